@@ -1,0 +1,45 @@
+"""fbia: inverse analysis of coupled biofilm models from the shape of the fluid-biofilm interface.
+
+>>> import fbia
+>>> model = fbia.forward_model("analytic_mound_2d")
+>>> obs = fbia.synthetic_observations(model, {"E": 400.0, "nu": 0.3},
+...                                   [{"inflow_rate": 100.0}], noise_std=0.002, seed=0)
+>>> problem = fbia.InverseProblem(model=model, measure=fbia.measure("rkhs", sigma_w=0.05),
+...                               observations=obs, noise_std=0.002,
+...                               parameters=[fbia.Parameter("E", bounds=(100.0, 800.0)),
+...                                           fbia.Parameter("nu", bounds=(-0.8, 0.5))])
+
+The package maps the repository folders ``core/``, ``plugins/``, ``measures/`` and
+``iterators/`` to ``fbia.core``, ``fbia.plugins``, ``fbia.measures`` and ``fbia.iterators``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from fbia.core import *  # noqa: F403  (the public core types)
+from fbia.core import __all__ as _core_all
+
+__version__ = "0.1.0"
+
+# Public names that live in modules imported on first use (they pull in heavier libraries).
+_LAZY = {
+    "synthetic_observations": "fbia.core.synthetic:synthetic_observations",
+    "Study": "fbia.core.study:Study",
+    "load_study": "fbia.core.study:load_study",
+    "least_squares": "fbia.iterators.levenberg_marquardt:least_squares",
+    "smc": "fbia.iterators.smc:smc",
+}
+
+__all__ = [*_core_all, *_LAZY, "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    target = _LAZY.get(name)
+    if target is None:
+        raise AttributeError(f"module 'fbia' has no attribute {name!r}")
+    module, attr = target.split(":")
+    value = getattr(importlib.import_module(module), attr)
+    globals()[name] = value
+    return value

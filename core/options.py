@@ -1,0 +1,82 @@
+"""Option schemas: every plugin class carries an ``Options`` model that rejects unknown keys.
+
+>>> from pydantic import Field
+>>> class Options(PluginOptions):
+...     mesh_size: float = Field(0.02, gt=0, description="element size at the interface [mm]")
+>>> Options.parse({"mesh_size": 0.01}, where="model.options").mesh_size
+0.01
+>>> Options.parse({"mesh_sise": 0.01}, where="model.options")
+Traceback (most recent call last):
+...
+fbia.core.errors.ConfigError: model.options: unknown option 'mesh_sise'; valid options: mesh_size
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Self
+
+import pydantic
+from pydantic import BaseModel, ConfigDict
+
+from fbia.core.errors import ConfigError
+
+
+class PluginOptions(BaseModel):
+    """Base class of option schemas: strict about keys, validated on assignment, immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+    @classmethod
+    def parse(cls, values: Mapping[str, Any] | None = None, where: str = "options") -> Self:
+        """Validate ``values``; any problem becomes one :class:`ConfigError` line."""
+        values = dict(values or {})
+        valid = sorted(cls.model_fields)
+        unknown = [k for k in values if k not in cls.model_fields]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"unknown option{plural} {', '.join(repr(k) for k in unknown)}; "
+                f"valid options: {', '.join(valid) or '(none)'}",
+                where,
+            )
+        try:
+            return cls(**values)
+        except pydantic.ValidationError as exc:
+            err = exc.errors()[0]
+            loc = ".".join(str(p) for p in err["loc"]) or "options"
+            raise ConfigError(
+                f"option {loc!r}: {err['msg']} (got {err.get('input')!r})", where
+            ) from None
+
+    @classmethod
+    def describe(cls) -> dict[str, dict[str, Any]]:
+        """Name -> {default, description} of every option, for ``fbia plugins --options``."""
+        return {
+            name: {"default": f.default, "description": f.description or ""}
+            for name, f in cls.model_fields.items()
+        }
+
+
+class Configurable:
+    """Mixin for plugin classes: ``Cls(**options)`` or ``Cls(Cls.Options(...))``.
+
+    The registry builds a plugin as ``factory(parsed_options)``; a user may also write
+    ``AnalyticMound2DForwardModel(height=0.4)``.  Either way ``self.options`` holds the
+    validated, immutable options.
+    """
+
+    Options: type[PluginOptions] = PluginOptions
+
+    def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
+        if options is None:
+            options = self.Options.parse(kwargs, where=type(self).__name__)
+        elif kwargs:
+            raise TypeError("pass either an Options instance or keyword options, not both")
+        elif not isinstance(options, self.Options):
+            raise TypeError(f"expected {self.Options.__qualname__}, got {type(options).__name__}")
+        self.options = options
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options.model_dump().items())
+        return f"{type(self).__name__}({opts})"

@@ -1,0 +1,380 @@
+"""The inverse problem, the record of one evaluation, and the result of an iterator.
+
+>>> import fbia
+>>> model = fbia.forward_model("analytic_mound_2d")
+>>> truth = {"E": 400.0, "nu": 0.3}
+>>> obs = fbia.synthetic_observations(model, truth, [{"inflow_rate": 100.0}], noise_std=0.0, seed=1)
+>>> problem = fbia.InverseProblem(model=model, measure=fbia.measure("cpp"), observations=obs,
+...     parameters=[fbia.Parameter("E", bounds=(100, 800)),
+...                 fbia.Parameter("nu", bounds=(-0.8, 0.5))])
+>>> ev = problem.evaluate(truth)
+>>> ev.ok, round(ev.distance, 12)
+(True, 0.0)
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, is_dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fbia.core.errors import ConfigError, ForwardModelError, MeasureError
+from fbia.core.observation import Observation, Solution, coordinate_key
+from fbia.core.parameters import Parameter
+from fbia.core.protocols import Discrepancy, ForwardModel
+
+#: Evaluation outcomes.  ``failed``: the forward model raised ForwardModelError;
+#: ``measure_failed``: the measure could not compare (MeasureError); ``error``: the plugin
+#: raised something it should not have (a bug, reported with its type).
+STATUSES = ("ok", "failed", "measure_failed", "error")
+
+
+@dataclass
+class Evaluation:
+    """The record of one forward run and its comparison with every observation."""
+
+    index: int
+    x: dict[str, float]
+    status: str = "ok"
+    message: str = ""
+    residuals: NDArray[np.float64] | None = None
+    distances: list[float] | None = None
+    time: float = 0.0
+    workdir: str | None = None
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    solution: Solution | None = field(default=None, repr=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def distance(self) -> float:
+        """D over all observations: the 2-norm of the per-observation distances (eq. 6/7)."""
+        if self.distances is None:
+            return math.nan
+        return float(np.linalg.norm(self.distances))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "index": self.index,
+            "x": self.x,
+            "status": self.status,
+            "message": self.message,
+            "residuals": None if self.residuals is None else self.residuals.tolist(),
+            "distances": self.distances,
+            "time": self.time,
+            "workdir": self.workdir,
+            "diagnostics": _jsonable(self.diagnostics),
+        }
+
+
+@dataclass
+class InverseProblem:
+    """Forward model + measure + observations + parameters: what an iterator solves.
+
+    Parameters
+    ----------
+    model
+        A forward model (protocol :class:`~fbia.core.protocols.ForwardModel`).
+    measure
+        A measure (protocol :class:`~fbia.core.protocols.Discrepancy`).
+    observations
+        The observed states; their coordinates are the states every forward run computes.
+    parameters
+        The calibration parameters x (names the model knows), with bounds and priors.
+    uncertain
+        Uncertain model inputs θ with prior distributions (Paper B eq. 3a-3b).
+    noise_std
+        Standard deviation σ_N of the likelihood noise in mm (Paper B eq. 5); observations may
+        override it with their own ``noise_std``.
+    fixed
+        Model inputs held at given values in every run (e.g. ``{"inflow_rate": 100.0}``).
+    """
+
+    model: ForwardModel
+    measure: Discrepancy
+    observations: Sequence[Observation]
+    parameters: Sequence[Parameter]
+    uncertain: Sequence[Parameter] = ()
+    noise_std: float | None = None
+    fixed: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.observations = list(self.observations)
+        self.parameters = list(self.parameters)
+        self.uncertain = list(self.uncertain)
+        self.fixed = dict(self.fixed)
+        if not self.observations:
+            raise ConfigError("an inverse problem needs at least one observation")
+        if not self.parameters:
+            raise ConfigError("an inverse problem needs at least one parameter")
+        for obs in self.observations:
+            if not isinstance(obs, Observation):
+                raise ConfigError(
+                    f"observations must be fbia.Observation, got {type(obs).__name__}"
+                )
+        names = [p.name for p in [*self.parameters, *self.uncertain]]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ConfigError(f"parameter(s) named twice: {', '.join(dupes)}")
+        clash = sorted(set(names) & set(self.fixed))
+        if clash:
+            raise ConfigError(f"parameter(s) both varied and fixed: {', '.join(clash)}")
+        known = set(self.model.parameter_names())
+        unknown = [n for n in [*names, *self.fixed] if n not in known]
+        if unknown:
+            raise ConfigError(
+                f"the forward model has no parameter(s) {', '.join(map(repr, unknown))}; "
+                f"it knows: {', '.join(sorted(known))}"
+            )
+        for p in self.uncertain:
+            if p.prior is None:
+                raise ConfigError("an uncertain parameter needs a prior distribution", p.name)
+        if self.noise_std is not None and not (
+            self.noise_std > 0 and math.isfinite(self.noise_std)
+        ):
+            raise ConfigError(f"noise_std must be a positive number, got {self.noise_std}")
+        dims = {o.dim for o in self.observations}
+        if len(dims) > 1:
+            raise ConfigError(f"observations mix dimensions {sorted(dims)}")
+
+    # -- names and vectors -------------------------------------------------------------------
+    @property
+    def names(self) -> list[str]:
+        """Names of the calibration parameters x, in order."""
+        return [p.name for p in self.parameters]
+
+    @property
+    def uncertain_names(self) -> list[str]:
+        return [p.name for p in self.uncertain]
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension of the observations."""
+        return self.observations[0].dim
+
+    @property
+    def lower(self) -> NDArray[np.float64]:
+        return np.array([p.lower for p in self.parameters])
+
+    @property
+    def upper(self) -> NDArray[np.float64]:
+        return np.array([p.upper for p in self.parameters])
+
+    def as_dict(
+        self, x: ArrayLike | Mapping[str, float], theta: ArrayLike | None = None
+    ) -> dict[str, float]:
+        """The full model input {name: value}: calibration x, uncertain θ and fixed inputs."""
+        if isinstance(x, Mapping):
+            out = {n: float(x[n]) for n in self.names if n in x}
+            missing = [n for n in self.names if n not in x]
+            if missing:
+                raise ConfigError(f"no value for parameter(s) {', '.join(missing)}")
+            extra = [k for k in x if k not in self.names and k not in self.uncertain_names]
+            if extra:
+                raise ConfigError(
+                    f"unknown parameter(s) {', '.join(extra)}; valid: {', '.join(self.names)}"
+                )
+            out.update({n: float(x[n]) for n in self.uncertain_names if n in x})
+        else:
+            vec = np.asarray(x, dtype=float).ravel()
+            if len(vec) != len(self.names):
+                raise ConfigError(f"expected {len(self.names)} parameter values, got {len(vec)}")
+            out = dict(zip(self.names, map(float, vec), strict=True))
+        if theta is not None:
+            tv = np.asarray(theta, dtype=float).ravel()
+            out.update(zip(self.uncertain_names, map(float, tv), strict=True))
+        return {**self.fixed, **out}
+
+    def vector(self, values: Mapping[str, float]) -> NDArray[np.float64]:
+        return np.array([float(values[n]) for n in self.names])
+
+    def coordinates(self) -> list[dict[str, float]]:
+        """Distinct coordinates of the observations, in order of first appearance."""
+        seen: dict[Any, dict[str, float]] = {}
+        for obs in self.observations:
+            seen.setdefault(obs.key, dict(obs.coordinate))
+        return list(seen.values())
+
+    # -- evaluation --------------------------------------------------------------------------
+    def discrepancy(self, solution: Solution) -> tuple[NDArray[np.float64], list[float]]:
+        """Residual vector over all observations (Paper A eq. 19) and D per observation."""
+        res, dist = [], []
+        for obs in self.observations:
+            simulated = solution.interface(obs.coordinate)
+            r = np.asarray(self.measure.residuals(simulated, obs), dtype=float).ravel()
+            res.append(r)
+            dist.append(float(self.measure.distance(simulated, obs)))
+        return np.concatenate(res), dist
+
+    def evaluate(
+        self,
+        x: Mapping[str, float],
+        workdir: str | Path | None = None,
+        index: int = 0,
+        keep_solution: bool = True,
+    ) -> Evaluation:
+        """Run the forward model at ``x`` (full input dict) and compare with the observations.
+
+        Never raises for a failed run: the outcome is in ``Evaluation.status``.
+        """
+        x = {k: float(v) for k, v in x.items()}
+        full = {**self.fixed, **x}
+        tmp = None
+        if workdir is None:
+            tmp = tempfile.mkdtemp(prefix="fbia-eval-")
+            wd = Path(tmp)
+        else:
+            wd = Path(workdir)
+            wd.mkdir(parents=True, exist_ok=True)
+        ev = Evaluation(index=index, x=x, workdir=None if tmp else str(wd))
+        t0 = time.perf_counter()
+        try:
+            coords = self.coordinates()
+            solution = self.model.solve(full, coords, wd)
+            missing = [c for c in coords if coordinate_key(c) not in solution.interfaces]
+            if missing:
+                raise _PluginBug(f"forward model returned no interface for coordinate(s) {missing}")
+            ev.diagnostics = dict(solution.diagnostics)
+            ev.residuals, ev.distances = self.discrepancy(solution)
+            if not (np.all(np.isfinite(ev.residuals)) and np.all(np.isfinite(ev.distances))):
+                raise _PluginBug("the measure returned NaN or infinite values")
+            if keep_solution:
+                ev.solution = solution
+        except ForwardModelError as exc:
+            ev.status, ev.message = "failed", str(exc) or type(exc).__name__
+        except MeasureError as exc:
+            ev.status, ev.message = "measure_failed", str(exc)
+        except Exception as exc:  # a plugin bug: recorded with its type, never silent
+            ev.status, ev.message = "error", f"{type(exc).__name__}: {exc}"
+        finally:
+            ev.time = time.perf_counter() - t0
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+        return ev
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-ready description of the problem (for results and provenance)."""
+        return {
+            "model": type(self.model).__name__,
+            "model_options": _options_of(self.model),
+            "measure": type(self.measure).__name__,
+            "measure_options": _options_of(self.measure),
+            "parameters": [p.describe() for p in self.parameters],
+            "uncertain": [p.describe() for p in self.uncertain],
+            "fixed": self.fixed,
+            "noise_std": self.noise_std,
+            "observations": [
+                {"label": o.label(), "coordinate": dict(o.coordinate), "noise_std": o.noise_std}
+                for o in self.observations
+            ],
+        }
+
+
+class _PluginBug(Exception):
+    pass
+
+
+def _options_of(obj: Any) -> dict[str, Any]:
+    opts = getattr(obj, "options", None)
+    if opts is None:
+        return {}
+    dump = getattr(opts, "model_dump", None)
+    return _jsonable(dump() if callable(dump) else dict(opts))
+
+
+def _jsonable(value: Any) -> Any:
+    """Numpy arrays, paths and dataclasses turned into plain JSON types."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, Path):
+        return str(value)
+    if is_dataclass(value) and not isinstance(value, type):
+        return _jsonable(asdict(value))
+    return value
+
+
+@dataclass
+class Result:
+    """What an iterator returns: why it stopped, what it found, and every evaluation.
+
+    Attributes
+    ----------
+    status
+        A short tag (``"converged_gradient"``, ``"iteration_limit"``, ``"all_failed"``, ...).
+    success
+        Whether the iterator reached what it set out to do.
+    message
+        Why it stopped, in words a user understands.
+    x
+        The point estimate (LM optimum, MAP, ...) by name, or None.
+    nfev, n_failed
+        Forward evaluations made, and how many of them failed.
+    history
+        One dict per iteration (iterator-specific keys).
+    evaluations
+        Every evaluation record, in order.
+    info
+        Iterator-specific results (covariance, particles, ...).
+    provenance
+        fbia and plugin versions, seed, host, times (filled by the study runner).
+    """
+
+    status: str
+    success: bool
+    message: str
+    x: dict[str, float] | None = None
+    nfev: int = 0
+    n_failed: int = 0
+    iterator: str = ""
+    history: list[dict[str, Any]] = field(default_factory=list)
+    evaluations: list[Evaluation] = field(default_factory=list, repr=False)
+    info: dict[str, Any] = field(default_factory=dict, repr=False)
+    provenance: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "status": self.status,
+            "success": self.success,
+            "message": self.message,
+            "x": self.x,
+            "nfev": self.nfev,
+            "n_failed": self.n_failed,
+            "iterator": self.iterator,
+            "history": _jsonable(self.history),
+            "info": _jsonable(self.info),
+            "provenance": _jsonable(self.provenance),
+            "evaluations": [e.to_dict() for e in self.evaluations],
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the result as JSON."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False, default=str))
+        return path
+
+    def summary(self) -> str:
+        lines = [f"{self.iterator or 'result'}: {self.status} - {self.message}"]
+        if self.x:
+            lines.append("  " + ", ".join(f"{k} = {v:.6g}" for k, v in self.x.items()))
+        lines.append(f"  {self.nfev} forward evaluations, {self.n_failed} failed")
+        return "\n".join(lines)

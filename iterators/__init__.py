@@ -1,0 +1,8 @@
+"""fbia.iterators: inverse-analysis algorithms, registered through the ``fbia`` entry points."""
+
+from fbia.core.hookspecs import hookimpl
+
+
+@hookimpl
+def register_iterators(register):  # type: ignore[no-untyped-def]
+    """Register the built-in iterators (one line each)."""
