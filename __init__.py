@@ -18,8 +18,12 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from fbia.core import *  # noqa: F403  (the public core types)
-from fbia.core import __all__ as _core_all
+# The sub-package ``fbia.plugins`` shares its name with the function ``fbia.plugins()``: import
+# it before the function is bound, or loading a plugin later would rebind ``fbia.plugins`` to it.
+importlib.import_module("fbia.plugins")
+
+from fbia.core import *  # noqa: E402, F403  (the public core types)
+from fbia.core import __all__ as _core_all  # noqa: E402
 
 __version__ = "0.1.0"
 

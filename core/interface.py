@@ -130,7 +130,8 @@ class Interface:
             elif key == "area_vectors":
                 if self.dim == 2:
                     t = p[:, 1] - p[:, 0]
-                    val = np.c_[-t[:, 1], t[:, 0]]  # tangent turned by +90° (eq. 24b)
+                    # tangent turned by +90° (eq. 24b); + 0.0 turns -0.0 into 0.0
+                    val = np.c_[-t[:, 1], t[:, 0]] + 0.0
                 else:
                     val = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
             else:  # pragma: no cover - internal misuse
@@ -275,10 +276,15 @@ class Interface:
         path = Path(path)
         if not path.is_file():
             raise ConfigError("file not found", str(path))
-        if path.suffix.lower() in (".csv", ".txt"):
-            return cls._read_csv(path)
-        if path.suffix.lower() in _SURFACE_SUFFIXES:
-            return cls._read_surface(path)
+        try:
+            if path.suffix.lower() in (".csv", ".txt"):
+                return cls._read_csv(path)
+            if path.suffix.lower() in _SURFACE_SUFFIXES:
+                return cls._read_surface(path)
+        except ConfigError as err:  # e.g. zero-length elements: say which file
+            if err.where is not None:
+                raise
+            raise err.located(str(path)) from None
         raise ConfigError(
             f"unknown interface file type {path.suffix!r} (CSV for 2-D; "
             f"{', '.join(sorted(_SURFACE_SUFFIXES))} for 3-D)",
@@ -289,12 +295,23 @@ class Interface:
     def _read_csv(cls, path: Path) -> Interface:
         rows = read_csv_table(path, min_cols=2, max_cols=3)
         if rows.shape[1] == 2:
-            return cls.polyline(rows)
-        ids = rows[:, 2]
-        if not np.all(ids == np.round(ids)):
-            raise ConfigError("third CSV column (curve id) must hold integers", str(path))
-        curves = [rows[ids == k, :2] for k in dict.fromkeys(ids.tolist())]
-        return cls.polylines(curves)
+            curves = [rows]
+        else:
+            ids = rows[:, 2]
+            if not np.all(ids == np.round(ids)):
+                raise ConfigError("third CSV column (curve id) must hold integers", str(path))
+            curves = [rows[ids == k, :2] for k in dict.fromkeys(ids.tolist())]
+        # a curve whose last point repeats its first is closed (as curves() and write() give it)
+        vertices, cells, offset = [], [], 0
+        for k, pts in enumerate(curves):
+            closed = len(pts) > 3 and np.array_equal(pts[0], pts[-1])
+            if len(pts) < 2:
+                raise ConfigError(f"curve {k} has fewer than two points", str(path))
+            part = cls.polylines([pts[:-1] if closed else pts], closed=closed)
+            vertices.append(part.vertices)
+            cells.append(part.cells + offset)
+            offset += len(part.vertices)
+        return cls(np.vstack(vertices), np.vstack(cells))
 
     @classmethod
     def _read_surface(cls, path: Path) -> Interface:
@@ -323,7 +340,9 @@ class Interface:
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.suffix.lower() == ".csv":
             if self.dim != 2:
-                raise ConfigError("CSV output is for 2-D interfaces; use .vtu/.stl/.ply for 3-D")
+                raise ConfigError(
+                    "CSV output is for 2-D interfaces; use .vtu/.stl/.ply for 3-D", str(path)
+                )
             with path.open("w", newline="") as fh:
                 w = csv.writer(fh)
                 w.writerow(["x", "y", "curve"])

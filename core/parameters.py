@@ -4,8 +4,8 @@
 >>> E = fbia.Parameter("E", unit="Pa", bounds=(100.0, 800.0))        # uniform prior on bounds
 >>> nu = fbia.Parameter("nu", bounds=(-0.8, 0.5),
 ...                     prior=fbia.priors.beta(43 / 13, 22 / 13, lower=-0.8, upper=0.5))
->>> round(float(nu.prior.mode), 3)                                   # Paper B: mode at 0.3
-0.3
+>>> round(float(nu.prior.mode), 3)                                   # Paper B: mode at 0.2
+0.2
 """
 
 from __future__ import annotations

@@ -70,8 +70,10 @@ class Evaluation:
             "x": self.x,
             "status": self.status,
             "message": self.message,
-            "residuals": None if self.residuals is None else self.residuals.tolist(),
-            "distances": self.distances,
+            # NaN/inf (an "error" record of a measure that returned them) as strings, so
+            # that Result.save (allow_nan=False) never fails on a record.
+            "residuals": None if self.residuals is None else _jsonable(self.residuals),
+            "distances": _jsonable(self.distances),
             "time": self.time,
             "workdir": self.workdir,
             "diagnostics": _jsonable(self.diagnostics),
