@@ -18,12 +18,12 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-# The sub-package ``fbia.plugins`` shares its name with the function ``fbia.plugins()``: import
-# it before the function is bound, or loading a plugin later would rebind ``fbia.plugins`` to it.
-importlib.import_module("fbia.plugins")
+from fbia.core import *  # noqa: F403  (the public core types)
+from fbia.core import __all__ as _core_all
 
-from fbia.core import *  # noqa: E402, F403  (the public core types)
-from fbia.core import __all__ as _core_all  # noqa: E402
+# ``fbia.plugins`` is the forward-model sub-package and, called, the registry listing: the
+# package module is callable (plugins/__init__.py), so both uses work in any import order.
+plugins = importlib.import_module("fbia.plugins")
 
 __version__ = "0.1.0"
 

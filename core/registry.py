@@ -107,6 +107,11 @@ class Registry:
         where = f"plugin {plugin!r}"
         if not isinstance(name, str) or not name.replace("_", "a").replace(".", "a").isalnum():
             raise PluginError(f"registers an invalid {kind} name {name!r}", where)
+        if not isinstance(factory, type):
+            raise PluginError(
+                f"{kind} {name!r} must be a class, got an instance of {type(factory).__name__}",
+                where,
+            )
         options = getattr(factory, "Options", None)
         if not (isinstance(options, type) and issubclass(options, PluginOptions)):
             raise PluginError(
