@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
 
 from fbia.core.errors import ConfigError
 
@@ -96,6 +95,13 @@ class Prior:
         return builder(**values)
 
 
+def _stats() -> Any:
+    """``scipy.stats``, imported on first use: it costs about 2 s, ``import fbia`` should not."""
+    from scipy import stats
+
+    return stats
+
+
 def _check(cond: bool, message: str) -> None:
     if not cond:
         raise ConfigError(message)
@@ -110,7 +116,7 @@ def uniform(lower: float, upper: float) -> Prior:
     return Prior(
         "uniform",
         {"lower": lower, "upper": upper},
-        stats.uniform(loc=lower, scale=upper - lower),
+        _stats().uniform(loc=lower, scale=upper - lower),
         mode=0.5 * (lower + upper),
     )
 
@@ -118,7 +124,7 @@ def uniform(lower: float, upper: float) -> Prior:
 def normal(mean: float, std: float) -> Prior:
     """Normal N(mean, std²)."""
     _check(std > 0, f"normal prior needs std > 0, got {std}")
-    return Prior("normal", {"mean": mean, "std": std}, stats.norm(mean, std), mode=mean)
+    return Prior("normal", {"mean": mean, "std": std}, _stats().norm(mean, std), mode=mean)
 
 
 def truncated_normal(mean: float, std: float, lower: float, upper: float) -> Prior:
@@ -129,7 +135,7 @@ def truncated_normal(mean: float, std: float, lower: float, upper: float) -> Pri
     return Prior(
         "truncated_normal",
         {"mean": mean, "std": std, "lower": lower, "upper": upper},
-        stats.truncnorm(a, b, loc=mean, scale=std),
+        _stats().truncnorm(a, b, loc=mean, scale=std),
         mode=min(max(mean, lower), upper),
     )
 
@@ -140,7 +146,7 @@ def lognormal(mu_ln: float, sigma_ln: float) -> Prior:
     return Prior(
         "lognormal",
         {"mu_ln": mu_ln, "sigma_ln": sigma_ln},
-        stats.lognorm(s=sigma_ln, scale=math.exp(mu_ln)),
+        _stats().lognorm(s=sigma_ln, scale=math.exp(mu_ln)),
         mode=math.exp(mu_ln - sigma_ln**2),
     )
 
@@ -156,7 +162,7 @@ def beta(a: float, b: float, lower: float = 0.0, upper: float = 1.0) -> Prior:
     return Prior(
         "beta",
         {"a": a, "b": b, "lower": lower, "upper": upper},
-        stats.beta(a, b, loc=lower, scale=upper - lower),
+        _stats().beta(a, b, loc=lower, scale=upper - lower),
         mode=mode,
     )
 
