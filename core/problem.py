@@ -146,6 +146,17 @@ class InverseProblem:
             self.noise_std > 0 and math.isfinite(self.noise_std)
         ):
             raise ConfigError(f"noise_std must be a positive number, got {self.noise_std}")
+        # A coordinate fixes its inputs per state, so varying the same input would be ignored
+        # silently (e.g. an uncertain inflow rate with observations at {"inflow_rate": 100}).
+        coordinate_names = {k for o in self.observations for k in o.coordinate}
+        overlap = sorted(coordinate_names & set(names))
+        if overlap:
+            raise ConfigError(
+                f"parameter(s) {', '.join(overlap)} also set by the observations' coordinates; "
+                "a coordinate fixes its value in each state, so the parameter would have no "
+                "effect: drop it from the coordinates (e.g. an uncertain inflow rate with "
+                "coordinate {}) or from the parameters"
+            )
         dims = {o.dim for o in self.observations}
         if len(dims) > 1:
             raise ConfigError(f"observations mix dimensions {sorted(dims)}")

@@ -532,6 +532,10 @@ def test_inverse_problem_evaluate_outcomes_never_raise(mound_problem_parts, tmp_
 def test_inverse_problem_as_dict_and_vectors(mound_problem_parts):
     model, obs, params = mound_problem_parts
     unc = [fbia.Parameter("inflow_rate", prior=fbia.priors.beta(2.6, 1.4, 0.0, 110.0))]
+    # An observation at {"inflow_rate": 100} would fix the rate: the uncertain one is ignored.
+    with pytest.raises(fbia.ConfigError, match="inflow_rate also set by the observations"):
+        fbia.InverseProblem(model, _VertexMeasure(), obs, params, uncertain=unc)
+    obs = [fbia.Observation(o.interface, {}) for o in obs]  # the state is set by theta
     problem = fbia.InverseProblem(
         model, _VertexMeasure(), obs, params, uncertain=unc, fixed={"load_scale": 1.0}
     )
