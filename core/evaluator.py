@@ -13,12 +13,15 @@ into: ``evaluate(problem, points) -> list[Evaluation]`` in the order of ``points
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import shutil
+import signal
 import tempfile
-from collections.abc import Mapping, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+import threading
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -39,7 +42,13 @@ class Evaluator(Protocol):
 class _EvaluatorBase:
     """Working folders and evaluation numbering shared by the evaluators."""
 
-    def __init__(self, workdir: str | Path | None = None, keep_workdirs: bool = False) -> None:
+    def __init__(
+        self,
+        workdir: str | Path | None = None,
+        keep_workdirs: bool = False,
+        on_record: Callable[[Evaluation], None] | None = None,
+    ) -> None:
+        self.on_record = on_record
         self._own_root = workdir is None
         self.root = (
             Path(tempfile.mkdtemp(prefix="fbia-runs-")) if workdir is None else Path(workdir)
@@ -59,6 +68,8 @@ class _EvaluatorBase:
             shutil.rmtree(ev.workdir, ignore_errors=True)
             ev.workdir = None
         self.history.append(ev)
+        if self.on_record is not None:
+            self.on_record(ev)  # e.g. the study's log: every record is stored as it finishes
         return ev
 
     def close(self) -> None:
@@ -73,7 +84,17 @@ class _EvaluatorBase:
 
 
 class SerialEvaluator(_EvaluatorBase):
-    """Runs the batch one after another in this process."""
+    """Runs the batch one after another in this process.
+
+    Parameters
+    ----------
+    workdir
+        Root of the per-evaluation working folders (default: a temporary folder).
+    keep_workdirs
+        Keep every run's folder (default: only when ``workdir`` is given).
+    on_record
+        Called with every finished record, at once (e.g. to store it).
+    """
 
     def evaluate(
         self, problem: InverseProblem, points: Sequence[Mapping[str, float]]
@@ -92,11 +113,42 @@ def _init_worker(problem: InverseProblem) -> None:
     _WORKER_PROBLEM = problem
 
 
+#: Written in a run's folder when a worker starts it and removed when it ends: after a worker
+#: dies, the runs that have it are the suspects, the others never started.
+_STARTED = ".fbia-started"
+
+
 def _run_in_worker(x: Mapping[str, float], workdir: str, index: int) -> Evaluation:
     assert _WORKER_PROBLEM is not None
+    marker = Path(workdir) / _STARTED
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    marker.write_text(str(os.getpid()))
     # The solution object (interfaces, fields) stays in the worker: only the record travels.
     ev = _WORKER_PROBLEM.evaluate(x, workdir=workdir, index=index, keep_solution=False)
+    marker.unlink(missing_ok=True)
     return ev
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """Processes started inside ignore SIGINT (the disposition survives exec): Ctrl-C then
+    reaches only this process, which stops the workers, instead of every worker printing
+    a traceback."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+_Job = tuple[int, Path, dict[str, float]]
+_DIED = (
+    "the worker process died during this run (killed, crashed or exited: e.g. os._exit, "
+    "a segfault, the out-of-memory killer)"
+)
 
 
 class ProcessPoolEvaluator(_EvaluatorBase):
@@ -112,6 +164,11 @@ class ProcessPoolEvaluator(_EvaluatorBase):
         Keep every run's folder (default: only when ``workdir`` is given).
     start_method
         ``"spawn"`` (default: safe with threaded solvers), ``"forkserver"`` or ``"fork"``.
+    on_record
+        Called in this process with every finished record, at once (e.g. to store it).
+
+    A run that kills its worker process (``os._exit``, a segfault, the OOM killer) becomes a
+    failed record; the rest of the batch is completed and the evaluator stays usable.
     """
 
     def __init__(
@@ -120,8 +177,9 @@ class ProcessPoolEvaluator(_EvaluatorBase):
         workdir: str | Path | None = None,
         keep_workdirs: bool = False,
         start_method: str = "spawn",
+        on_record: Callable[[Evaluation], None] | None = None,
     ) -> None:
-        super().__init__(workdir, keep_workdirs)
+        super().__init__(workdir, keep_workdirs, on_record)
         n = workers if workers is not None else (os.cpu_count() or 1)
         if n < 1:
             raise ConfigError(f"workers must be at least 1, got {workers}")
@@ -150,31 +208,84 @@ class ProcessPoolEvaluator(_EvaluatorBase):
     def evaluate(
         self, problem: InverseProblem, points: Sequence[Mapping[str, float]]
     ) -> list[Evaluation]:
+        jobs: list[_Job] = [
+            (i, wd, dict(x))
+            for (i, wd), x in zip(self._next_dirs(len(points)), points, strict=True)
+        ]
+        done: dict[int, Evaluation] = {}
+        try:
+            todo = jobs
+            while todo:
+                lost = self._round(problem, todo, done)
+                if not lost:
+                    break
+                # A worker died and took the pool down with every run under way.  Runs that
+                # had not started are submitted again.  If one run had started, it is the one
+                # that died; if several had, each is repeated alone to tell the run that kills
+                # its process from those that were only in the same pool.
+                self._shutdown()
+                suspects = [j for j in lost if (j[1] / _STARTED).exists()]
+                if not suspects:
+                    for job in lost:
+                        done[job[0]] = self._finish(
+                            self._died(job, "the worker pool broke before this run started")
+                        )
+                    break
+                if len(suspects) == 1:
+                    done[suspects[0][0]] = self._finish(self._died(suspects[0], _DIED))
+                else:
+                    for job in suspects:
+                        if self._round(problem, [job], done):
+                            self._shutdown()
+                            done[job[0]] = self._finish(
+                                self._died(job, f"{_DIED}; it died again when repeated alone")
+                            )
+                todo = [j for j in lost if j not in suspects]
+        except BaseException:  # Ctrl-C or a bug: stop the workers instead of waiting for them
+            self._shutdown(kill=True)
+            raise
+        return [done[i] for i, _, _ in jobs]
+
+    def _round(
+        self, problem: InverseProblem, jobs: Sequence[_Job], done: dict[int, Evaluation]
+    ) -> list[_Job]:
+        """Submit ``jobs``; record each as it finishes; return those lost to a dead worker."""
         pool = self._pool_for(problem)
-        jobs: list[tuple[int, Path, Mapping[str, float], Future[Evaluation]]] = []
-        for (i, wd), x in zip(self._next_dirs(len(points)), points, strict=True):
-            jobs.append((i, wd, x, pool.submit(_run_in_worker, dict(x), str(wd), i)))
-        out: list[Evaluation] = []
-        broken = False
-        for i, wd, x, fut in jobs:
+        with _workers_ignore_sigint():  # the pool starts its processes on submit
+            futures: dict[Future[Evaluation], _Job] = {
+                pool.submit(_run_in_worker, x, str(wd), i): (i, wd, x) for i, wd, x in jobs
+            }
+        lost: list[_Job] = []
+        for fut in as_completed(futures):
+            i, wd, x = job = futures[fut]
             try:
                 ev = fut.result()
             except BrokenProcessPool:
-                broken = True
+                lost.append(job)
+                continue
+            except (Exception, SystemExit) as exc:  # raised outside problem.evaluate's guard
                 ev = Evaluation(
                     index=i,
                     x=dict(x),
-                    status="failed",
+                    status="error",
                     workdir=str(wd),
-                    message="the worker process died (killed or crashed) during the run",
+                    message=f"{type(exc).__name__}: {exc}",
                 )
-            out.append(self._finish(ev))
-        if broken:
-            self._shutdown()
-        return out
+            done[i] = self._finish(ev)
+        return sorted(lost)
 
-    def _shutdown(self) -> None:
+    @staticmethod
+    def _died(job: _Job, message: str) -> Evaluation:
+        i, wd, x = job
+        return Evaluation(index=i, x=dict(x), status="failed", workdir=str(wd), message=message)
+
+    def _shutdown(self, kill: bool = False) -> None:
         if self._pool is not None:
+            if kill:
+                # The standard library has no public way to stop running workers before
+                # Python 3.14 (ProcessPoolExecutor.terminate_workers).
+                for proc in list(getattr(self._pool, "_processes", {}).values()):
+                    proc.terminate()
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
             self._pool_problem = None

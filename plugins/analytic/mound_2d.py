@@ -63,6 +63,9 @@ class AnalyticMound2DForwardModel(Configurable):
     See the module docstring for the geometry and the formulas.
     """
 
+    #: Spatial dimension of the interfaces it returns (checked against data files).
+    dim = 2
+
     class Options(MoundOptions):
         channel_length: float = Field(2.0, gt=0, description="channel length L [mm]")
         centre: float = Field(1.0, description="x of the footprint centre x0 [mm]")

@@ -58,6 +58,9 @@ class AnalyticMound3DForwardModel(Configurable):
     See the module docstring for the geometry and the formulas.
     """
 
+    #: Spatial dimension of the interfaces it returns (checked against data files).
+    dim = 3
+
     class Options(MoundOptions):
         channel_length: float = Field(2.0, gt=0, description="channel length L along x [mm]")
         channel_width: float = Field(1.0, gt=0, description="channel width W along y [mm]")

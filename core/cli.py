@@ -1,0 +1,180 @@
+"""The ``fbia`` command line: a thin layer over :func:`fbia.load_study` and the registry.
+
+::
+
+    fbia validate study.toml                  check everything that needs no forward run
+    fbia forward study.toml --set E=400 --set nu=0.3 [--output DIR]
+    fbia run study.toml [--workers N] [--output DIR]
+    fbia plugins [--json]
+    fbia --version
+
+Exit status: 0 done (``fbia run``: the result, converged or not, is written; its status is in
+the report); 1 a forward run failed (``fbia forward``, or ``fbia run`` without an iterator), or
+a file could not be written; 2 bad input (study file, data files, plugin
+names, options, arguments): one line ``fbia: error: <message>`` on stderr, no traceback;
+130 interrupted by Ctrl-C, after saving what was computed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from typing import Any, NoReturn
+
+from fbia.core.errors import ConfigError
+
+PROG = "fbia"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr and exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        command = self.prog.removeprefix(PROG).strip()
+        raise _UsageError(f"{command}: {message}" if command else message)
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _parser() -> argparse.ArgumentParser:
+    from fbia import __version__
+
+    p = _Parser(
+        prog=PROG,
+        description="Calibrate biofilm models from the shape of the fluid-biofilm interface.",
+    )
+    p.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    v = sub.add_parser("validate", help="check a study file without running the model")
+    v.add_argument("study", metavar="FILE", help="study file (TOML)")
+
+    f = sub.add_parser("forward", help="one forward run and its discrepancy table")
+    f.add_argument("study", metavar="FILE", help="study file (TOML)")
+    f.add_argument(
+        "--set",
+        dest="values",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a parameter value (repeatable); default: 'initial', else mid-bounds",
+    )
+    f.add_argument("--output", metavar="DIR", help="output folder (default: <output>/forward)")
+
+    r = sub.add_parser("run", help="run the study and write its output folder")
+    r.add_argument("study", metavar="FILE", help="study file (TOML)")
+    r.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes (overrides [executor]; 1 runs serially)",
+    )
+    r.add_argument("--output", metavar="DIR", help="output folder (default: the study's)")
+
+    pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
+    pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (the console script exits with it)."""
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    try:
+        try:
+            args = _parser().parse_args(args_list)
+        except SystemExit as exc:  # --help, --version
+            return exc.code if isinstance(exc.code, int) else 0
+        if args.command is None:
+            _parser().print_help()
+            return 2
+        command = {
+            "validate": _validate,
+            "forward": _forward,
+            "run": _run,
+            "plugins": _plugins,
+        }[args.command]
+        return command(args)
+    except _UsageError as exc:
+        return _fail(str(exc), 2)
+    except ConfigError as exc:  # includes PluginError
+        return _fail(str(exc), 2)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted; what was computed is saved", file=sys.stderr)
+        return 130
+    except OSError as exc:  # e.g. an output folder that cannot be written
+        return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc), 1)
+
+
+def _fail(message: str, status: int) -> int:
+    print(f"{PROG}: error: {' '.join(message.split())}", file=sys.stderr)
+    return status
+
+
+def _load(args: argparse.Namespace, build: bool = True) -> Any:
+    from fbia.core.study import load_study
+
+    return load_study(args.study, build=build)
+
+
+def _validate(args: argparse.Namespace) -> int:
+    study = _load(args, build=False)
+    print(study.summary())
+    print("ok")
+    return 0
+
+
+def _parse_values(items: Sequence[str]) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or not name or not text:
+            raise ConfigError(f"expected NAME=VALUE, got {item!r}", "--set")
+        try:
+            value = float(text)
+        except ValueError:
+            raise ConfigError(f"value of {name!r} is not a number: {text!r}", "--set") from None
+        if not math.isfinite(value):
+            raise ConfigError(f"value of {name!r} is not finite: {text!r}", "--set")
+        out[name] = value
+    return out
+
+
+def _forward(args: argparse.Namespace) -> int:
+    values = _parse_values(args.values)
+    study = _load(args)
+    study.start_point(values)  # unknown names are user errors before anything runs
+    result = study.forward(values, args.output)
+    if not result.success:
+        return _fail(result.message, 1)
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    study = _load(args)
+    result = study.run(args.output, args.workers)
+    if study.iterator is None and not result.success:
+        return _fail(result.message, 1)
+    return 0
+
+
+def _plugins(args: argparse.Namespace) -> int:
+    from fbia.core.registry import plugins
+
+    rows = [e.describe() for e in plugins()]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    from fbia.core.report import format_table
+
+    print(format_table(rows, ["name", "kind", "distribution", "version", "class"]))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

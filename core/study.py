@@ -1,0 +1,1139 @@
+"""Study files: one TOML file describes an inverse analysis; :func:`load_study` reads it.
+
+>>> import fbia
+>>> study = fbia.load_study("examples/flow_cell/study.toml")      # doctest: +SKIP
+>>> result = study.run()                                            # doctest: +SKIP
+>>> print(result.summary())                                         # doctest: +SKIP
+
+The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and one of
+``[[observations]]``/``[synthetic]`` is optional)::
+
+    [study]
+    name = "flow_cell"          # default: the file's stem
+    seed = 1                    # every random choice derives from it (default 0)
+    output = "output"           # output folder, relative to the study file (default "output")
+
+    [model]                     # a forward model from the registry (`fbia plugins`)
+    name = "analytic_mound_2d"
+    options = { n_points = 81 } # or a [model.options] table; unknown keys are errors
+
+    [[parameters]]              # the calibration parameters x, one table each
+    name = "E"                  # a name the forward model knows
+    unit = "Pa"                 # for reports and plots
+    bounds = [100.0, 800.0]     # lower < upper (optional if the prior has finite support)
+    initial = 200.0             # optional initial guess, inside the bounds
+    prior = { distribution = "uniform" }   # optional; default uniform on the bounds
+                                # uniform | normal | truncated_normal | lognormal | beta
+
+    [[uncertain]]               # uncertain inputs theta with a prior (Paper B eq. 3)
+    name = "inflow_rate"
+    prior = { distribution = "beta", a = 2.6, b = 1.4, lower = 0.0, upper = 110.0 }
+
+    [fixed]                     # model inputs held at a value in every run
+    inflow_rate = 100.0
+
+    [[observations]]            # observed states from files, relative to the study file ...
+    coordinate = { inflow_rate = 100.0 }     # which state (model-defined names)
+    interface = "data/observed_100.csv"      # CSV x, y[, curve] (2-D); STL/PLY/VTU/... (3-D)
+    points = "data/points_100.csv"           # optional: x, y[, z][, dx, dy[, dz]]
+    noise_std = 0.01                         # optional, mm
+    name = "Q100"                            # optional label
+
+    [synthetic]                 # ... or made here: the model at `truth` plus Gaussian noise
+    truth = { E = 400.0, nu = 0.3 }
+    coordinates = [ { inflow_rate = 100.0 } ]
+    noise_std = 0.005           # mm (0: exact data)
+    noise = "normal"            # along the normals (Paper A) | "isotropic" (Paper B eq. 16)
+    points = 12                 # optional number of measurement points (for "ray")
+    seed = 7                    # optional; default: derived from [study] seed
+
+    [measure]                   # ray | cpp | rkhs (or a plugin's)
+    name = "cpp"
+    options = {}
+
+    [likelihood]
+    noise_std = 0.01            # sigma_N in mm (Paper B eq. 5)
+
+    [iterator]                  # optional; without it `fbia run` does one forward run
+    name = "levenberg_marquardt"
+    options = { x0 = [ { E = 200.0, nu = 0.4 }, { E = 700.0, nu = -0.5 } ] }
+
+    [executor]
+    kind = "processes"          # serial | processes (default processes)
+    workers = 2                 # default: the number of cores
+    keep_runs = false           # keep every run's working folder in <output>/runs
+
+Seeds: the synthetic noise uses ``numpy.random.SeedSequence(seed, spawn_key=(0,))`` and an
+iterator whose options have a ``seed`` the file does not set gets the state of
+``SeedSequence(seed, spawn_key=(1,))``; nothing else draws random numbers.  An iterator with an
+``x0`` option that the file does not set starts from the parameters' ``initial`` values when
+all of them have one.
+
+Every mistake in a study file raises :class:`~fbia.core.errors.ConfigError` with one line that
+names the file and the key, e.g. ``study.toml: [model.options]: unknown option 'mesh_sise';
+valid options: ...``.  Paths in the file are relative to the file's folder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+import tomllib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fbia.core import report
+from fbia.core.errors import ConfigError, ForwardModelError
+from fbia.core.evaluator import make_evaluator
+from fbia.core.interface import Interface
+from fbia.core.observation import MeasurementPoints, Observation, check_coordinate
+from fbia.core.parameters import Parameter, Prior
+from fbia.core.problem import Evaluation, InverseProblem, Result
+from fbia.core.registry import Registry, default_registry
+
+__all__ = ["ExecutorSpec", "Study", "SyntheticSpec", "load_study"]
+
+#: Top-level sections of a study file and what each holds.
+SECTIONS: dict[str, str] = {
+    "study": "name, seed, output folder",
+    "model": "forward model name and options",
+    "parameters": "calibration parameters (array of tables)",
+    "uncertain": "uncertain inputs with priors (array of tables)",
+    "fixed": "inputs held fixed",
+    "observations": "observed states from files (array of tables)",
+    "synthetic": "observations made from the model at a ground truth",
+    "measure": "discrepancy measure name and options",
+    "likelihood": "noise_std",
+    "iterator": "iterator name and options",
+    "executor": "serial or processes, workers",
+}
+_KEYS: dict[str, tuple[str, ...]] = {
+    "study": ("name", "seed", "output"),
+    "model": ("name", "options"),
+    "measure": ("name", "options"),
+    "iterator": ("name", "options"),
+    "parameters": ("name", "unit", "bounds", "initial", "prior"),
+    "uncertain": ("name", "unit", "bounds", "prior"),
+    "observations": ("coordinate", "interface", "points", "noise_std", "name"),
+    "synthetic": ("truth", "coordinates", "noise_std", "noise", "points", "seed"),
+    "likelihood": ("noise_std",),
+    "executor": ("kind", "workers", "keep_runs"),
+}
+EXECUTOR_KINDS = ("serial", "processes")
+#: how [synthetic] noise is added (fbia.synthetic_observations): along the normals (Paper A)
+#: or on every coordinate (Paper B eq. 16)
+NOISE_KINDS = ("normal", "isotropic")
+
+#: spawn keys of the seed sequence derived from [study] seed
+_SYNTHETIC_STREAM, _ITERATOR_STREAM = 0, 1
+
+
+def derived_seed(seed: int, stream: int) -> int:
+    """A 32-bit seed for one consumer of randomness, derived from the study's seed."""
+    return int(np.random.SeedSequence(seed, spawn_key=(stream,)).generate_state(1)[0])
+
+
+@dataclass(frozen=True)
+class ExecutorSpec:
+    """How forward runs are executed: ``serial`` or a local process pool of ``workers``."""
+
+    kind: str = "processes"
+    workers: int | None = None
+    keep_runs: bool = False
+
+    def with_workers(self, workers: int | None) -> ExecutorSpec:
+        """The command line's ``--workers N``: 1 runs serially, more on a process pool."""
+        if workers is None:
+            return self
+        if workers < 1:
+            raise ConfigError(f"--workers must be at least 1, got {workers}")
+        return replace(self, kind="serial" if workers == 1 else "processes", workers=workers)
+
+    def make(self, output: Path, on_record: Callable[[Evaluation], None] | None = None) -> Any:
+        """The evaluator; run folders go to ``<output>/runs`` when ``keep_runs``."""
+        options: dict[str, Any] = {"on_record": on_record}
+        if self.keep_runs:
+            options["workdir"] = output / "runs"
+        if self.kind == "processes":
+            options["workers"] = self.workers
+        return make_evaluator(self.kind, **options)
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": self.kind, "workers": self.workers, "keep_runs": self.keep_runs}
+
+
+@dataclass(frozen=True)
+class SyntheticSpec:
+    """Observations made from the forward model at ``truth`` plus Gaussian noise."""
+
+    truth: dict[str, float]
+    coordinates: list[dict[str, float]]
+    noise_std: float = 0.0
+    points: int | None = None
+    seed: int = 0
+    noise: str = "normal"
+
+
+@dataclass(eq=False)
+class Study:
+    """A study file, read and checked.
+
+    The inverse problem (:attr:`problem`) is built on first use: synthetic observations need
+    forward runs, which :func:`load_study` with ``build=False`` (``fbia validate``) avoids.
+    """
+
+    path: Path
+    name: str
+    seed: int
+    output: Path
+    model: Any
+    model_name: str
+    measure: Any
+    measure_name: str
+    parameters: list[Parameter]
+    uncertain: list[Parameter]
+    fixed: dict[str, float]
+    observations: list[Observation]
+    synthetic: SyntheticSpec | None
+    noise_std: float | None
+    iterator: Any | None
+    iterator_name: str | None
+    executor: ExecutorSpec
+    raw: dict[str, Any] = field(repr=False)
+    text: str = field(repr=False)
+    sha256: str = ""
+
+    @property
+    def file(self) -> str:
+        """The study file as named by the user (used in messages)."""
+        return str(self.path)
+
+    @cached_property
+    def problem(self) -> InverseProblem:
+        """The :class:`InverseProblem` (makes the synthetic observations on first use)."""
+        observations = list(self.observations)
+        if self.synthetic is not None:
+            observations += self._synthetic_observations()
+        try:
+            return InverseProblem(
+                model=self.model,
+                measure=self.measure,
+                observations=observations,
+                parameters=self.parameters,
+                uncertain=self.uncertain,
+                noise_std=self.noise_std,
+                fixed=self.fixed,
+            )
+        except ConfigError as err:
+            raise err.located(self.file) from None
+
+    def _synthetic_observations(self) -> list[Observation]:
+        from fbia.core.synthetic import synthetic_observations
+
+        spec = self.synthetic
+        assert spec is not None
+        where = f"{self.file}: [synthetic]"
+        try:
+            obs = synthetic_observations(
+                self.model,
+                {**self.fixed, **spec.truth},
+                spec.coordinates,
+                noise_std=spec.noise_std,
+                seed=spec.seed,
+                points=spec.points,
+                noise=spec.noise,  # type: ignore[arg-type]
+            )
+        except ForwardModelError as exc:
+            raise ConfigError(f"the forward model failed at the truth: {exc}", where) from None
+        except ConfigError as err:
+            raise err.located(where) from None
+        return list(obs)
+
+    # -- what to show ------------------------------------------------------------------------
+    def start_point(self, values: Mapping[str, float] | None = None) -> dict[str, float]:
+        """Parameters' ``initial`` (else the middle of the bounds), overridden by ``values``.
+
+        ``values`` may also set uncertain and fixed inputs (``fbia forward --set``).
+        """
+        values = dict(values or {})
+        valid = [p.name for p in self.parameters] + [p.name for p in self.uncertain]
+        valid += list(self.fixed)
+        unknown = [k for k in values if k not in valid]
+        if unknown:
+            raise ConfigError(
+                f"unknown name(s) {', '.join(map(repr, unknown))}; valid: {', '.join(valid)}",
+                "--set",
+            )
+        x: dict[str, float] = {}
+        for p in self.parameters:
+            if p.name in values:
+                x[p.name] = float(values.pop(p.name))
+            elif p.initial is not None:
+                x[p.name] = p.initial
+            elif p.bounds is not None:
+                x[p.name] = 0.5 * (p.bounds[0] + p.bounds[1])
+            else:
+                raise ConfigError(
+                    f"parameter {p.name!r} has neither an initial value nor bounds; "
+                    f"give one with --set {p.name}=VALUE"
+                )
+        x.update({k: float(v) for k, v in values.items()})
+        return x
+
+    def summary(self) -> str:
+        """A few lines that say what the study is (``fbia validate``)."""
+
+        def par(p: Parameter) -> str:
+            unit = f" [{p.unit}]" if p.unit else ""
+            rng = f" in [{p.bounds[0]:g}, {p.bounds[1]:g}]" if p.bounds else ""
+            prior = p.prior.kind if p.prior is not None else "none"
+            return f"{p.name}{unit}{rng} ({prior} prior)"
+
+        obs = [f"{o.label()} (file)" for o in self.observations]
+        if self.synthetic is not None:
+            obs += [
+                ", ".join(f"{k}={v:g}" for k, v in c.items()) + " (synthetic)"
+                for c in self.synthetic.coordinates
+            ]
+        lines = [
+            f"study      {self.name} ({self.file}, sha256 {self.sha256[:12]})",
+            f"model      {self.model_name} {_opts(self.model)}".rstrip(),
+            f"parameters {'; '.join(par(p) for p in self.parameters)}",
+        ]
+        if self.uncertain:
+            lines.append(f"uncertain  {'; '.join(par(p) for p in self.uncertain)}")
+        if self.fixed:
+            lines.append("fixed      " + ", ".join(f"{k} = {v:g}" for k, v in self.fixed.items()))
+        lines += [
+            f"states     {'; '.join(obs)}",
+            f"measure    {self.measure_name} {_opts(self.measure)}".rstrip(),
+            f"iterator   {self.iterator_name or '(none: one forward run)'}",
+            f"executor   {self.executor.kind}"
+            + (f", {self.executor.workers} workers" if self.executor.workers else ""),
+            f"seed       {self.seed}",
+            f"output     {self.output}",
+        ]
+        return "\n".join(lines)
+
+    # -- running -----------------------------------------------------------------------------
+    def forward(
+        self,
+        values: Mapping[str, float] | None = None,
+        output: str | Path | None = None,
+        echo: Callable[[str], None] = print,
+    ) -> Result:
+        """One forward run at :meth:`start_point` (``values`` override it); writes its files.
+
+        A run that fails gives a :class:`Result` with ``success`` False and the model's
+        message; nothing is raised for it.
+        """
+        return forward_study(self, values, output, echo)
+
+    def run(
+        self,
+        output: str | Path | None = None,
+        workers: int | None = None,
+        echo: Callable[[str], None] = print,
+    ) -> Result:
+        """Run the study (the iterator, or one forward run if there is none) and write the
+        output folder; see :func:`run_study`."""
+        return run_study(self, output, workers, echo)
+
+
+def _opts(obj: Any) -> str:
+    """The options that differ from their defaults, e.g. ``(n_points=81)``."""
+    opts = getattr(obj, "options", None)
+    dump = getattr(opts, "model_dump", None)
+    if not callable(dump):
+        return ""
+    given = dump(exclude_defaults=True)
+    return "(" + ", ".join(f"{k}={v!r}" for k, v in given.items()) + ")" if given else ""
+
+
+# -- reading -----------------------------------------------------------------------------------
+def load_study(path: str | Path, registry: Registry | None = None, build: bool = True) -> Study:
+    """Read and check a study file.
+
+    Parameters
+    ----------
+    path
+        The TOML file.
+    registry
+        Where plugin names are looked up (default: the installed plugins).
+    build
+        Also build :attr:`Study.problem` now (runs the model for ``[synthetic]`` data).
+        ``False`` checks everything that needs no forward run.
+
+    Raises
+    ------
+    ConfigError
+        For any mistake, with one line naming the file and the key.
+    """
+    path = Path(path)
+    file = str(path)
+    if not path.is_file():
+        raise ConfigError("study file not found" if not path.exists() else "not a file", file)
+    raw_bytes = path.read_bytes()
+    try:
+        text = raw_bytes.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", file) from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"TOML syntax error: {exc}", file) from None
+    study = _Reader(path, raw, registry or default_registry()).read(text, raw_bytes)
+    if build:
+        _ = study.problem
+    return study
+
+
+class _Reader:
+    """Turns the parsed TOML into a :class:`Study`, one precise error per rule."""
+
+    def __init__(self, path: Path, raw: dict[str, Any], registry: Registry) -> None:
+        self.path = path
+        self.file = str(path)
+        self.folder = path.parent
+        self.raw = raw
+        self.registry = registry
+
+    # -- small checks --------------------------------------------------------------------
+    def where(self, section: str, key: str = "") -> str:
+        return f"{self.file}: {section}" + (f" {key}" if key else "")
+
+    def keys(self, table: Mapping[str, Any], valid: Sequence[str], where: str) -> None:
+        unknown = [k for k in table if k not in valid]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"unknown key{plural} {', '.join(map(repr, unknown))}; "
+                f"valid keys: {', '.join(valid)}",
+                where,
+            )
+
+    def table(self, value: Any, where: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise ConfigError(f"expected a table, got {_kind(value)}", where)
+        return value
+
+    def tables(self, value: Any, where: str) -> list[dict[str, Any]]:
+        if isinstance(value, dict):
+            return [value]
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise ConfigError(f"expected an array of tables, got {_kind(value)}", where)
+        return value
+
+    def number(self, value: Any, where: str, positive: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"expected a number, got {_kind(value)} {value!r}", where)
+        v = float(value)
+        if not math.isfinite(v):
+            raise ConfigError(f"expected a finite number, got {value!r}", where)
+        if positive and v <= 0:
+            raise ConfigError(f"must be positive, got {value!r}", where)
+        return v
+
+    def integer(self, value: Any, where: str, minimum: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"expected an integer, got {_kind(value)} {value!r}", where)
+        if minimum is not None and value < minimum:
+            raise ConfigError(f"must be at least {minimum}, got {value}", where)
+        return value
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f"expected a non-empty string, got {_kind(value)} {value!r}", where)
+        return value
+
+    def numbers(self, value: Any, where: str) -> dict[str, float]:
+        table = self.table(value, where)
+        return {str(k): self.number(v, f"{where}.{k}") for k, v in table.items()}
+
+    def known(self, names: Sequence[str], where: str, what: str = "parameter") -> None:
+        unknown = [n for n in names if n not in self.model_names]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"the forward model {self.model_name!r} has no {what}{plural} "
+                f"{', '.join(map(repr, unknown))}; it knows: {', '.join(self.model_names)}",
+                where,
+            )
+
+    def plugin(self, kind: str, section: str) -> tuple[str, Any]:
+        spec = self.table(self.raw[section], f"{self.file}: [{section}]")
+        self.keys(spec, _KEYS[section], f"{self.file}: [{section}]")
+        if "name" not in spec:
+            raise ConfigError("missing key 'name'", f"{self.file}: [{section}]")
+        name = self.string(spec["name"], self.where(f"[{section}]", "name"))
+        self.registry.get(kind, name, where=self.where(f"[{section}]", "name"))
+        options = self.table(spec.get("options", {}), self.where(f"[{section}.options]"))
+        options = self.prepare_options(kind, name, dict(options))
+        obj = self.registry.create(kind, name, options, where=self.where(f"[{section}.options]"))
+        return name, obj
+
+    def prepare_options(self, kind: str, name: str, options: dict[str, Any]) -> dict[str, Any]:
+        """Seed and start values that iterators take from the study (see the module doc)."""
+        if kind != "iterator":
+            return options
+        fields = self.registry.get(kind, name).factory.Options.model_fields
+        where = self.where("[iterator.options]")
+        if "seed" in fields and "seed" not in options:
+            options["seed"] = derived_seed(self.seed, _ITERATOR_STREAM)
+        if "x0" in fields:
+            if "x0" in options:
+                options["x0"] = self.starts(options["x0"], f"{where} x0")
+            elif all(p.initial is not None for p in self.parameters):
+                options["x0"] = {p.name: p.initial for p in self.parameters}
+        return options
+
+    def starts(self, x0: Any, where: str) -> Any:
+        """Check initial guesses (a table or an array of tables): names and bounds."""
+        if isinstance(x0, dict):
+            return self.start(x0, where)
+        if isinstance(x0, list) and x0 and all(isinstance(s, dict) for s in x0):
+            return [self.start(s, f"{where}[{k}]") for k, s in enumerate(x0)]
+        return x0  # other forms (a plain vector, ...) are the iterator's to check
+
+    def start(self, x0: dict[str, Any], where: str) -> dict[str, float]:
+        by_name = {p.name: p for p in self.parameters}
+        unknown = [k for k in x0 if k not in by_name]
+        if unknown:
+            raise ConfigError(
+                f"unknown parameter(s) {', '.join(map(repr, unknown))}; "
+                f"valid: {', '.join(by_name)}",
+                where,
+            )
+        out: dict[str, float] = {}
+        for p in self.parameters:
+            if p.name in x0:
+                v = self.number(x0[p.name], f"{where}.{p.name}")
+                if p.bounds is not None and not p.bounds[0] <= v <= p.bounds[1]:
+                    raise ConfigError(
+                        f"initial guess {v:g} lies outside bounds "
+                        f"[{p.bounds[0]:g}, {p.bounds[1]:g}]",
+                        f"{where}.{p.name}",
+                    )
+                out[p.name] = v
+            elif p.initial is not None:
+                out[p.name] = p.initial
+            else:
+                raise ConfigError(
+                    f"no value for parameter {p.name!r} (and it has no 'initial')", where
+                )
+        return out
+
+    # -- sections ------------------------------------------------------------------------
+    def read(self, text: str, raw_bytes: bytes) -> Study:
+        raw = self.raw
+        unknown = [k for k in raw if k not in SECTIONS]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"unknown section{plural} {', '.join(f'[{k}]' for k in unknown)}; "
+                f"valid sections: {', '.join(f'[{k}]' for k in SECTIONS)}",
+                self.file,
+            )
+        for required in ("model", "parameters", "measure"):
+            if required not in raw:
+                brackets = "[[parameters]]" if required == "parameters" else f"[{required}]"
+                raise ConfigError(f"missing section {brackets}", self.file)
+        if "observations" not in raw and "synthetic" not in raw:
+            raise ConfigError(
+                "no observations: give [[observations]] (data files) or [synthetic]", self.file
+            )
+
+        meta = self.table(raw.get("study", {}), self.where("[study]"))
+        self.keys(meta, _KEYS["study"], self.where("[study]"))
+        name = self.string(meta.get("name", self.path.stem), self.where("[study]", "name"))
+        self.seed = self.integer(meta.get("seed", 0), self.where("[study]", "seed"), minimum=0)
+        out_name = self.string(meta.get("output", "output"), self.where("[study]", "output"))
+        output = self.folder / out_name
+
+        self.model_name, model = self.plugin("forward_model", "model")
+        try:
+            self.model_names = [str(n) for n in model.parameter_names()]
+        except Exception as exc:  # a plugin bug, reported where it shows
+            raise ConfigError(
+                f"forward model {self.model_name!r} failed to list its parameters: "
+                f"{type(exc).__name__}: {exc}",
+                self.where("[model]"),
+            ) from None
+        self.model_dim = _model_dim(model)
+
+        self.parameters = self.read_parameters("parameters")
+        uncertain = self.read_parameters("uncertain") if "uncertain" in raw else []
+        fixed = self.numbers(raw.get("fixed", {}), self.where("[fixed]"))
+        self.known(list(fixed), self.where("[fixed]"), "input")
+        taken = {p.name: "[[parameters]]" for p in self.parameters}
+        for p in uncertain:
+            if p.name in taken:
+                raise ConfigError(
+                    f"{p.name!r} is both a calibration parameter and uncertain",
+                    self.where("[[uncertain]]", repr(p.name)),
+                )
+            taken[p.name] = "[[uncertain]]"
+        for k in fixed:
+            if k in taken:
+                raise ConfigError(
+                    f"{k!r} is fixed here and also listed in {taken[k]}",
+                    self.where("[fixed]", k),
+                )
+
+        observations = self.read_observations() if "observations" in raw else []
+        synthetic = self.read_synthetic() if "synthetic" in raw else None
+
+        measure_name, measure = self.plugin("measure", "measure")
+
+        likelihood = self.table(raw.get("likelihood", {}), self.where("[likelihood]"))
+        self.keys(likelihood, _KEYS["likelihood"], self.where("[likelihood]"))
+        noise_std = (
+            self.number(likelihood["noise_std"], self.where("[likelihood]", "noise_std"), True)
+            if "noise_std" in likelihood
+            else None
+        )
+
+        iterator_name, iterator = (
+            self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
+        )
+        executor = self.read_executor()
+
+        study = Study(
+            path=self.path,
+            name=name,
+            seed=self.seed,
+            output=output,
+            model=model,
+            model_name=self.model_name,
+            measure=measure,
+            measure_name=measure_name,
+            parameters=self.parameters,
+            uncertain=uncertain,
+            fixed=fixed,
+            observations=observations,
+            synthetic=synthetic,
+            noise_std=noise_std,
+            iterator=iterator,
+            iterator_name=iterator_name,
+            executor=executor,
+            raw=raw,
+            text=text,
+            sha256=hashlib.sha256(raw_bytes).hexdigest(),
+        )
+        if synthetic is None:
+            _ = study.problem  # no forward run needed: check the whole problem now
+        return study
+
+    def read_parameters(self, section: str) -> list[Parameter]:
+        out: list[Parameter] = []
+        for k, spec in enumerate(self.tables(self.raw[section], self.where(f"[[{section}]]"))):
+            label = repr(spec["name"]) if isinstance(spec.get("name"), str) else f"#{k + 1}"
+            where = self.where(f"[[{section}]]", label)
+            self.keys(spec, _KEYS[section], where)
+            if "name" not in spec:
+                raise ConfigError("missing key 'name'", where)
+            name = self.string(spec["name"], f"{where} name")
+            self.known([name], f"{where} name")
+            if any(p.name == name for p in out):
+                raise ConfigError(f"parameter {name!r} is listed twice", where)
+            unit = spec.get("unit", "")
+            if not isinstance(unit, str):
+                raise ConfigError(f"expected a string, got {_kind(unit)}", f"{where} unit")
+            bounds: tuple[float, float] | None = None
+            if "bounds" in spec:
+                b = spec["bounds"]
+                if not isinstance(b, list) or len(b) != 2:
+                    raise ConfigError(f"expected [lower, upper], got {b!r}", f"{where} bounds")
+                bounds = (
+                    self.number(b[0], f"{where} bounds"),
+                    self.number(b[1], f"{where} bounds"),
+                )
+                if not bounds[0] < bounds[1]:
+                    raise ConfigError(
+                        f"lower bound {bounds[0]:g} is not below upper bound {bounds[1]:g}",
+                        f"{where} bounds",
+                    )
+            prior: Prior | None = None
+            if "prior" in spec:
+                pspec = self.table(spec["prior"], f"{where} prior")
+                try:
+                    prior = Prior.from_spec(pspec, bounds)
+                except ConfigError as err:
+                    raise err.located(f"{where} prior") from None
+            elif section == "uncertain":
+                raise ConfigError("an uncertain input needs a prior", where)
+            if bounds is None and (prior is None or not all(map(math.isfinite, prior.support))):
+                raise ConfigError(
+                    "needs bounds = [lower, upper] (or a prior with finite support)", where
+                )
+            initial = None
+            if "initial" in spec:
+                initial = self.number(spec["initial"], f"{where} initial")
+                lo, hi = bounds if bounds is not None else prior.support  # type: ignore[union-attr]
+                if not lo <= initial <= hi:
+                    raise ConfigError(
+                        f"initial guess {initial:g} lies outside bounds [{lo:g}, {hi:g}]",
+                        f"{where} initial",
+                    )
+            try:
+                out.append(Parameter(name, bounds, prior, unit, initial))
+            except ConfigError as err:
+                raise ConfigError(err.reason, where) from None
+        if not out:
+            raise ConfigError("no parameters", self.where(f"[[{section}]]"))
+        return out
+
+    def read_observations(self) -> list[Observation]:
+        out: list[Observation] = []
+        specs = self.tables(self.raw["observations"], self.where("[[observations]]"))
+        for k, spec in enumerate(specs):
+            where = self.where("[[observations]]", f"#{k + 1}")
+            self.keys(spec, _KEYS["observations"], where)
+            coordinate = check_coordinate(
+                self.table(spec.get("coordinate", {}), f"{where} coordinate"),
+                f"{where} coordinate",
+            )
+            if "interface" not in spec and "points" not in spec:
+                raise ConfigError("needs 'interface' (a file), 'points' (a file) or both", where)
+            gamma = None
+            if "interface" in spec:
+                file = self.folder / self.string(spec["interface"], f"{where} interface")
+                try:
+                    gamma = Interface.read(file)
+                except ConfigError as err:
+                    raise err.located(f"{where} interface") from None
+                self.dimension(gamma.dim, f"{where} interface")
+            points = None
+            if "points" in spec:
+                file = self.folder / self.string(spec["points"], f"{where} points")
+                try:
+                    points = MeasurementPoints.read(file)
+                except ConfigError as err:
+                    raise err.located(f"{where} points") from None
+                self.dimension(points.dim, f"{where} points")
+            noise = spec.get("noise_std")
+            name = spec.get("name", "")
+            if not isinstance(name, str):
+                raise ConfigError(f"expected a string, got {_kind(name)}", f"{where} name")
+            try:
+                out.append(
+                    Observation(
+                        gamma,
+                        coordinate,
+                        points,
+                        noise_std=(
+                            None
+                            if noise is None
+                            else self.number(noise, f"{where} noise_std", positive=True)
+                        ),
+                        name=name,
+                    )
+                )
+            except ConfigError as err:
+                raise ConfigError(err.reason, where) from None
+        dims = {o.dim for o in out}
+        if len(dims) > 1:
+            raise ConfigError(
+                f"observations mix dimensions {sorted(dims)}", self.where("[[observations]]")
+            )
+        return out
+
+    def dimension(self, dim: int, where: str) -> None:
+        if isinstance(self.model_dim, int) and dim != self.model_dim:
+            raise ConfigError(
+                f"{dim}-D data for the {self.model_dim}-D forward model {self.model_name!r}",
+                where,
+            )
+
+    def read_synthetic(self) -> SyntheticSpec:
+        where = self.where("[synthetic]")
+        spec = self.table(self.raw["synthetic"], where)
+        self.keys(spec, _KEYS["synthetic"], where)
+        for key in ("truth", "coordinates"):
+            if key not in spec:
+                raise ConfigError(f"missing key {key!r}", where)
+        truth = self.numbers(spec["truth"], f"{where} truth")
+        self.known(list(truth), f"{where} truth")
+        missing = [p.name for p in self.parameters if p.name not in truth]
+        if missing:
+            raise ConfigError(
+                f"no true value for parameter(s) {', '.join(map(repr, missing))}",
+                f"{where} truth",
+            )
+        coords = [
+            check_coordinate(c, f"{where} coordinates[{k}]")
+            for k, c in enumerate(self.tables(spec["coordinates"], f"{where} coordinates"))
+        ]
+        if not coords:
+            raise ConfigError("needs at least one coordinate", f"{where} coordinates")
+        noise = self.number(spec["noise_std"], f"{where} noise_std") if "noise_std" in spec else 0.0
+        if noise < 0:
+            raise ConfigError(f"must not be negative, got {noise:g}", f"{where} noise_std")
+        points = (
+            self.integer(spec["points"], f"{where} points", minimum=1) if "points" in spec else None
+        )
+        seed = (
+            self.integer(spec["seed"], f"{where} seed", minimum=0)
+            if "seed" in spec
+            else derived_seed(self.seed, _SYNTHETIC_STREAM)
+        )
+        kind = self.string(spec.get("noise", "normal"), f"{where} noise")
+        if kind not in NOISE_KINDS:
+            raise ConfigError(
+                f"unknown noise {kind!r}; valid: {', '.join(NOISE_KINDS)}", f"{where} noise"
+            )
+        return SyntheticSpec(truth, coords, noise, points, seed, kind)
+
+    def read_executor(self) -> ExecutorSpec:
+        where = self.where("[executor]")
+        spec = self.table(self.raw.get("executor", {}), where)
+        self.keys(spec, _KEYS["executor"], where)
+        kind = self.string(spec.get("kind", "processes"), f"{where} kind")
+        if kind not in EXECUTOR_KINDS:
+            raise ConfigError(
+                f"unknown executor {kind!r}; valid: {', '.join(EXECUTOR_KINDS)}", f"{where} kind"
+            )
+        workers = (
+            self.integer(spec["workers"], f"{where} workers", minimum=1)
+            if "workers" in spec
+            else None
+        )
+        keep = spec.get("keep_runs", False)
+        if not isinstance(keep, bool):
+            raise ConfigError(f"expected true or false, got {keep!r}", f"{where} keep_runs")
+        return ExecutorSpec(kind, workers, keep)
+
+
+def _model_dim(model: Any) -> int | None:
+    """The spatial dimension of a model's interfaces, when it tells (a ``dim`` attribute, or
+    an ``undeformed()`` interface); None otherwise (then checked on the first run)."""
+    dim = getattr(model, "dim", None)
+    if isinstance(dim, int) and not isinstance(dim, bool):
+        return dim
+    undeformed = getattr(model, "undeformed", None)
+    if callable(undeformed):
+        try:
+            gamma = undeformed()
+        except Exception:  # an optional extra that failed: the first run will tell
+            return None
+        if isinstance(gamma, Interface):
+            return gamma.dim
+    return None
+
+
+def _kind(value: Any) -> str:
+    return {
+        dict: "a table",
+        list: "an array",
+        str: "a string",
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+    }.get(type(value), type(value).__name__)
+
+
+# -- running -----------------------------------------------------------------------------------
+Echo = Callable[[str], None]
+
+
+def forward_study(
+    study: Study,
+    values: Mapping[str, float] | None = None,
+    output: str | Path | None = None,
+    echo: Echo = print,
+) -> Result:
+    """One forward run at ``study.start_point(values)``, compared with every observation.
+
+    Writes to ``output`` (default ``<study output>/forward``): ``evaluations.jsonl``, the
+    model's working folder ``run/`` (with any field files), ``interfaces/`` (observed and
+    simulated, CSV for 2-D and VTU), ``plots/interfaces.png`` (2-D), ``result.json`` and
+    ``report.txt``; echoes the discrepancy table (measure, D, number of residuals, max |r|).
+    """
+    out = Path(output) if output is not None else study.output / "forward"
+    return _forward(study, values, out, echo, started=report.now())
+
+
+def _forward(
+    study: Study, values: Mapping[str, float] | None, out: Path, echo: Echo, started: str
+) -> Result:
+    problem = study.problem
+    x = study.start_point(values)
+    out.mkdir(parents=True, exist_ok=True)
+    with report.EvaluationLog(out / "evaluations.jsonl") as log:
+        ev = problem.evaluate(x, workdir=out / "run", index=0, keep_solution=True)
+        log.append(ev)
+    echo(f"forward run of {study.model_name} at {_point(ev.x)}: {ev.status} ({ev.time:.3g} s)")
+    result = Result(
+        status="forward" if ev.ok else ev.status,
+        success=ev.ok,
+        message=(
+            "one forward run and its discrepancy (the study has no iterator)"
+            if ev.ok
+            else f"the forward run {_failure_word(ev)}: {ev.message}"
+        ),
+        x={n: ev.x[n] for n in problem.names if n in ev.x},
+        nfev=1,
+        n_failed=0 if ev.ok else 1,
+        iterator="",
+        evaluations=[ev],
+    )
+    if ev.ok and ev.solution is not None:
+        rows = report.discrepancy_rows(problem, ev.solution, study.measure_name)
+        result.info["discrepancy"] = rows
+        files = result.info["files"] = _write_solution(study, ev.solution, out, "forward run")
+        result.info["inputs"] = ev.x
+        echo(f"interfaces: {len(files['interfaces'])} files in {out / 'interfaces'}")
+        for name, path in files.get("fields", {}).items():
+            echo(f"field {name}: {path}")
+    _finish(study, result, out, started, echo)
+    return result
+
+
+def run_study(
+    study: Study,
+    output: str | Path | None = None,
+    workers: int | None = None,
+    echo: Echo = print,
+) -> Result:
+    """Run a study and write its output folder (default: the study's ``output``).
+
+    With an iterator: builds the evaluator from ``[executor]`` (``workers`` overrides it),
+    drives the iterator step by step (one progress line per second at most), appends every
+    evaluation to ``evaluations.jsonl`` the moment it finishes, then solves once more at the
+    result's ``x`` and writes ``interfaces/``, ``plots/``, ``result.json`` (with provenance)
+    and ``report.txt``.  Without an iterator: what :func:`forward_study` does, in ``output``.
+
+    On Ctrl-C or an error the evaluations finished so far are already on disk; a
+    ``result.json`` with status ``"interrupted"`` or ``"error"`` is written and the exception
+    goes on to the caller.
+    """
+    out = Path(output) if output is not None else study.output
+    started = report.now()
+    if study.iterator is None:
+        echo("the study has no [iterator]: one forward run at the start point")
+        return _forward(study, None, out, echo, started)
+    problem = study.problem
+    executor = study.executor.with_workers(workers)
+    out.mkdir(parents=True, exist_ok=True)
+    log = report.EvaluationLog(out / "evaluations.jsonl")
+    progress = _Progress(echo, log, problem.names)
+    echo(
+        f"running {study.iterator_name} on {study.model_name} with the {study.measure_name} "
+        f"measure ({executor.kind}"
+        + (f", {executor.workers} workers" if executor.kind == "processes" else "")
+        + f"); evaluations go to {log.path}"
+    )
+    executor_info = executor.describe()
+    try:
+        evaluator = executor.make(out, on_record=log.append)
+        executor_info["workers"] = getattr(evaluator, "workers", 1)
+        try:
+            result = _drive(study.iterator, problem, evaluator, progress)
+        finally:
+            evaluator.close()
+    except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
+        interrupted = isinstance(exc, KeyboardInterrupt)
+        partial = _partial(
+            study,
+            log,
+            "interrupted" if interrupted else "error",
+            "stopped by the user (Ctrl-C)"
+            if interrupted
+            else f"the iterator stopped with {type(exc).__name__}: {exc}",
+        )
+        log.close()
+        _finish(study, partial, out, started, echo, executor_info, quiet=True)
+        raise
+    log.close()
+    progress.last()
+    if not isinstance(result, Result):
+        raise TypeError(
+            f"iterator {study.iterator_name!r} returned {type(result).__name__}, not fbia.Result"
+        )
+    result.iterator = result.iterator or study.iterator_name or ""
+    if not result.evaluations:
+        result.evaluations = list(log.records)
+    # The result is saved before the extras below, which only add files to it: a plot that
+    # fails is reported (echoed and kept in result.info["warnings"]), never fatal.
+    _finish(study, result, out, started, echo, executor_info, quiet=True)
+    files: dict[str, Any] = {}
+    warnings: list[str] = []
+
+    def extra(what: str, make: Callable[[], Any]) -> Any:
+        try:
+            return make()
+        except Exception as exc:  # a plugin's plotting or the last run: keep the result
+            warnings.append(f"{what} failed: {type(exc).__name__}: {exc}")
+            echo(f"warning: {warnings[-1]}")
+            return None
+
+    if result.x and all(n in result.x for n in problem.names):
+        x_star = dict(result.x)
+        best = problem.evaluate(x_star, workdir=out / "best", keep_solution=True)
+        if best.ok and best.solution is not None:
+            solution = best.solution
+            result.info.setdefault(
+                "discrepancy", report.discrepancy_rows(problem, solution, study.measure_name)
+            )
+            title = f"{study.iterator_name} result"
+            files.update(
+                extra(
+                    "writing the interfaces", lambda: _write_solution(study, solution, out, title)
+                )
+                or {}
+            )
+        else:
+            warnings.append(f"the forward run at the result's x {best.status}: {best.message}")
+            echo(f"warning: {warnings[-1]}")
+    write_plots = getattr(study.iterator, "write_plots", None)
+    if callable(write_plots):  # an iterator's own plots: write_plots(result, problem, folder)
+        made = extra("the iterator's plots", lambda: write_plots(result, problem, out / "plots"))
+        if made:
+            files["iterator plots"] = [str(p) for p in made]
+    names, units = problem.names, [p.unit for p in problem.parameters]
+    made_ev = extra(
+        "the evaluations plot",
+        lambda: report.plot_evaluations(
+            out / "plots" / "evaluations.png", log.records, names, units
+        ),
+    )
+    if made_ev is not None:
+        files["evaluations plot"] = str(made_ev)
+    if warnings:
+        result.info["warnings"] = warnings
+    result.info.setdefault("files", files)
+    _finish(study, result, out, started, echo, executor_info)
+    return result
+
+
+def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Progress) -> Any:
+    """Step a steppable iterator (``steps()`` generator), else call its ``run()``."""
+    steps = getattr(iterator, "steps", None)
+    if not callable(steps):
+        return iterator.run(problem, evaluator)
+    gen = steps(problem, evaluator)
+    try:
+        while True:
+            try:
+                state = next(gen)
+            except StopIteration as stop:
+                if hasattr(iterator, "result"):
+                    iterator.result = stop.value
+                return stop.value
+            progress(state)
+    finally:
+        gen.close()
+
+
+class _Progress:
+    """One line per iterator step, at most one a second: evaluations, failures, best D."""
+
+    def __init__(self, echo: Echo, log: report.EvaluationLog, names: Sequence[str]) -> None:
+        self.echo, self.log, self.names = echo, log, list(names)
+        self.t0 = self.shown = time.perf_counter()
+        self.steps = 0
+        self.pending = False
+
+    def __call__(self, state: Any) -> None:
+        self.steps += 1
+        self.pending = True
+        if time.perf_counter() - self.shown >= 1.0:
+            self.show()
+
+    def show(self) -> None:
+        best = self.log.best()
+        at = f", best D = {best.distance:.4g} at {_point(best.x, self.names)}" if best else ""
+        self.echo(
+            f"  step {self.steps:4d}  {time.perf_counter() - self.t0:7.1f} s  "
+            f"{len(self.log.records)} evaluations ({self.log.n_failed} failed){at}"
+        )
+        self.shown = time.perf_counter()
+        self.pending = False
+
+    def last(self) -> None:
+        if self.pending:
+            self.show()
+
+
+def _partial(study: Study, log: report.EvaluationLog, status: str, message: str) -> Result:
+    best = log.best()
+    names = [p.name for p in study.parameters]
+    return Result(
+        status=status,
+        success=False,
+        message=f"{message} after {len(log.records)} evaluations"
+        + (" (x is the best evaluation so far)" if best else ""),
+        x={n: best.x[n] for n in names if n in best.x} if best else None,
+        nfev=len(log.records),
+        n_failed=log.n_failed,
+        iterator=study.iterator_name or "",
+        evaluations=list(log.records),
+    )
+
+
+def _write_solution(study: Study, solution: Any, out: Path, title: str) -> dict[str, Any]:
+    problem = study.problem
+    files: dict[str, Any] = {
+        "interfaces": [
+            str(p) for p in report.write_interfaces(out / "interfaces", problem, solution)
+        ]
+    }
+    fields = report.copy_fields(solution, out / "fields", root=out)
+    if fields:
+        files["fields"] = {k: str(v) for k, v in fields.items()}
+    png = report.plot_interfaces(out / "plots" / "interfaces.png", problem, solution, title)
+    if png is not None:
+        files["interfaces plot"] = str(png)
+    return files
+
+
+def _finish(
+    study: Study,
+    result: Result,
+    out: Path,
+    started: str,
+    echo: Echo,
+    executor: Mapping[str, Any] | None = None,
+    quiet: bool = False,
+) -> None:
+    """Provenance, ``result.json`` and ``report.txt``; echo the report unless ``quiet``."""
+    problem = study.problem
+    result.provenance = report.provenance(
+        study_path=study.path.resolve(),
+        study_text=study.text,
+        study_sha256=study.sha256,
+        seed=study.seed,
+        executor=executor or {"kind": "serial", "workers": 1},
+        plugins=[problem.model, problem.measure, study.iterator],
+        started=started,
+        finished=report.now(),
+    )
+    result.info.setdefault("problem", problem.describe())
+    result.save(out / "result.json")
+    truth = study.synthetic.truth if study.synthetic is not None else None
+    text = report.result_report(study.name, result, out, truth)
+    for folder in (out / "run", out / "best"):  # a model's working folder, if it wrote nothing
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+    (out / "report.txt").write_text(text + "\n", encoding="utf-8")
+    if not quiet:
+        echo(text)
+
+
+def _point(x: Mapping[str, float], names: Sequence[str] | None = None) -> str:
+    keys = list(names) if names is not None else list(x)
+    return ", ".join(f"{k} = {x[k]:.6g}" for k in keys if k in x)
+
+
+def _failure_word(ev: Evaluation) -> str:
+    return {
+        "failed": "failed",
+        "measure_failed": "could not be compared (measure failed)",
+        "error": "raised an error",
+    }.get(ev.status, ev.status)

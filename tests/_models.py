@@ -1,0 +1,169 @@
+"""Small plugin classes for the tests of evaluators, study files and the CLI.
+
+They live in an importable module (pytest puts ``tests/`` on ``sys.path``) so that worker
+processes started with ``spawn`` can unpickle them.  They are registered only in registries
+the tests build themselves (``Registry.load(extra=[PLUGIN])``), never globally.
+
+``ToyMoundForwardModel``: a 2-D bump ``y(x) = (h / (E/400)) * sin(pi x) * (1 + nu * x)``
+on ``x`` in [0, 1], with ``h = 0.1 * inflow_rate / 100`` [mm]: closed form, so every
+evaluation has an exact expected value.  Its options make it fail on purpose:
+``fail_above`` (ForwardModelError when E exceeds it), ``bug_above`` (RuntimeError),
+``die_above`` (``os._exit`` of the process running it), ``interrupt_above``
+(KeyboardInterrupt, as Ctrl-C during a run).  With ``rendezvous`` (a file path),
+a dying run first creates that file, and a run with E below ``wait_below`` waits for the file
+and then 0.5 s more: so the two are under way together when the worker dies.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Generator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import Field
+
+import fbia
+from fbia.core.hookspecs import hookimpl
+
+X = np.linspace(0.0, 1.0, 21)
+
+
+def toy_curve(E: float, nu: float, inflow_rate: float = 100.0) -> np.ndarray:
+    """The exact toy interface, (21, 2) [mm]."""
+    h = 0.1 * inflow_rate / 100.0 / (E / 400.0)
+    return np.c_[X, h * np.sin(np.pi * X) * (1.0 + nu * X)]
+
+
+class ToyMoundForwardModel(fbia.Configurable):
+    """Closed-form 2-D test model with switchable failures (see the module docstring)."""
+
+    dim = 2
+
+    class Options(fbia.PluginOptions):
+        inflow_rate: float = Field(100.0, gt=0, description="inflow rate [mm^2/s]")
+        fail_above: float = Field(math.inf, description="E above which solve raises [Pa]")
+        bug_above: float = Field(math.inf, description="E above which a RuntimeError [Pa]")
+        die_above: float = Field(math.inf, description="E above which os._exit(3) [Pa]")
+        interrupt_above: float = Field(math.inf, description="E above which Ctrl-C [Pa]")
+        wait_below: float = Field(-math.inf, description="E below which to wait [Pa]")
+        slow_above: float = Field(math.inf, description="E above which to sleep 30 s [Pa]")
+        rendezvous: str = Field("", description="file a dying run creates first")
+
+    def parameter_names(self) -> Sequence[str]:
+        return ("E", "nu", "inflow_rate")
+
+    def solve(
+        self, parameters: Mapping[str, float], coordinates: Sequence[Mapping[str, float]], workdir
+    ) -> fbia.Solution:
+        E = parameters.get("E", 400.0)
+        nu = parameters.get("nu", 0.3)
+        if E > self.options.slow_above:
+            time.sleep(30.0)
+        if E > self.options.die_above:
+            if self.options.rendezvous:
+                Path(self.options.rendezvous).touch()
+            os._exit(3)
+        if E < self.options.wait_below:
+            deadline = time.monotonic() + 30.0
+            while not Path(self.options.rendezvous).exists() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            time.sleep(0.5)
+        if E > self.options.interrupt_above:
+            raise KeyboardInterrupt  # what Ctrl-C does in the middle of a run
+        if E > self.options.bug_above:
+            raise RuntimeError(f"toy bug at E = {E}")
+        if E > self.options.fail_above:
+            raise fbia.ForwardModelError(f"mesh distortion at E = {E}")
+        (Path(workdir) / "toy.txt").write_text(f"E={E}\n")
+        pairs = []
+        for c in coordinates:
+            q = c.get("inflow_rate", parameters.get("inflow_rate", self.options.inflow_rate))
+            pairs.append((c, fbia.Interface.polyline(toy_curve(E, nu, q))))
+        return fbia.Solution.from_pairs(pairs, diagnostics={"E": E})
+
+
+class VerticalMeasure(fbia.Configurable):
+    """Residuals: simulated minus observed y at the observed vertices (same x grid) [mm]."""
+
+    class Options(fbia.PluginOptions):
+        scale: float = Field(1.0, gt=0, description="factor on the residuals [-]")
+
+    def residuals(self, simulated: fbia.Interface, observation: fbia.Observation) -> np.ndarray:
+        assert observation.interface is not None
+        obs = observation.interface.vertices
+        y = np.interp(obs[:, 0], simulated.vertices[:, 0], simulated.vertices[:, 1])
+        return self.options.scale * (y - obs[:, 1])
+
+    def distance(self, simulated: fbia.Interface, observation: fbia.Observation) -> float:
+        return float(np.linalg.norm(self.residuals(simulated, observation)))
+
+
+class GridIterator(fbia.IteratorBase):
+    """Evaluates an n x n grid over the bounds, one row per step; x = the smallest D."""
+
+    class Options(fbia.PluginOptions):
+        n: int = Field(3, ge=2, description="grid points per parameter [-]")
+        seed: int = Field(0, description="unused here; shows that studies inject a seed")
+
+    def steps(
+        self, problem: fbia.InverseProblem, evaluator: Any
+    ) -> Generator[int, None, fbia.Result]:
+        axes = [
+            np.linspace(lo, hi, self.options.n)
+            for lo, hi in zip(problem.lower, problem.upper, strict=True)
+        ]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
+        records = []
+        for row in np.array_split(grid, self.options.n):
+            records += evaluator.evaluate(problem, [problem.as_dict(x) for x in row])
+            yield len(records)
+        ok = [r for r in records if r.ok]
+        best = min(ok, key=lambda r: r.distance) if ok else None
+        return fbia.Result(
+            status="grid_done" if best else "all_failed",
+            success=best is not None,
+            message=f"evaluated {len(records)} grid points",
+            x={n: best.x[n] for n in problem.names} if best else None,
+            nfev=len(records),
+            n_failed=sum(not r.ok for r in records),
+            evaluations=records,
+        )
+
+
+class _Plugin:
+    """The hook implementations that register the classes above (tests only)."""
+
+    @hookimpl
+    def register_forward_models(self, register):
+        register("toy_mound", ToyMoundForwardModel)
+
+    @hookimpl
+    def register_measures(self, register):
+        register("vertical", VerticalMeasure)
+
+    @hookimpl
+    def register_iterators(self, register):
+        register("grid", GridIterator)
+
+
+PLUGIN = _Plugin()
+
+
+def toy_problem(**model_options: Any) -> fbia.InverseProblem:
+    """The toy model against its own exact curve at E = 400 Pa, nu = 0.3."""
+    obs = fbia.Observation(
+        interface=fbia.Interface.polyline(toy_curve(400.0, 0.3)), coordinate={"inflow_rate": 100.0}
+    )
+    return fbia.InverseProblem(
+        model=ToyMoundForwardModel(**model_options),
+        measure=VerticalMeasure(),
+        observations=[obs],
+        parameters=[
+            fbia.Parameter("E", bounds=(100.0, 800.0)),
+            fbia.Parameter("nu", bounds=(-0.8, 0.5)),
+        ],
+    )

@@ -1,0 +1,320 @@
+"""The ``fbia`` command line: exit statuses, one-line errors, the files each command writes."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+from _models import PLUGIN
+from _studies import BAD_CASES, STUDY, TRUTH, edit, write_study
+
+import fbia
+from fbia.core import study as study_module
+from fbia.core.cli import main
+from fbia.core.registry import Registry
+
+FBIA = Path(sys.executable).parent / "fbia"
+
+
+@pytest.fixture
+def study_file(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return write_study(tmp_path)
+
+
+def _one_error_line(capsys) -> str:
+    out, err = capsys.readouterr()
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("fbia: error: ")
+    return lines[0].removeprefix("fbia: error: ")
+
+
+@pytest.mark.parametrize(("case", "text", "message"), BAD_CASES, ids=[c[0] for c in BAD_CASES])
+def test_validate_gives_status_2_and_one_line_per_mistake(study_file, capsys, case, text, message):
+    study_file.write_text(text)
+    assert main(["validate", "study.toml"]) == 2
+    assert _one_error_line(capsys).startswith(message)
+
+
+@pytest.mark.parametrize("command", [["run"], ["forward"]])
+@pytest.mark.parametrize("case", ["nan-in-data", "unknown-measure", "x0-outside"])
+def test_run_and_forward_report_the_same_mistakes(study_file, capsys, command, case):
+    text, message = next((t, m) for c, t, m in BAD_CASES if c == case)
+    study_file.write_text(text)
+    assert main([*command, "study.toml"]) == 2
+    assert _one_error_line(capsys).startswith(message)
+    assert not (study_file.parent / "out").exists()  # nothing ran
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["run", "nope.toml"], "nope.toml: study file not found"),
+        (["run"], "run: the following arguments are required: FILE"),
+        (["frobnicate"], "argument COMMAND: invalid choice: 'frobnicate'"),
+        (["run", "study.toml", "--workers", "two"], "run: argument --workers: invalid int value"),
+        (["forward", "study.toml", "--set", "E"], "--set: expected NAME=VALUE, got 'E'"),
+        (["forward", "study.toml", "--set", "E=abc"], "--set: value of 'E' is not a number: 'abc'"),
+        (
+            ["forward", "study.toml", "--set", "G=1"],
+            "--set: unknown name(s) 'G'; valid: E, nu",
+        ),
+        (["run", "study.toml", "--workers", "0"], "--workers must be at least 1, got 0"),
+    ],
+)
+def test_bad_arguments_give_status_2_and_one_line(study_file, capsys, argv, message):
+    assert main(argv) == 2
+    assert _one_error_line(capsys).startswith(message)
+
+
+def test_a_real_subprocess_prints_one_line_and_no_traceback(study_file):
+    study_file.write_text(edit("data/observed_100.csv", "data/with_nan.csv"))
+    proc = subprocess.run(
+        [str(FBIA), "validate", "study.toml"], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert proc.stderr == (
+        "fbia: error: study.toml: [[observations]] #1 interface: data/with_nan.csv: row 4: "
+        "NaN or infinite value\n"
+    )
+
+
+def test_version_and_validate(study_file, capsys):
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"fbia {fbia.__version__}\n"
+    assert main(["validate", "study.toml"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == "ok"
+    assert out[0].startswith("study      tiny (study.toml, sha256 ")
+    assert "model      analytic_mound_2d (n_points=41)" in out
+    assert "executor   serial" in out
+
+
+def test_plugins_lists_the_builtins_with_versions(capsys):
+    assert main(["plugins", "--json"]) == 0
+    rows = {(r["kind"], r["name"]): r for r in json.loads(capsys.readouterr().out)}
+    builtins = {
+        ("forward_model", "analytic_mound_2d"),
+        ("forward_model", "analytic_mound_3d"),
+        ("measure", "cpp"),
+        ("measure", "ray"),
+        ("measure", "rkhs"),
+        ("iterator", "levenberg_marquardt"),
+    }
+    assert builtins <= set(rows)
+    for key in builtins:
+        assert rows[key]["distribution"] == "fbia"
+        assert rows[key]["version"] == fbia.__version__
+    assert rows[("measure", "cpp")]["class"] == "fbia.measures.cpp.CppMeasure"
+    assert main(["plugins"]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[0].split() == ["name", "kind", "distribution", "version", "class"]
+    assert any(line.split()[:4] == ["cpp", "measure", "fbia", fbia.__version__] for line in table)
+
+
+def test_forward_writes_the_interfaces_and_prints_the_discrepancy_table(study_file, capsys):
+    assert (
+        main(["forward", "study.toml", "--set", "E=400", "--set", "nu=0.3", "--output", "f"]) == 0
+    )
+    out = capsys.readouterr().out
+    folder = study_file.parent / "f"
+    model = fbia.forward_model("analytic_mound_2d", n_points=41)
+    exact = model.solve(TRUTH, [{"inflow_rate": 100.0}], folder).interface({"inflow_rate": 100.0})
+    for stem in ("simulated_inflow_rate_100", "observed_inflow_rate_100"):
+        csv = fbia.Interface.read(folder / "interfaces" / f"{stem}.csv")
+        np.testing.assert_allclose(csv.vertices, exact.vertices, rtol=0, atol=1e-15)
+        vtu = meshio.read(folder / "interfaces" / f"{stem}.vtu")  # for ParaView: line cells
+        np.testing.assert_allclose(vtu.points[:, :2], exact.vertices, rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(vtu.cells_dict["line"], exact.cells)
+    assert (folder / "interfaces" / "points_inflow_rate_100.csv").is_file()
+    assert (folder / "plots" / "interfaces.png").stat().st_size > 1000
+    # the discrepancy table: at the truth the simulated interface is the observed one
+    row = next(line.split() for line in out.splitlines() if line.startswith("inflow_rate=100"))
+    assert row[1] == "cpp" and float(row[2]) < 1e-12 and row[3] == "41"
+    assert "forward run of analytic_mound_2d at E = 400, nu = 0.3: ok" in out
+    result = json.loads((folder / "result.json").read_text())
+    assert result["status"] == "forward" and result["x"] == TRUTH
+    assert len((folder / "evaluations.jsonl").read_text().splitlines()) == 1
+
+
+def test_forward_keeps_the_model_field_files_and_names_them(study_file, capsys):
+    study_file.write_text(edit("n_points = 41", "n_points = 41, write_fields = true"))
+    assert main(["forward", "study.toml", "--output", "f"]) == 0
+    out = capsys.readouterr().out
+    field = study_file.parent / "f" / "run" / "interface_0.csv"  # the model's working folder
+    assert f"field interface_0: {Path('f') / 'run' / 'interface_0.csv'}" in out
+    simulated = fbia.Interface.read(
+        study_file.parent / "f" / "interfaces" / "simulated_inflow_rate_100.csv"
+    )
+    np.testing.assert_array_equal(fbia.Interface.read(field).vertices, simulated.vertices)
+
+
+def test_forward_default_point_is_initial_and_D_matches_the_measure(study_file, capsys):
+    assert main(["forward", "study.toml"]) == 0
+    out = capsys.readouterr().out
+    assert "at E = 300, nu = 0.2: ok" in out
+    study = fbia.load_study("study.toml")
+    model, obs = study.problem.model, study.problem.observations[0]
+    sim = model.solve({"E": 300.0, "nu": 0.2}, [obs.coordinate], Path(".")).interface(
+        obs.coordinate
+    )
+    expected_d = study.problem.measure.distance(sim, obs)
+    r = study.problem.measure.residuals(sim, obs)
+    row = next(line.split() for line in out.splitlines() if line.startswith("inflow_rate=100"))
+    assert float(row[2]) == pytest.approx(expected_d, rel=1e-5)
+    assert float(row[4]) == pytest.approx(np.abs(r).max(), rel=1e-5)
+    assert (study_file.parent / "out" / "forward" / "result.json").is_file()
+
+
+def test_a_failed_forward_run_exits_1_with_one_line(study_file, capsys):
+    study_file.write_text(
+        edit("n_points = 41", "n_points = 41, failure_region = { E = [500.0, 900.0] }")
+    )
+    assert main(["forward", "study.toml", "--set", "E=600"]) == 1
+    line = _one_error_line(capsys)
+    assert line.startswith("the forward run failed: ") and "mesh distortion" in line
+    saved = json.loads((study_file.parent / "out" / "forward" / "result.json").read_text())
+    assert saved["status"] == "failed" and saved["n_failed"] == 1
+
+
+def test_run_writes_result_json_with_provenance(study_file, capsys):
+    assert main(["run", "study.toml"]) == 0
+    out = capsys.readouterr().out
+    folder = study_file.parent / "out"
+    result = json.loads((folder / "result.json").read_text())
+    # exact data: Levenberg-Marquardt recovers the truth
+    assert result["success"] and result["iterator"] == "levenberg_marquardt"
+    assert result["x"]["E"] == pytest.approx(400.0, rel=1e-4)
+    assert result["x"]["nu"] == pytest.approx(0.3, abs=1e-4)
+    prov = result["provenance"]
+    assert prov["fbia"] == fbia.__version__
+    assert prov["python"] == platform.python_version()
+    assert prov["numpy"] == np.__version__ and prov["scipy"]
+    assert prov["study_text"] == STUDY
+    assert prov["study_sha256"] == hashlib.sha256(STUDY.encode()).hexdigest()
+    assert prov["seed"] == 3 and prov["executor"]["kind"] == "serial"
+    assert prov["host"] and prov["started"] <= prov["finished"]
+    assert {
+        "forward_model:analytic_mound_2d",
+        "measure:cpp",
+        "iterator:levenberg_marquardt",
+    } <= set(prov["plugins"])
+    assert prov["plugins"]["measure:cpp"]["version"] == fbia.__version__
+    # every evaluation was logged, one JSON line each
+    lines = (folder / "evaluations.jsonl").read_text().splitlines()
+    assert len(lines) == result["nfev"] == len(result["evaluations"])
+    assert [json.loads(line)["index"] for line in lines] == list(range(len(lines)))
+    report = (folder / "report.txt").read_text()
+    assert report.strip() in out  # the report is also what the run printed at the end
+    assert "discrepancy at x:" in report
+    assert (folder / "interfaces" / "simulated_inflow_rate_100.csv").is_file()
+    assert (folder / "plots" / "evaluations.png").is_file()
+
+
+def test_run_without_iterator_does_a_forward_run_and_says_so(study_file, capsys):
+    study_file.write_text(
+        STUDY.split("[iterator]")[0] + "[executor]" + STUDY.split("[executor]")[1]
+    )
+    assert main(["run", "study.toml", "--output", "o"]) == 0
+    out = capsys.readouterr().out
+    assert "the study has no [iterator]: one forward run at the start point" in out
+    assert "discrepancy of the forward run:" in out
+    assert (study_file.parent / "o" / "interfaces" / "simulated_inflow_rate_100.vtu").is_file()
+
+
+def test_ctrl_c_exits_130_after_saving_what_was_computed(tmp_path, monkeypatch, capsys):
+    registry = Registry.load(extra=[PLUGIN])
+    monkeypatch.setattr(study_module, "default_registry", lambda: registry)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "toy.toml").write_text(
+        '[model]\nname = "toy_mound"\noptions = { interrupt_above = 500.0 }\n'
+        '[[parameters]]\nname = "E"\nbounds = [100.0, 800.0]\n'
+        '[[parameters]]\nname = "nu"\nbounds = [-0.8, 0.5]\n'
+        "[synthetic]\ntruth = { E = 400.0, nu = 0.3 }\ncoordinates = [{ inflow_rate = 100.0 }]\n"
+        '[measure]\nname = "vertical"\n[iterator]\nname = "grid"\n[executor]\nkind = "serial"\n'
+    )
+    # the grid's rows are E = 100, 450, 800: the first run of the third row is "interrupted"
+    assert main(["run", "toy.toml"]) == 130
+    assert capsys.readouterr().err == "fbia: interrupted; what was computed is saved\n"
+    folder = tmp_path / "output"
+    lines = (folder / "evaluations.jsonl").read_text().splitlines()
+    assert [json.loads(line)["x"]["E"] for line in lines] == [100.0] * 3 + [450.0] * 3
+    result = json.loads((folder / "result.json").read_text())
+    assert result["status"] == "interrupted" and not result["success"]
+    assert result["nfev"] == 6 and result["x"]["E"] == 450.0
+    assert result["provenance"]["finished"]
+
+
+def test_an_unwritable_output_is_one_line_with_status_1(study_file, capsys):
+    (study_file.parent / "taken").write_text("a file, not a folder")
+    assert main(["forward", "study.toml", "--output", "taken"]) == 1
+    assert "taken" in _one_error_line(capsys)
+
+
+_DRIVER = """
+import sys
+sys.path.insert(0, {tests!r})
+from _models import PLUGIN
+from fbia.core import study
+from fbia.core.cli import main
+from fbia.core.registry import Registry
+registry = Registry.load(extra=[PLUGIN])
+study.default_registry = lambda: registry
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_real_ctrl_c_exits_130_and_saves_the_finished_runs(tmp_path):
+    # A real SIGINT to the process group, as a terminal sends it, during a run that would take
+    # 30 s: exit 130 at once with one line and no traceback, the 6 finished runs saved.
+    # (tests/test_evaluator.py checks that Ctrl-C stops a process pool's workers.)
+    (tmp_path / "drive.py").write_text(_DRIVER.format(tests=str(Path(__file__).parent)))
+    (tmp_path / "toy.toml").write_text(
+        '[model]\nname = "toy_mound"\noptions = { slow_above = 500.0 }\n'
+        '[[parameters]]\nname = "E"\nbounds = [100.0, 800.0]\n'
+        '[[parameters]]\nname = "nu"\nbounds = [-0.8, 0.5]\n'
+        "[synthetic]\ntruth = { E = 400.0, nu = 0.3 }\ncoordinates = [{ inflow_rate = 100.0 }]\n"
+        '[measure]\nname = "vertical"\n[iterator]\nname = "grid"\n[executor]\nkind = "serial"\n'
+    )
+    log = tmp_path / "output" / "evaluations.jsonl"
+    proc = subprocess.Popen(
+        [sys.executable, "drive.py", "run", "toy.toml"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        deadline = time.monotonic() + 120.0
+        while not (log.is_file() and len(log.read_text().splitlines()) >= 6):
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        time.sleep(0.3)  # now in the first 30 s run of the grid's last row (E = 800 Pa)
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert time.monotonic() - t0 < 10.0
+    assert proc.returncode == 130
+    assert err == "fbia: interrupted; what was computed is saved\n"
+    assert len(log.read_text().splitlines()) == 6
+    result = json.loads((tmp_path / "output" / "result.json").read_text())
+    assert (result["status"], result["nfev"]) == ("interrupted", 6)
+    assert result["x"]["E"] in (100.0, 450.0)

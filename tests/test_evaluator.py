@@ -1,0 +1,170 @@
+"""SerialEvaluator and ProcessPoolEvaluator: same records, order, folders, failures, crashes.
+
+The toy model (tests/_models.py) is closed form, so every ok record has exact residuals.  It
+fails on purpose: ForwardModelError above E = 650 Pa, RuntimeError above 680 Pa, os._exit above
+750 Pa, and takes 30 s above 790 Pa.  One problem object and one pool (2 spawned workers)
+serve the pool tests, so the workers start once (plus the restarts that a killed worker
+forces).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+from _models import toy_curve, toy_problem
+
+import fbia
+
+PROBLEM = toy_problem(fail_above=650.0, bug_above=680.0, die_above=750.0, slow_above=790.0)
+POINTS = [{"E": E, "nu": nu} for E, nu in [(200.0, 0.1), (400.0, 0.3), (600.0, -0.2), (300.0, 0.0)]]
+FAILING = [*POINTS, {"E": 700.0, "nu": 0.3}, {"E": 660.0, "nu": 0.3}]
+
+
+def _exact_residuals(E: float, nu: float) -> np.ndarray:
+    return toy_curve(E, nu)[:, 1] - toy_curve(400.0, 0.3)[:, 1]
+
+
+@pytest.fixture(scope="module")
+def pool_root(tmp_path_factory):
+    return tmp_path_factory.mktemp("pool_runs")
+
+
+@pytest.fixture(scope="module")
+def pool(pool_root):
+    with fbia.ProcessPoolEvaluator(workers=2, workdir=pool_root, start_method="spawn") as ev:
+        yield ev
+
+
+def _check_failing_batch(records: list[fbia.Evaluation], first_index: int) -> None:
+    assert [r.index for r in records] == list(range(first_index, first_index + len(FAILING)))
+    assert [r.x for r in records] == FAILING
+    # E = 700 is above both thresholds: the RuntimeError (a plugin bug) comes first -> "error"
+    # with the type name; E = 660 only fails (ForwardModelError) -> "failed" with the message
+    assert [r.status for r in records] == ["ok", "ok", "ok", "ok", "error", "failed"]
+    assert records[4].message == "RuntimeError: toy bug at E = 700.0"
+    assert records[5].message == "mesh distortion at E = 660.0"
+    for r in records[4:]:
+        assert r.residuals is None and np.isnan(r.distance)
+    for r, p in zip(records[:4], POINTS, strict=True):
+        np.testing.assert_allclose(r.residuals, _exact_residuals(p["E"], p["nu"]), atol=1e-15)
+        assert r.distance == pytest.approx(np.linalg.norm(_exact_residuals(p["E"], p["nu"])))
+    assert records[1].distance == 0.0  # the truth
+
+
+def test_serial_records_are_exact_in_batch_order_with_failures_recorded(tmp_path):
+    with fbia.SerialEvaluator(workdir=tmp_path) as ev:
+        records = ev.evaluate(PROBLEM, FAILING)
+    _check_failing_batch(records, 0)
+    # each run in its own folder, where the model wrote its file
+    folders = [tmp_path / f"eval_{i:06d}" for i in range(len(FAILING))]
+    assert [r.workdir for r in records] == [str(f) for f in folders]
+    assert [(f / "toy.txt").read_text() for f in folders[:4]] == [f"E={p['E']}\n" for p in POINTS]
+
+
+def test_pool_gives_the_serial_records_for_the_same_batch(pool, pool_root):
+    with fbia.SerialEvaluator() as serial:
+        expected = serial.evaluate(PROBLEM, FAILING)
+    start = pool.count
+    got = pool.evaluate(PROBLEM, FAILING)
+    _check_failing_batch(got, start)
+    for a, b in zip(expected, got, strict=True):
+        assert (a.index + start, a.x, a.status, a.message) == (b.index, b.x, b.status, b.message)
+        assert a.distances == b.distances
+        if a.residuals is not None:
+            np.testing.assert_array_equal(a.residuals, b.residuals)
+    # each run in its own folder, named by its index, written by a worker process
+    for r, p in zip(got[:4], POINTS, strict=True):
+        assert r.workdir == str(pool_root / f"eval_{r.index:06d}")
+        assert (pool_root / r.workdir).joinpath("toy.txt").read_text() == f"E={p['E']}\n"
+        assert not (pool_root / r.workdir).joinpath(".fbia-started").exists()
+
+
+def test_a_run_that_kills_its_worker_fails_alone_and_the_pool_carries_on(pool):
+    stored: list[fbia.Evaluation] = []
+    pool.on_record = stored.append
+    batch = [*POINTS, {"E": 780.0, "nu": 0.2}, {"E": 250.0, "nu": 0.4}, {"E": 500.0, "nu": 0.2}]
+    start = pool.count
+    try:
+        records = pool.evaluate(PROBLEM, batch)
+    finally:
+        pool.on_record = None
+    assert [r.status for r in records] == ["ok"] * 4 + ["failed", "ok", "ok"]
+    assert records[4].message.startswith("the worker process died during this run")
+    assert records[4].x == {"E": 780.0, "nu": 0.2}
+    for r, p in zip(records, batch, strict=True):
+        if r.ok:
+            np.testing.assert_allclose(r.residuals, _exact_residuals(p["E"], p["nu"]), atol=1e-15)
+    # every record reached on_record exactly once, as it finished
+    assert sorted(r.index for r in stored) == list(range(start, start + len(batch)))
+    # the evaluator is still usable for the next batch
+    again = pool.evaluate(PROBLEM, POINTS[:2])
+    assert [r.status for r in again] == ["ok", "ok"]
+    assert [r.index for r in again] == [start + len(batch), start + len(batch) + 1]
+    assert again[1].distance == 0.0
+
+
+def test_ctrl_c_stops_the_workers_at_once_and_keeps_the_finished_records(pool):
+    # (runs after the other tests of the module pool: it stops the pool's processes)
+    # Ctrl-C arrives 0.5 s after the first record, while both workers are in 30 s runs.
+    stored: list[fbia.Evaluation] = []
+    workers: list = []
+    timers: list[threading.Timer] = []
+
+    def on_record(record: fbia.Evaluation) -> None:
+        stored.append(record)
+        workers.extend(pool._pool._processes.values())
+        timers.append(threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT)))
+        timers[-1].start()
+
+    pool.on_record = on_record
+    batch = [{"E": 200.0, "nu": 0.1}, {"E": 795.0, "nu": 0.3}, {"E": 799.0, "nu": 0.3}]
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            pool.evaluate(PROBLEM, batch)
+        t_stop = time.monotonic()
+    finally:
+        for t in timers:
+            t.cancel()
+        pool.on_record = None
+    assert [(r.x, r.status) for r in stored] == [({"E": 200.0, "nu": 0.1}, "ok")]
+    assert len(workers) == 2
+    for proc in workers:  # the 30 s runs were stopped, not waited for
+        proc.join(timeout=5.0)
+        assert not proc.is_alive()
+    assert time.monotonic() - t_stop < 5.0
+    # a later batch starts a new pool
+    assert [r.status for r in pool.evaluate(PROBLEM, POINTS[:1])] == ["ok"]
+
+
+def test_runs_under_way_when_a_worker_dies_are_repeated_alone_to_find_the_culprit(tmp_path):
+    # E = 250 waits until E = 780 has started (and is about to kill its worker), so both are
+    # under way when the pool breaks: each is repeated alone; only E = 780 dies again.
+    flag = tmp_path / "rendezvous"
+    problem = toy_problem(die_above=750.0, wait_below=260.0, rendezvous=str(flag))
+    batch = [{"E": 250.0, "nu": 0.4}, {"E": 780.0, "nu": 0.2}, {"E": 400.0, "nu": 0.3}]
+    # fork: this test restarts the pool three times; the logic does not depend on the start
+    # method, and spawned workers are what the other pool tests use
+    with fbia.ProcessPoolEvaluator(workers=2, start_method="fork") as ev:
+        records = ev.evaluate(problem, batch)
+    assert flag.exists()
+    assert [r.status for r in records] == ["ok", "failed", "ok"]
+    assert records[1].message.endswith("it died again when repeated alone")
+    np.testing.assert_allclose(records[0].residuals, _exact_residuals(250.0, 0.4), atol=1e-15)
+    assert records[2].distance == 0.0
+
+
+def test_serial_on_record_sees_every_record_in_order():
+    seen: list[tuple[int, str]] = []
+    with fbia.SerialEvaluator(on_record=lambda r: seen.append((r.index, r.status))) as ev:
+        ev.evaluate(PROBLEM, FAILING)
+    assert seen == [(0, "ok"), (1, "ok"), (2, "ok"), (3, "ok"), (4, "error"), (5, "failed")]
+
+
+def test_make_evaluator_rejects_unknown_kinds():
+    with pytest.raises(fbia.ConfigError, match=r"unknown executor 'dask2'; valid: serial, proc"):
+        fbia.make_evaluator("dask2")
