@@ -6,3 +6,6 @@ from fbia.core.hookspecs import hookimpl
 @hookimpl
 def register_iterators(register):  # type: ignore[no-untyped-def]
     """Register the built-in iterators (one line each)."""
+    from fbia.iterators.levenberg_marquardt import LevenbergMarquardtIterator
+
+    register("levenberg_marquardt", LevenbergMarquardtIterator)

@@ -1,0 +1,732 @@
+"""Levenberg–Marquardt inverse analysis (Paper A eq. 16-29), on a problem or a plain function.
+
+On an inverse problem (the residual vector r of eq. 19 comes from the measure, over all
+observations)::
+
+    import fbia
+    lm = fbia.iterator("levenberg_marquardt", x0=[{"E": 200.0, "nu": 0.4},
+                                                  {"E": 600.0, "nu": 0.0}])
+    with fbia.ProcessPoolEvaluator(workers=3) as ev:      # the n_x + 1 runs of a Jacobian
+        result = lm.run(problem, ev)                       # run side by side
+    print(result.summary())                               # optimum, std. errors, correlation,
+    lm.write_plots(result, problem, "output")             # AIC/BIC, multi-start table
+
+    for state in (gen := lm.steps(problem, ev)):           # or step by step
+        print(state)
+        if state.nfev > 200:
+            result = lm.stop(gen)                          # partial result, status "stopped"
+            break
+
+On a plain residual function, like ``scipy.optimize.least_squares`` (same iterator):
+
+>>> import numpy as np, fbia
+>>> t = np.linspace(0.0, 4.0, 20)
+>>> y = 3.0 * np.exp(-0.7 * t)
+>>> res = fbia.least_squares(lambda b: b[0] * np.exp(-b[1] * t) - y, [1.0, 1.0],
+...                          bounds=([0.0, 0.0], [10.0, 5.0]))
+>>> res.success, np.round(res.x_array, 8).tolist()
+(True, [3.0, 0.7])
+
+``mode="paper"`` runs the algorithm exactly as Paper A describes it (including its known
+weaknesses: it can stall on a bound and gives no result when a forward run fails);
+``mode="robust"`` (default) is the improved variant described in
+:mod:`fbia.iterators.lm_core`.
+
+Status tags of the result (``success`` is True for the first three):
+
+``converged_gradient``  err_grad < eps_grad (eq. 29a), or r ⟂ J within gtol (robust)
+``converged_residual``  err_res < eps_res (eq. 29b), or ‖r‖² stopped decreasing (ftol, robust)
+``converged_step``      no step larger than xtol reduces err_res (robust)
+``iteration_limit``     max_iter iterations (eq. 29c); x is the best iterate
+``damping_limit``       paper: μ > μ0·mu_limit, no result; robust: the steps shrank to nothing
+                        because the runs fail there, x is the best point found
+``run_failed``          paper: a forward run failed, no result (Paper A, "Deterministic
+                        character")
+``singular``            paper: JᵀJ + μ diag(JᵀJ) is singular, no result
+``start_failed``        robust: the run at the initial guess failed
+``all_failed``          every forward run failed
+``evaluation_limit``    max_nfev runs; ``stopped``: :meth:`LevenbergMarquardtIterator.stop`
+``plugin_error``        a plugin raised an unexpected exception (a bug, never retried)
+``no_result``           multi-start: no start gave a result, for different reasons
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Callable, Generator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pydantic import Field, model_validator
+
+from fbia.core.errors import ConfigError, ForwardModelError
+from fbia.core.evaluator import Evaluator
+from fbia.core.iteration import IteratorBase
+from fbia.core.options import PluginOptions
+from fbia.core.problem import Evaluation
+from fbia.iterators.lm_core import LMChain, LMSettings, Outcome, err_res_of
+from fbia.iterators.lm_result import FitStatistics, LMResult, compare_starts
+
+FloatArray = NDArray[np.float64]
+
+#: Options that only the robust mode knows.
+_ROBUST_ONLY = ("ftol", "xtol", "gtol", "scaling", "speculative")
+
+#: Finite-difference step of :func:`least_squares` (a function computed to machine precision).
+_SQRT_EPS = float(np.sqrt(np.finfo(float).eps))
+
+
+class _StopRequested(Exception):
+    """Thrown into a running :meth:`LevenbergMarquardtIterator.steps` by its ``stop``."""
+
+
+@dataclass
+class LMState:
+    """What :meth:`LevenbergMarquardtIterator.steps` yields after every batch of runs."""
+
+    round: int
+    nfev: int
+    n_failed: int
+    chains: list[dict[str, Any]]
+
+    def __str__(self) -> str:
+        parts = []
+        for c in self.chains:
+            tail = f" [{c['status']}]" if c["status"] else ""
+            parts.append(
+                f"start {c['start']}: it {c['iteration']}, err_res {c['err_res']:.3e}, "
+                f"err_grad {c['err_grad']:.3e}, mu {c['mu']:.2e}{tail}"
+            )
+        return f"round {self.round}, {self.nfev} runs ({self.n_failed} failed): " + "; ".join(parts)
+
+
+class LevenbergMarquardtIterator(IteratorBase):
+    """Levenberg–Marquardt optimisation of the least-squares objective (Paper A eq. 16).
+
+    Each iteration evaluates the forward model at x and at n_x perturbed points
+    (eq. 21-23, one batch for the evaluator), computes the step of eq. 18 and stops on
+    eq. 29a-c.  Several initial guesses run as independent chains whose batches share the
+    evaluator; the result compares their optima.  See :mod:`fbia.iterators.lm_core` for the
+    ``paper`` and ``robust`` modes.
+    """
+
+    class Options(PluginOptions):
+        x0: dict[str, float] | list[dict[str, float]] | None = Field(
+            None,
+            description="initial guess {name: value} in the parameters' units, or a list of "
+            "them for a multi-start analysis (Paper A Tables 1, 3-6); default: the "
+            "parameters' `initial` values",
+        )
+        mode: Literal["robust", "paper"] = Field(
+            "robust",
+            description="'robust': improved algorithm (declines steps that increase the "
+            "residual, projects steps onto the bounds, survives failed runs); 'paper': Paper A "
+            "exactly as published",
+        )
+        alpha: float | dict[str, float] = Field(
+            1e-5,
+            description="absolute part α of the finite-difference perturbation "
+            "δx_i = α + β·x_i (Paper A eq. 21; robust mode uses |x_i|), in each parameter's "
+            "unit; one number or {name: value}; with α = 0, δx_i = β where x_i = 0",
+        )
+        beta: float = Field(
+            1e-3, ge=0.0, description="relative part β of the perturbation (eq. 21) [-]"
+        )
+        mu0: float | None = Field(
+            None,
+            gt=0.0,
+            description="initial damping μ0 of eq. 18, relative to diag(JᵀJ) [-]; default 1 "
+            "in paper mode (the default of QUEENS, where Paper A's algorithm was implemented), "
+            "1e-2 in robust mode (where it sets the first trust region: the length of the "
+            "first step)",
+        )
+        mu_limit: float = Field(
+            1e6,
+            gt=1.0,
+            description="paper mode: damping limit factor, the run ends without result when "
+            "μ > μ0·mu_limit (Paper A: 1e6) [-]; the robust mode ends on xtol instead",
+        )
+        eps_grad: float = Field(
+            1e-8,
+            ge=0.0,
+            description="eq. 29a: converged when err_grad = ‖Jᵀr‖ < eps_grad; unit "
+            "[r]²/[x], mixed over the parameters as in the paper; 0 disables",
+        )
+        eps_res: float = Field(
+            0.0,
+            ge=0.0,
+            description="eq. 29b: converged when err_res = ‖r‖/√n_r < eps_res, in the unit "
+            "of the residuals (mm); 0 disables",
+        )
+        max_iter: int = Field(
+            100, ge=0, description="eq. 29c: largest number of LM iterations (steps taken)"
+        )
+        ftol: float = Field(
+            1e-8,
+            ge=0.0,
+            description="robust mode: converged when a step reduces ‖r‖² by a fraction "
+            "below ftol (actual and predicted) [-]",
+        )
+        xtol: float = Field(
+            1e-8,
+            ge=0.0,
+            description="robust mode: converged when the trust region ‖D Δx‖ shrinks below "
+            "xtol·‖D x‖ (D: Jacobian column norms, so each parameter counts by its effect on "
+            "r) [-]",
+        )
+        gtol: float = Field(
+            1e-8,
+            ge=0.0,
+            description="robust mode: converged when r is orthogonal to every column of J "
+            "within gtol (largest |cos| of the angle) [-]",
+        )
+        scaling: Literal["adaptive", "marquardt"] = Field(
+            "adaptive",
+            description="robust mode: damping matrix D² of eq. 18: 'marquardt' = "
+            "diag(JᵀJ) of the current J (as in the paper), 'adaptive' = largest squared "
+            "column norms of J seen so far (Moré 1978; robust for insensitive parameters)",
+        )
+        speculative: bool = Field(
+            False,
+            description="robust mode: evaluate a trial point together with its n_x "
+            "perturbations in one batch (n_x+1 runs per round, like the paper: fewer rounds "
+            "on a pool, n_x runs wasted per declined step); default: the trial point first",
+        )
+        max_nfev: int | None = Field(
+            None,
+            ge=1,
+            description="stop after this many forward runs in total (checked after each batch)",
+        )
+        uncertain_values: dict[str, float] | None = Field(
+            None,
+            description="values at which to hold the problem's uncertain parameters θ "
+            "(least squares has no place for distributions), in their units",
+        )
+        fit_rtol: float = Field(
+            0.05,
+            ge=0.0,
+            description="multi-start: optima whose err_res is within this fraction of the "
+            "best one fit 'equally well' [-]",
+        )
+        agree_rtol: float = Field(
+            0.01,
+            gt=0.0,
+            description="multi-start: equally good optima disagree when a parameter differs "
+            "by more than agree_rtol·max(|x|, α/β) [-]",
+        )
+
+        @model_validator(mode="after")
+        def _paper_mode_is_the_paper(self) -> LevenbergMarquardtIterator.Options:
+            if self.mode == "paper":
+                extra = [k for k in _ROBUST_ONLY if k in self.model_fields_set]
+                if extra:
+                    raise ValueError(
+                        f"option(s) {', '.join(extra)} apply to mode='robust' only; "
+                        "mode='paper' is Paper A's algorithm as published"
+                    )
+            elif "mu_limit" in self.model_fields_set:
+                raise ValueError(
+                    "option mu_limit applies to mode='paper' only; the robust mode ends when "
+                    "the steps fall below xtol"
+                )
+            alphas = self.alpha if isinstance(self.alpha, dict) else {"alpha": self.alpha}
+            bad = {k: v for k, v in alphas.items() if not v >= 0}
+            if bad:
+                raise ValueError(f"alpha must be >= 0, got {bad}")
+            if self.beta == 0 and not all(v > 0 for v in alphas.values()):
+                raise ValueError("alpha and beta are both zero: no finite-difference step")
+            if isinstance(self.x0, list) and not self.x0:
+                raise ValueError("x0 is an empty list of initial guesses")
+            return self
+
+    options: Options
+
+    # -- the iteration ----------------------------------------------------------------------
+    def steps(self, problem: Any, evaluator: Evaluator) -> Generator[LMState, None, LMResult]:
+        """Run the chains; yield an :class:`LMState` after every batch; return the result.
+
+        ``problem`` is an :class:`~fbia.InverseProblem` (or anything with ``names``,
+        ``lower``, ``upper``, ``parameters``, ``uncertain`` and ``evaluate``).
+        """
+        names = list(problem.names)
+        lower = np.asarray(problem.lower, dtype=float)
+        upper = np.asarray(problem.upper, dtype=float)
+        extra = self._uncertain_inputs(problem)
+        starts = self._starts(problem, names, lower, upper)
+        settings = self._settings(names)
+        chains = [LMChain(i, x, lower, upper, settings, names) for i, x in enumerate(starts)]
+        gens = {c.index: c.run() for c in chains}
+        pending = {i: next(g) for i, g in gens.items()}
+        evaluations: list[Evaluation] = []
+        n_r: int | None = None
+        rounds = 0
+        try:
+            while pending:
+                order = list(pending.items())
+                points = [p for _, batch in order for p in batch]
+                inputs = [{**dict(zip(names, map(float, p), strict=True)), **extra} for p in points]
+                records = evaluator.evaluate(problem, inputs)
+                evaluations.extend(records)
+                bug = next((e for e in records if e.status == "error"), None)
+                if bug is not None:
+                    for c in chains:
+                        c.finish(
+                            "plugin_error", f"a plugin raised an unexpected error: {bug.message}"
+                        )
+                    break
+                for e in records:
+                    if e.ok and e.residuals is not None:
+                        if n_r is None:
+                            n_r = len(e.residuals)
+                        elif len(e.residuals) != n_r:
+                            raise ConfigError(
+                                f"the residual vector changed length from {n_r} to "
+                                f"{len(e.residuals)} between runs; Levenberg-Marquardt needs the "
+                                "same residuals r (eq. 19) in every run"
+                            )
+                pos = 0
+                for idx, batch in order:
+                    outs = [_outcome(e) for e in records[pos : pos + len(batch)]]
+                    pos += len(batch)
+                    try:
+                        pending[idx] = gens[idx].send(outs)
+                    except StopIteration:
+                        del pending[idx]
+                rounds += 1
+                budget = self.options.max_nfev
+                if pending and budget is not None and len(evaluations) >= budget:
+                    for idx in pending:
+                        chains[idx].finish(
+                            "evaluation_limit",
+                            f"evaluation limit: {len(evaluations)} forward runs >= max_nfev = "
+                            f"{budget}",
+                        )
+                    break
+                try:
+                    yield self._state(rounds, evaluations, chains)
+                except _StopRequested:
+                    for idx in pending:
+                        chains[idx].finish("stopped", "stopped on request")
+                    break
+        finally:
+            for g in gens.values():
+                g.close()
+        self.result = self._result(chains, evaluations, settings)
+        return self.result
+
+    def stop(self, gen: Generator[LMState, None, LMResult]) -> LMResult:
+        """End a running :meth:`steps` generator and return its partial result ("stopped")."""
+        state = inspect.getgeneratorstate(gen)
+        if state == inspect.GEN_CREATED:
+            gen.close()
+            self.result = LMResult(
+                status="stopped",
+                success=False,
+                message="stopped before the first evaluation",
+                iterator="levenberg_marquardt",
+            )
+            return self.result
+        if state == inspect.GEN_CLOSED:
+            if self.result is None:
+                raise RuntimeError("the LM generator ended without a result")
+            assert isinstance(self.result, LMResult)
+            return self.result
+        try:
+            gen.throw(_StopRequested())
+        except StopIteration as done:
+            self.result = done.value
+            return done.value
+        raise RuntimeError("the LM generator did not stop")  # pragma: no cover
+
+    def write_plots(self, result: LMResult, problem: Any, folder: str | Path) -> list[Path]:
+        """Search paths and error histories as PNG files (see :func:`plot_lm_result`)."""
+        from fbia.iterators.lm_plots import plot_lm_result
+
+        return plot_lm_result(result, problem, folder)
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def _uncertain_inputs(self, problem: Any) -> dict[str, float]:
+        where = "levenberg_marquardt"
+        unc = [p.name for p in getattr(problem, "uncertain", ())]
+        given = dict(self.options.uncertain_values or {})
+        missing = [n for n in unc if n not in given]
+        if missing:
+            raise ConfigError(
+                f"the problem has uncertain parameter(s) {', '.join(missing)}, which "
+                "Levenberg-Marquardt cannot treat (it fits x only): hold them at values with "
+                "the option uncertain_values or make them fixed inputs",
+                where,
+            )
+        unknown = [n for n in given if n not in unc]
+        if unknown:
+            raise ConfigError(
+                f"uncertain_values names {', '.join(unknown)}, which are not uncertain "
+                f"parameters of the problem (those are: {', '.join(unc) or 'none'})",
+                where,
+            )
+        return {n: float(given[n]) for n in unc}
+
+    def _starts(
+        self, problem: Any, names: list[str], lower: FloatArray, upper: FloatArray
+    ) -> list[FloatArray]:
+        x0 = self.options.x0
+        if x0 is None:
+            params = list(getattr(problem, "parameters", ()))
+            missing = [p.name for p in params if p.initial is None]
+            if missing or not params:
+                raise ConfigError(
+                    f"no initial guess for {', '.join(missing) or 'the parameters'}: give the "
+                    "option x0 or Parameter(initial=...)",
+                    "levenberg_marquardt",
+                )
+            guesses = [{p.name: float(p.initial) for p in params}]
+            labels = ["initial"]
+        elif isinstance(x0, dict):
+            guesses, labels = [x0], ["x0"]
+        else:
+            guesses, labels = list(x0), [f"x0[{k}]" for k in range(len(x0))]
+        out = []
+        for guess, where in zip(guesses, labels, strict=True):
+            where = f"levenberg_marquardt.{where}"
+            missing = [n for n in names if n not in guess]
+            unknown = [k for k in guess if k not in names]
+            if missing:
+                raise ConfigError(f"no value for parameter(s) {', '.join(missing)}", where)
+            if unknown:
+                raise ConfigError(
+                    f"unknown parameter(s) {', '.join(unknown)}; valid: {', '.join(names)}", where
+                )
+            x = np.array([float(guess[n]) for n in names])
+            for i, n in enumerate(names):
+                if not (math.isfinite(x[i]) and lower[i] <= x[i] <= upper[i]):
+                    raise ConfigError(
+                        f"initial guess {n} = {x[i]} lies outside the bounds "
+                        f"[{lower[i]}, {upper[i]}]",
+                        where,
+                    )
+            out.append(x)
+        return out
+
+    def _settings(self, names: list[str]) -> LMSettings:
+        o = self.options
+        if isinstance(o.alpha, dict):
+            unknown = [k for k in o.alpha if k not in names]
+            if unknown:
+                raise ConfigError(
+                    f"alpha names unknown parameter(s) {', '.join(unknown)}; valid: "
+                    f"{', '.join(names)}",
+                    "levenberg_marquardt",
+                )
+            default = type(o).model_fields["alpha"].default
+            alpha = np.array([float(o.alpha.get(n, default)) for n in names])
+        else:
+            alpha = np.full(len(names), float(o.alpha))
+        return LMSettings(
+            mode=o.mode,
+            alpha=alpha,
+            beta=o.beta,
+            mu0=o.mu0 if o.mu0 is not None else (1.0 if o.mode == "paper" else 1e-2),
+            mu_limit=o.mu_limit,
+            eps_grad=o.eps_grad,
+            eps_res=o.eps_res,
+            max_iter=o.max_iter,
+            ftol=o.ftol,
+            xtol=o.xtol,
+            gtol=o.gtol,
+            scaling=o.scaling,
+            speculative=o.speculative,
+        )
+
+    # -- reporting --------------------------------------------------------------------------------
+    @staticmethod
+    def _state(rounds: int, evaluations: list[Evaluation], chains: list[LMChain]) -> LMState:
+        return LMState(
+            round=rounds,
+            nfev=len(evaluations),
+            n_failed=sum(not e.ok for e in evaluations),
+            chains=[
+                {
+                    "start": c.index + 1,
+                    "iteration": c.iterations,
+                    "x": None if c.x is None else dict(zip(c.names, map(float, c.x), strict=True)),
+                    "err_res": c.err_res,
+                    "err_grad": c.err_grad,
+                    "mu": c.mu,
+                    "status": c.status,
+                }
+                for c in chains
+            ],
+        )
+
+    def _result(
+        self, chains: list[LMChain], evaluations: list[Evaluation], settings: LMSettings
+    ) -> LMResult:
+        names = list(chains[0].names)
+        rows: list[dict[str, Any]] = []
+        for c in chains:
+            has_x = c.x is not None and c.r is not None
+            x = (
+                dict(zip(names, map(float, c.x), strict=True))
+                if c.x is not None and has_x
+                else None
+            )
+            at_bound = (
+                [n for i, n in enumerate(names) if c.x[i] in (c.lower[i], c.upper[i])]
+                if c.x is not None
+                else []
+            )
+            rows.append(
+                {
+                    "start": c.index + 1,
+                    "x0": dict(zip(names, map(float, c.x0), strict=True)),
+                    "status": c.status,
+                    "success": c.success,
+                    "message": c.message,
+                    "x": x,
+                    "err_res": c.err_res if has_x else None,
+                    "err_grad": c.err_grad if has_x else None,
+                    "mu": c.mu,
+                    "iterations": c.iterations,
+                    "nfev": c.nfev,
+                    "n_failed": c.n_failed,
+                    "at_bound": at_bound,
+                }
+            )
+        best, warnings = compare_starts(
+            rows, names, settings.typical, self.options.fit_rtol, self.options.agree_rtol
+        )
+        nfev = len(evaluations)
+        n_failed = sum(not e.ok for e in evaluations)
+        history = [h for c in chains for h in c.history]
+        common: dict[str, Any] = {
+            "nfev": nfev,
+            "n_failed": n_failed,
+            "iterator": "levenberg_marquardt",
+            "history": history,
+            "evaluations": evaluations,
+            "names": names,
+            "starts": rows,
+            "warnings": warnings,
+            "info": {"mode": settings.mode, "options": self.options.model_dump()},
+        }
+        if best is None:
+            if nfev > 0 and n_failed == nfev:
+                status = "all_failed"
+                message = f"all {nfev} forward runs failed; first: {evaluations[0].message}"
+            elif len({c.status for c in chains}) == 1:
+                status = chains[0].status
+                message = (
+                    chains[0].message
+                    if len(chains) == 1
+                    else (f"no start gave a result: {chains[0].message}")
+                )
+            else:
+                status = "no_result"
+                message = "no start gave a result: " + "; ".join(
+                    f"start {c.index + 1}: {c.message}" for c in chains
+                )
+            if len(chains) == 1 and chains[0].x_last is not None:
+                common["info"]["x_last"] = dict(
+                    zip(names, map(float, chains[0].x_last), strict=True)
+                )
+            iterations = chains[0].iterations if len(chains) == 1 else 0
+            return LMResult(
+                status=status, success=False, message=message, iterations=iterations, **common
+            )
+        c = chains[best]
+        assert c.x is not None and c.r is not None and c.J is not None and c.jac_x is not None
+        message = c.message
+        if len(chains) > 1:
+            n_ok = sum(r["success"] for r in rows)
+            message = f"{n_ok} of {len(chains)} starts converged; best: start {best + 1}: {message}"
+        n_r, n_x = c.J.shape
+        if n_r < n_x:
+            warnings.append(
+                f"only {n_r} residual(s) for {n_x} parameters: the optimum is not determined "
+                "and there is no covariance; use a measure with a residual vector (eq. 19), "
+                "e.g. ray or cpp"
+            )
+        if warnings:
+            message += " - WARNING: " + "; ".join(warnings)
+        stats = FitStatistics.of(c.J, c.r)
+        return LMResult(
+            status=c.status,
+            success=c.success,
+            message=message,
+            x=rows[best]["x"],
+            err_res=c.err_res,
+            err_grad=c.err_grad,
+            mu=c.mu,
+            iterations=c.iterations,
+            residuals=c.r,
+            jac=c.J,
+            jac_x=dict(zip(names, map(float, c.jac_x), strict=True)),
+            sigma2=stats.sigma2,
+            cov=stats.cov,
+            corr=stats.corr,
+            stderr=None
+            if stats.stderr is None
+            else dict(zip(names, map(float, stats.stderr), strict=True)),
+            cov_rank=stats.cov_rank,
+            aic=stats.aic,
+            bic=stats.bic,
+            **common,
+        )
+
+
+def _outcome(e: Evaluation) -> Outcome:
+    if e.ok and e.residuals is not None:
+        return Outcome(np.asarray(e.residuals, dtype=float))
+    return Outcome(None, f"{e.status}: {e.message}")
+
+
+# -- standalone use on a residual function -------------------------------------------------------
+class ResidualFunctionProblem:
+    """A plain residual function ``fun(x) -> r`` dressed as the problem the iterator expects.
+
+    ``evaluate`` returns an :class:`~fbia.Evaluation`; a function that raises
+    :class:`~fbia.ForwardModelError` or returns non-finite values gives a failed evaluation
+    (the iterator decides); any other exception propagates (a bug in ``fun``).
+    """
+
+    def __init__(
+        self,
+        fun: Callable[..., ArrayLike],
+        names: Sequence[str],
+        lower: FloatArray,
+        upper: FloatArray,
+        args: Sequence[Any] = (),
+        kwargs: Mapping[str, Any] | None = None,
+    ) -> None:
+        self.fun = fun
+        self.names = list(names)
+        self.lower = lower
+        self.upper = upper
+        self.args = tuple(args)
+        self.kwargs = dict(kwargs or {})
+        self.parameters: list[Any] = []
+        self.uncertain: list[Any] = []
+
+    def evaluate(
+        self,
+        x: Mapping[str, float],
+        workdir: str | Path | None = None,
+        index: int = 0,
+        keep_solution: bool = True,
+    ) -> Evaluation:
+        vec = np.array([float(x[n]) for n in self.names])
+        ev = Evaluation(index=index, x={n: float(x[n]) for n in self.names})
+        try:
+            r = np.asarray(self.fun(vec, *self.args, **self.kwargs), dtype=float).ravel()
+        except ForwardModelError as exc:
+            ev.status, ev.message = "failed", str(exc) or type(exc).__name__
+            return ev
+        if not np.all(np.isfinite(r)):
+            ev.status, ev.message = "failed", "the residual function returned NaN or inf"
+            return ev
+        ev.residuals = r
+        ev.distances = [float(np.linalg.norm(r))]
+        return ev
+
+
+def least_squares(
+    fun: Callable[..., ArrayLike],
+    x0: ArrayLike,
+    bounds: tuple[ArrayLike, ArrayLike] | None = None,
+    *,
+    args: Sequence[Any] = (),
+    kwargs: Mapping[str, Any] | None = None,
+    names: Sequence[str] | None = None,
+    evaluator: Evaluator | None = None,
+    **options: Any,
+) -> LMResult:
+    """Minimise ½‖fun(x)‖² with the Levenberg–Marquardt iterator of Paper A.
+
+    Parameters
+    ----------
+    fun
+        ``fun(x, *args, **kwargs) -> r``: the residual vector for a parameter vector x.
+        Raise :class:`fbia.ForwardModelError` (or return NaN) where it cannot be evaluated.
+    x0
+        Initial guess, shape (n,); or several, shape (m, n), for a multi-start analysis.
+    bounds
+        ``(lower, upper)``, scalars or arrays of shape (n,), ``±inf`` for none (as in scipy).
+    names
+        Parameter names for the result (default ``x0, x1, ...``).
+    evaluator
+        Evaluator of the runs (default: serial, in this process).
+    options
+        Options of :class:`LevenbergMarquardtIterator` (``mode``, ``mu0``, ``max_iter``, ...).
+        Two defaults differ, because a function computed to machine precision is not a
+        forward model solved to a tolerance: the perturbation of eq. 21 is
+        ``alpha = 0, beta = √ε ≈ 1.5e-8`` (MINPACK's choice) and, in robust mode, the
+        absolute criterion ``eps_grad`` (eq. 29a) is off (``gtol`` is its scale-free
+        counterpart; paper mode keeps eq. 29 as it is).
+
+    Returns
+    -------
+    LMResult
+        ``x`` by name, ``x_array`` in order, ``success``, ``status``, ``message``, ``nfev``
+        (every call of ``fun``, including those of the finite differences), covariance, ...
+    """
+    starts = np.asarray(x0, dtype=float)
+    if starts.ndim == 1:
+        starts = starts[None, :]
+    if starts.ndim != 2 or starts.shape[1] == 0:
+        raise ConfigError(f"x0 must have shape (n,) or (m, n), got {np.shape(x0)}", "least_squares")
+    n = starts.shape[1]
+    labels = [f"x{i}" for i in range(n)] if names is None else [str(k) for k in names]
+    if len(labels) != n or len(set(labels)) != n:
+        raise ConfigError(f"names must be {n} distinct names, got {labels}", "least_squares")
+    lower, upper = _bounds(bounds, n)
+    if "x0" in options:
+        raise ConfigError(
+            "give the initial guess as the argument x0, not as an option", "least_squares"
+        )
+    defaults: dict[str, Any] = {"alpha": 0.0, "beta": _SQRT_EPS}
+    if options.get("mode", "robust") == "robust":
+        defaults["eps_grad"] = 0.0
+    opts = {**defaults, **options}
+    guesses = [dict(zip(labels, map(float, row), strict=True)) for row in starts]
+    opts["x0"] = guesses[0] if len(guesses) == 1 else guesses
+    iterator = LevenbergMarquardtIterator(
+        LevenbergMarquardtIterator.Options.parse(opts, where="least_squares")
+    )
+    problem = ResidualFunctionProblem(fun, labels, lower, upper, args, kwargs)
+    result = iterator.run(problem, evaluator)  # type: ignore[arg-type]
+    assert isinstance(result, LMResult)
+    return result
+
+
+def _bounds(bounds: tuple[ArrayLike, ArrayLike] | None, n: int) -> tuple[FloatArray, FloatArray]:
+    if bounds is None:
+        return np.full(n, -np.inf), np.full(n, np.inf)
+    try:
+        lo, hi = bounds
+        lower = np.broadcast_to(np.asarray(lo, dtype=float), (n,)).copy()
+        upper = np.broadcast_to(np.asarray(hi, dtype=float), (n,)).copy()
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"bounds must be (lower, upper) with scalars or {n} values each", "least_squares"
+        ) from None
+    if np.any(np.isnan(lower)) or np.any(np.isnan(upper)) or np.any(lower >= upper):
+        raise ConfigError(
+            f"bounds need lower < upper for every parameter, got {lower.tolist()} and "
+            f"{upper.tolist()}",
+            "least_squares",
+        )
+    return lower, upper
+
+
+__all__ = [
+    "LMResult",
+    "LMState",
+    "LevenbergMarquardtIterator",
+    "ResidualFunctionProblem",
+    "err_res_of",
+    "least_squares",
+]
