@@ -5,7 +5,7 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
 
     it = fbia.iterator("levenberg_marquardt", x0={"E": 200.0, "nu": 0.4})
     for state in (gen := it.steps(problem, evaluator)):
-        print(state)                      # or break: it.stop(gen) gives the partial result
+        print(state)                      # or break: LM's it.stop(gen) gives the partial result
     result = it.result
 """
 
