@@ -1,0 +1,478 @@
+"""The ``ale_fsi`` forward model: parameters in, deformed fluid-biofilm interface out.
+
+>>> import fbia
+>>> from fbia.plugins.ale_fsi import AleFsiForwardModel
+>>> model = AleFsiForwardModel(mesh_size=0.2, interface_mesh_size=0.06)
+>>> model.parameter_names()
+['E', 'nu', 'inflow_rate']
+>>> sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], "run")  # doctest: +SKIP
+>>> sol.interface({"inflow_rate": 100.0}).vertices.shape                           # doctest: +SKIP
+(..., 2)
+
+Quasi-static mode (default) solves the steady coupled problem with continuation in the inflow
+rate; the coordinates are inflow levels ``{"inflow_rate": r}`` (mm^2/s; ``{}`` means the
+parameter/option value).  Transient mode marches with one-step-theta from rest, the inflow
+ramped by a cosine over ``ramp_time`` as in Paper A, and returns the interface at the requested
+``{"time": t}`` (s).  Physics, weak forms and checks: :mod:`fbia.plugins.ale_fsi.solver`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field, field_validator, model_validator
+
+from fbia.core.errors import ConfigError, ForwardModelError
+from fbia.core.interface import Interface
+from fbia.core.observation import Coordinate, Solution
+from fbia.core.options import Configurable, PluginOptions
+
+from .geometry import DEFAULT_OUTLINE, FLUID, SOLID
+
+Point = tuple[float, float]
+
+
+class AleFsiForwardModel(Configurable):
+    """Monolithic ALE fluid-biofilm interaction (Paper A eq. 1-4, thesis eq. 2.14-2.30).
+
+    Incompressible Navier-Stokes in ALE form in the fluid, a plane-strain hyperelastic solid
+    (Saint Venant-Kirchhoff eq. 2.15 or neo-Hooke eq. 2.18, Lame parameters from E and nu by
+    eq. 2.16), no-slip and traction balance on the interface, pseudo-solid mesh motion; solved
+    monolithically by Newton's method with a direct solver (Pardiso).
+
+    Parameters (``parameter_names``): ``E`` [Pa], ``nu`` [-] -- or ``E_k``, ``nu_k`` per solid
+    subdomain k = 1..n -- and ``inflow_rate`` [mm^2/s].  Inputs that are not given keep their
+    option values.  A run that fails (Newton divergence, inverted ALE map or solid, element
+    quality below the threshold, invalid material values) raises
+    :class:`fbia.ForwardModelError` with a ``reason`` tag.
+    """
+
+    class Options(PluginOptions):
+        mode: Literal["quasi_static", "transient"] = Field(
+            "quasi_static",
+            description="quasi_static: steady FSI with continuation in the inflow rate "
+            "(coordinates {'inflow_rate': mm^2/s}); transient: one-step-theta from rest "
+            "(coordinates {'time': s}) [-]",
+        )
+        material: Literal["svk", "neo_hooke"] = Field(
+            "svk", description="solid material: Saint Venant-Kirchhoff or neo-Hooke [-]"
+        )
+        E: float = Field(400.0, gt=0, description="Young's modulus of the biofilm [Pa]")
+        nu: float = Field(0.3, gt=-1.0, lt=0.5, description="Poisson's ratio of the biofilm [-]")
+        inflow_rate: float = Field(
+            100.0, description="volume inflow rate of the parabolic inflow profile [mm^2/s]"
+        )
+        channel_length: float = Field(2.0, gt=0, description="flow-cell length L [mm]")
+        channel_height: float = Field(1.0, gt=0, description="flow-cell height H [mm]")
+        outline: list[Point] | None = Field(
+            None,
+            description="biofilm outline from the upstream to the downstream foot, both on "
+            "the floor y = 0; default: a mound shaped like Paper A Fig. 2 [mm]",
+        )
+        smooth_outline: bool = Field(
+            True, description="interpolate the outline by a cubic spline (else polygon) [-]"
+        )
+        subdomains: list[list[Point]] = Field(
+            default_factory=list,
+            description="closed polygons cutting the biofilm into regions solid_1..solid_n; "
+            "the rest of the biofilm is region n+1 (Paper A Fig. 9) [mm]",
+        )
+        mesh_file: Path | None = Field(
+            None,
+            description="user mesh (gmsh .msh or any meshio format) with regions fluid, "
+            "solid[_k] and boundaries inflow, outflow, walls, interface, solid_fixed "
+            "[, obstacle]; replaces the flow-cell builder [path]",
+        )
+        curved: bool = Field(
+            True,
+            description="second-order element geometry along the biofilm outline of the "
+            "flow-cell builder (user meshes are read with straight sides) [-]",
+        )
+        mesh_size: float = Field(0.12, gt=0, description="maximum element size [mm]")
+        interface_mesh_size: float = Field(
+            0.03, gt=0, description="element size at the interface and in the biofilm [mm]"
+        )
+        fluid_density: float = Field(1e-3, gt=0, description="fluid density [g/mm^3]")
+        fluid_viscosity: float = Field(1e-3, gt=0, description="dynamic viscosity [g/(mm s)]")
+        solid_density: float = Field(1e-3, gt=0, description="biofilm density [g/mm^3]")
+        gravity: tuple[float, float] = Field(
+            (0.0, 0.0), description="body force per unit mass on the solid only [mm/s^2]"
+        )
+        outflow: Literal["horizontal", "do_nothing"] = Field(
+            "horizontal",
+            description="outflow condition: horizontal flow (v_y = 0, traction-free in x, "
+            "Paper A) or do-nothing (traction-free) [-]",
+        )
+        mesh_motion: Literal["elastic", "harmonic"] = Field(
+            "elastic", description="pseudo-solid extension of the displacement into the fluid [-]"
+        )
+        mesh_stiffening: float = Field(
+            1.0, ge=0, description="exponent of the Jacobian-based mesh stiffening [-]"
+        )
+        order: int = Field(2, ge=2, le=4, description="polynomial order of v and d; p: order-1 [-]")
+        newton_tol: float = Field(
+            1e-10, gt=0, lt=1e-2, description="tolerance on the scaled Newton update [-]"
+        )
+        newton_max_iter: int = Field(12, ge=1, description="Newton iterations per solve [-]")
+        min_det_f: float = Field(
+            0.01, ge=0, description="smallest admissible det F of the ALE map and solid [-]"
+        )
+        min_element_quality: float = Field(
+            0.02, ge=0, lt=1, description="smallest admissible deformed fluid element quality [-]"
+        )
+        warm_start: bool = Field(
+            True,
+            description="start from the nearest converged state of an earlier run of this "
+            "model object (same mesh) [-]",
+        )
+        probes: list[Point] = Field(
+            default_factory=list,
+            description="reference points whose displacement is reported in the diagnostics "
+            "('probe_displacements', one list per coordinate) [mm]",
+        )
+        write_vtu: bool = Field(
+            False, description="write a VTU file per coordinate into the run's workdir [-]"
+        )
+        time_step: float = Field(0.25, gt=0, description="transient time step [s]")
+        theta: float = Field(1.0, ge=0.5, le=1.0, description="one-step-theta parameter [-]")
+        ramp_time: float = Field(10.0, ge=0, description="duration of the inflow ramp [s]")
+        ramp_steps: int = Field(1, ge=1, description="cosine stairs of the inflow ramp [-]")
+        threads: int = Field(1, ge=1, description="NGSolve task-manager threads [-]")
+
+        @field_validator("outline")
+        @classmethod
+        def _outline_len(cls, v: list[Point] | None) -> list[Point] | None:
+            if v is not None and len(v) < 3:
+                raise ValueError("an outline needs at least 3 points")
+            return v
+
+        @model_validator(mode="after")
+        def _mesh_source(self) -> AleFsiForwardModel.Options:
+            if self.mesh_file is not None and (self.outline is not None or self.subdomains):
+                raise ValueError("give either mesh_file or outline/subdomains, not both")
+            return self
+
+    def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
+        super().__init__(options, **kwargs)
+        self._solver: Any = None
+        self._store: list[tuple[dict[str, float], float, NDArray[np.float64]]] = []
+        self._regions: list[str] | None = None
+        self._given_rate = False
+
+    # pickling (process pools): ship the options, rebuild the mesh in the worker
+    def __getstate__(self) -> dict[str, Any]:
+        return {"options": self.options}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["options"])  # type: ignore[misc]
+
+    # -- protocol ----------------------------------------------------------------------------
+    @classmethod
+    def example_parameters(cls) -> tuple[dict[str, float], list[dict[str, float]]]:
+        """Parameters and coordinates for conformance tests (Paper A's homogeneous example)."""
+        return {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}]
+
+    @classmethod
+    def example_options(cls) -> dict[str, Any]:
+        """Options of a cheap instance for conformance runs (a coarse mesh, ~2 600 dofs)."""
+        return {"mesh_size": 0.2, "interface_mesh_size": 0.06}
+
+    def solid_regions(self) -> list[str]:
+        """Names of the solid regions (``solid`` or ``solid_1..n``), without meshing."""
+        if self._regions is None:
+            o = self.options
+            if o.mesh_file is not None:
+                self._regions = _regions_in_file(Path(o.mesh_file))
+            elif o.subdomains:
+                self._regions = [f"{SOLID}_{k}" for k in range(1, len(o.subdomains) + 2)]
+            else:
+                self._regions = [SOLID]
+        return self._regions
+
+    def parameter_names(self) -> list[str]:
+        regions = self.solid_regions()
+        if regions == [SOLID]:
+            return ["E", "nu", "inflow_rate"]
+        names: list[str] = []
+        for k in range(1, len(regions) + 1):
+            names += [f"E_{k}", f"nu_{k}"]
+        return names + ["inflow_rate"]
+
+    def solve(
+        self, parameters: Mapping[str, float], coordinates: Sequence[Coordinate], workdir: Path
+    ) -> Solution:
+        """Solve at every coordinate; raise :class:`ForwardModelError` if the run fails."""
+        t_start = time.perf_counter()
+        cpu_start = time.process_time()
+        params = self._check_parameters(parameters)
+        self._given_rate = "inflow_rate" in parameters
+        levels = self._check_coordinates(coordinates, params)
+        solver = self._get_solver()
+        solver.set_materials(self._materials(params))
+        t_setup = time.perf_counter()
+        n = len(coordinates)
+        diag: dict[str, Any] = {}
+        per: dict[str, list[Any]] = {"max_displacement": [None] * n, "fluid_force": [None] * n}
+        if self.options.probes:
+            per["probe_displacements"] = [None] * n
+        curves: list[Any] = [None] * n
+        fields: dict[str, Path] = {}
+        workdir = Path(workdir)
+
+        def record(label: str, index: int) -> None:
+            """Check the current state and store its results for coordinate ``index``."""
+            for key, val in solver.check_state(label).items():
+                diag[key] = min(diag.get(key, math.inf), val)
+            curves[index] = solver.interface_curves()
+            per["max_displacement"][index] = solver.max_interface_displacement()
+            per["fluid_force"][index] = solver.forces().tolist()
+            if self.options.probes:
+                per["probe_displacements"][index] = [
+                    solver.point_displacement(p).tolist() for p in self.options.probes
+                ]
+            if self.options.write_vtu:
+                from .output import write_vtu
+
+                fields[f"vtu_{index}"] = write_vtu(solver, workdir / f"ale_fsi_{index:03d}.vtu")
+
+        solver.timings = {"assembly": 0.0, "solve": 0.0}
+        if self.options.mode == "quasi_static":
+            iterations, warm = self._quasi_static(solver, params, levels, record)
+            diag["newton_iterations_per_coordinate"] = iterations
+            diag["newton_iterations"] = int(sum(iterations))
+            diag["warm_start"] = warm
+        else:
+            o = self.options
+
+            def on_time(t: float) -> None:
+                for i, ti in enumerate(levels):
+                    if ti == t:
+                        record(f"time {t:g} s", i)
+
+            rep = solver.solve_transient(
+                params["inflow_rate"],
+                sorted(set(levels)),
+                o.time_step,
+                o.ramp_time,
+                o.ramp_steps,
+                on_time,
+            )
+            diag["newton_iterations"] = rep.iterations
+            diag["warm_start"] = False
+        diag.update(per)
+        pairs = [(c, Interface.polylines(cs)) for c, cs in zip(coordinates, curves, strict=True)]
+        diag.update(
+            linear_solver=solver.linear_solver,
+            ndof=solver.ndof,
+            elements=int(solver.mesh.ne),
+            setup_time=t_setup - t_start,
+            assembly_time=solver.timings["assembly"],
+            solve_time=solver.timings["solve"],
+            wall_time=time.perf_counter() - t_start,
+            cpu_time=time.process_time() - cpu_start,
+        )
+        return Solution.from_pairs(pairs, fields=fields, diagnostics=diag)
+
+    # -- internals ---------------------------------------------------------------------------
+    def _check_parameters(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        names = self.parameter_names()
+        allowed = set(names) | {"E", "nu"}
+        unknown = [k for k in parameters if k not in allowed]
+        if unknown:
+            raise ConfigError(
+                f"unknown parameter(s) {unknown}; valid: {', '.join(names)}", "ale_fsi.solve"
+            )
+        o = self.options
+        params = {"E": o.E, "nu": o.nu, "inflow_rate": o.inflow_rate}
+        params.update({k: float(v) for k, v in parameters.items()})
+        for k, v in params.items():
+            if not math.isfinite(v):
+                raise ForwardModelError(f"parameter {k} is not finite ({v})", "invalid_parameter")
+        return params
+
+    def _materials(self, params: dict[str, float]) -> dict[str, tuple[float, float]]:
+        regions = self.solid_regions()
+        out = {}
+        for k, region in enumerate(regions, start=1):
+            suffix = "" if region == SOLID else f"_{k}"
+            E = params.get(f"E{suffix}", params["E"])
+            nu = params.get(f"nu{suffix}", params["nu"])
+            if not E > 0:
+                raise ForwardModelError(f"E{suffix} = {E} Pa is not positive", "invalid_parameter")
+            if not -1.0 < nu < 0.5:
+                raise ForwardModelError(
+                    f"nu{suffix} = {nu} is outside (-1, 0.5)", "invalid_parameter"
+                )
+            out[region] = (E, nu)
+        return out
+
+    def _check_coordinates(
+        self, coordinates: Sequence[Coordinate], params: dict[str, float]
+    ) -> list[float]:
+        """Inflow level of each coordinate (quasi-static) or check the times (transient)."""
+        where = "ale_fsi.solve: coordinates"
+        if len(coordinates) == 0:
+            raise ConfigError("no coordinates requested", where)
+        if self._given_rate and any("inflow_rate" in c for c in coordinates):
+            raise ConfigError(
+                "inflow_rate is both a parameter and a coordinate; give it in one place", where
+            )
+        levels = []
+        for c in coordinates:
+            keys = set(c)
+            if self.options.mode == "quasi_static":
+                if not keys <= {"inflow_rate"}:
+                    raise ConfigError(
+                        f"quasi-static coordinates take only 'inflow_rate', got {sorted(keys)}",
+                        where,
+                    )
+                levels.append(float(c.get("inflow_rate", params["inflow_rate"])))
+            else:
+                if keys != {"time"}:
+                    raise ConfigError(
+                        f"transient coordinates need exactly 'time', got {sorted(keys)}", where
+                    )
+                if float(c["time"]) < 0:
+                    raise ConfigError(f"negative time {c['time']}", where)
+                levels.append(float(c["time"]))
+        return levels
+
+    def _get_solver(self) -> Any:
+        if self._solver is None:
+            from .solver import AleFsiSolver, SolverSettings
+
+            o = self.options
+            mesh = self.build_mesh()
+            settings = SolverSettings(
+                fluid_density=o.fluid_density,
+                fluid_viscosity=o.fluid_viscosity,
+                solid_density=o.solid_density,
+                material=o.material,
+                gravity=tuple(o.gravity),
+                outflow=o.outflow,
+                mesh_motion=o.mesh_motion,
+                mesh_stiffening=o.mesh_stiffening,
+                order=o.order,
+                newton_tol=o.newton_tol,
+                newton_max_iter=o.newton_max_iter,
+                min_det_f=o.min_det_f,
+                min_quality=o.min_element_quality,
+                theta=o.theta,
+                threads=o.threads,
+            )
+            try:
+                self._solver = AleFsiSolver(mesh, settings)
+            except ForwardModelError as exc:
+                raise ConfigError(str(exc), "ale_fsi mesh") from None
+            self._regions = self._solver.solids
+        return self._solver
+
+    def build_mesh(self) -> Any:
+        """The NGSolve mesh this model solves on (built or read on every call)."""
+        from . import geometry
+
+        o = self.options
+        if o.mesh_file is not None:
+            return geometry.read_mesh(o.mesh_file)
+        return geometry.build_flow_cell(
+            length=o.channel_length,
+            height=o.channel_height,
+            outline=DEFAULT_OUTLINE if o.outline is None else o.outline,
+            smooth=o.smooth_outline,
+            subdomains=o.subdomains,
+            mesh_size=o.mesh_size,
+            interface_mesh_size=o.interface_mesh_size,
+            curve_order=2 if o.curved else 1,
+        )
+
+    @property
+    def solver(self) -> Any:
+        """The underlying :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver` (built lazily)."""
+        return self._get_solver()
+
+    def _quasi_static(
+        self, solver: Any, params: dict[str, float], levels: list[float], record: Any
+    ) -> tuple[list[int], bool]:
+        """Continuation through the requested inflow levels (ascending |rate|)."""
+        order = sorted(range(len(levels)), key=lambda i: abs(levels[i]))
+        iterations = [0] * len(levels)
+        key = {k: v for k, v in params.items() if k != "inflow_rate"}
+        warm_used = False
+        earlier = list(self._store)  # states of earlier runs only
+        solved: dict[float, NDArray[np.float64]] = {}
+        for i in order:
+            rate = levels[i]
+            if rate in solved:
+                solver.set_state(solved[rate])
+                solver.inflow_rate.Set(rate)
+                record(f"inflow rate {rate:g} mm^2/s", i)
+                continue
+            start = _nearest(earlier, key, rate) if self.options.warm_start else None
+            # (start rate, state, continuation): the warm state first, without continuation;
+            # then the cold path from this run's last level (or rest) with continuation
+            attempts: list[tuple[float, NDArray[np.float64] | None, bool]] = []
+            if start is not None:
+                attempts.append((start[0], start[1], False))
+            if solved:
+                last = max(solved, key=abs)
+                attempts.append((last, solved[last], True))
+            else:
+                attempts.append((0.0, None, True))
+            error: ForwardModelError | None = None
+            for k, (r0, x0, continuation) in enumerate(attempts):
+                solver.set_state(x0)
+                solver.inflow_rate.Set(r0)
+                try:
+                    rep = solver.solve_steady(rate, continuation=continuation)
+                    solver.check_state(f"inflow rate {rate:g} mm^2/s")
+                except ForwardModelError as exc:
+                    iterations[i] += getattr(exc, "iterations", 0)
+                    error = exc
+                    continue
+                iterations[i] += rep.iterations
+                warm_used = warm_used or (k == 0 and start is not None)
+                error = None
+                break
+            if error is not None:
+                raise error
+            record(f"inflow rate {rate:g} mm^2/s", i)
+            solved[rate] = solver.state()
+            self._remember(key, rate, solved[rate])
+        return iterations, warm_used
+
+    def _remember(self, key: dict[str, float], rate: float, state: NDArray[np.float64]) -> None:
+        self._store.append((dict(key), rate, state))
+        del self._store[:-16]
+
+
+def _nearest(
+    store: list[tuple[dict[str, float], float, NDArray[np.float64]]],
+    key: dict[str, float],
+    rate: float,
+) -> tuple[float, NDArray[np.float64]] | None:
+    """The stored (rate, state) nearest to (parameters, rate); distances relative per input."""
+    best, best_d = None, math.inf
+    for k, r, x in store:
+        d = sum(abs(k[n] - key[n]) / max(abs(k[n]), abs(key[n]), 1.0) for n in key)
+        d += abs(r - rate) / max(abs(r), abs(rate), 1.0)
+        if d < best_d:
+            best, best_d = (r, x), d
+    return best
+
+
+def _regions_in_file(path: Path) -> list[str]:
+    """Solid region names in a mesh file, read with meshio (no NGSolve needed)."""
+    from .geometry import read_mesh_names
+
+    names = read_mesh_names(path)
+    solids = sorted((n for n in names if n == SOLID or n.startswith(SOLID + "_")), key=len)
+    solids.sort(key=lambda s: (len(s), s))
+    if not solids or FLUID not in names:
+        raise ConfigError("mesh needs regions 'fluid' and 'solid[_k]'", str(path))
+    return solids

@@ -1,0 +1,290 @@
+"""The ale_fsi forward model on the default flow cell (coarse meshes, one NGSolve thread).
+
+Physical checks of the quasi-static monolithic ALE FSI solver: rest at zero inflow, monotone
+deformation in the inflow rate and in 1/E, mass conservation, warm starts that do not change
+the answer, small-strain agreement of SVK and neo-Hooke, interface orientation, failures as
+ForwardModelError, heterogeneous subdomains, user-mesh round trip, VTU output and transient
+mode.  Turek-Hron is in test_ale_fsi_turek_hron.py.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ngsolve")
+
+import fbia  # noqa: E402
+from fbia.plugins.ale_fsi import AleFsiForwardModel  # noqa: E402
+
+COARSE = {"mesh_size": 0.2, "interface_mesh_size": 0.06}
+
+
+@pytest.fixture(scope="module")
+def model() -> AleFsiForwardModel:
+    return AleFsiForwardModel(**COARSE, warm_start=False)
+
+
+def _max_disp(sol: fbia.Solution, coordinates: list[dict[str, float]]) -> list[float]:
+    """Largest interface displacement (mm) per coordinate, from the diagnostics."""
+    assert len(sol.diagnostics["max_displacement"]) == len(coordinates)
+    return [float(d) for d in sol.diagnostics["max_displacement"]]
+
+
+@pytest.fixture(scope="module")
+def reference(model, tmp_path_factory) -> fbia.Interface:
+    """The undeformed interface (zero inflow) on the coarse mesh."""
+    sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 0.0}], tmp_path_factory.mktemp("r"))
+    return sol.interface({"inflow_rate": 0.0})
+
+
+def test_import_and_registration_do_not_import_ngsolve():
+    code = (
+        "import sys, fbia.plugins.ale_fsi as p; "
+        "m = p.AleFsiForwardModel(mesh_size=0.1); "
+        "print(m.parameter_names(), 'ngsolve' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "['E', 'nu', 'inflow_rate'] False"
+
+
+def test_registered_through_the_hook():
+    import fbia.plugins.ale_fsi as plugin
+    from fbia.core.registry import Registry
+
+    registry = Registry.load(entry_points=False, extra=[plugin])
+    made = registry.create("forward_model", "ale_fsi", {"mesh_size": 0.3})
+    assert isinstance(made, AleFsiForwardModel) and made.options.mesh_size == 0.3
+    with pytest.raises(fbia.ConfigError, match="mesh_sise"):
+        registry.create("forward_model", "ale_fsi", {"mesh_sise": 0.3})
+
+
+def test_every_option_states_its_unit():
+    for name, f in AleFsiForwardModel.Options.model_fields.items():
+        assert f.description and f.description.rstrip().endswith("]"), name
+
+
+def test_zero_inflow_gives_zero_displacement(model, reference):
+    sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 0.0}], "unused")
+    assert sol.diagnostics["max_displacement"] == [0.0]
+    assert sol.diagnostics["newton_iterations"] <= 1
+    # the undeformed interface is the outline from the upstream to the downstream foot
+    v = reference.vertices
+    np.testing.assert_allclose(v[0], [0.50, 0.0], atol=1e-12)
+    np.testing.assert_allclose(v[-1], [1.17, 0.0], atol=1e-12)
+
+
+def test_interface_has_the_solid_on_its_right(model, reference, tmp_path):
+    import shapely
+
+    sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
+    gamma = sol.interface({"inflow_rate": 100.0})
+    solid = shapely.Polygon(np.vstack([gamma.vertices, gamma.vertices[:1]]))
+    assert solid.is_valid and solid.area > 0.2
+    outside = gamma.centres + 1e-3 * gamma.normals  # a step along the normal leaves the solid
+    inside = gamma.centres - 1e-3 * gamma.normals
+    assert not any(solid.contains(shapely.points(outside)))
+    assert all(solid.contains(shapely.points(inside)))
+    # the flow pushes the mound downstream
+    shift = gamma.vertices - reference.vertices
+    assert shift[:, 0].mean() > 0.01
+
+
+def test_deformation_grows_with_inflow_and_compliance(model, reference, tmp_path):
+    coords = [{"inflow_rate": r} for r in (100.0, 25.0, 50.0)]  # any order
+    sol = model.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path)
+    d100, d25, d50 = _max_disp(sol, coords)
+    by_rate = [d25, d50, d100]
+    for c, d in zip(coords, (d100, d25, d50), strict=True):
+        moved = np.linalg.norm(sol.interface(c).vertices - reference.vertices, axis=1).max()
+        assert moved == pytest.approx(d, rel=1e-12)
+    assert by_rate[0] > 0.003 and np.all(np.diff(by_rate) > 0), by_rate
+    # super-linear: the load grows faster than linearly with the inflow (convection, Re ~ 100)
+    assert by_rate[2] > 2.0 * by_rate[1]
+    one = [{"inflow_rate": 100.0}]
+    by_e = [
+        _max_disp(model.solve({"E": e, "nu": 0.3}, one, tmp_path), one)[0]
+        for e in (800.0, 400.0, 250.0)
+    ]
+    assert np.all(np.diff(by_e) > 0), by_e
+    assert by_e[1] == pytest.approx(by_rate[2], rel=1e-8)
+    # the rough size of Paper A's reference (max 5.3e-2 mm at E = 400 Pa, 100 mm^2/s)
+    assert 0.02 < by_e[1] < 0.08
+
+
+def test_fluid_mass_is_conserved(model, tmp_path):
+    model.solve({"E": 300.0, "nu": 0.2}, [{"inflow_rate": 80.0}], tmp_path)
+    solver = model.solver
+    q_in = -solver.flux("inflow")
+    q_out = solver.flux("outflow")
+    q_gamma = solver.flux("interface")
+    assert q_in == pytest.approx(80.0, rel=1e-12)  # the parabolic profile is exact in P2
+    assert q_out == pytest.approx(q_in, rel=1e-7)
+    assert abs(q_gamma) < 1e-7 * q_in  # the solid is at rest: no flow through the interface
+
+
+def test_warm_start_does_not_change_the_answer(tmp_path):
+    warm = AleFsiForwardModel(**COARSE)  # warm_start=True is the default
+    coords = [{"inflow_rate": 60.0}, {"inflow_rate": 100.0}]
+    first = warm.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path)
+    assert first.diagnostics["warm_start"] is False
+    near = {"E": 400.0 * (1 + 1e-4), "nu": 0.3}
+    w = warm.solve(near, coords, tmp_path)
+    cold = AleFsiForwardModel(**COARSE, warm_start=False).solve(near, coords, tmp_path)
+    assert w.diagnostics["warm_start"] is True
+    assert w.diagnostics["newton_iterations"] < cold.diagnostics["newton_iterations"]
+    for c in coords:
+        dev = np.abs(w.interface(c).vertices - cold.interface(c).vertices).max()
+        assert dev < 1e-10  # mm; deformation ~ 5e-2 mm
+    # and the warm result still sees the parameter change
+    change = np.abs(w.interface(coords[1]).vertices - first.interface(coords[1]).vertices).max()
+    assert change > 1e-7
+
+
+def test_svk_and_neo_hooke_differ_only_at_second_order_in_the_load(tmp_path):
+    # Both laws linearise to Hooke's law (eq. 2.15, 2.18): at small inflow (Stokes regime,
+    # load ~ rate) the displacement is linear in the rate and the difference of the two
+    # interfaces quadratic, so it grows 4x when the rate doubles.
+    coords = [{"inflow_rate": r} for r in (0.25, 0.5, 1.0)]
+    shapes = {}
+    for material in ("svk", "neo_hooke"):
+        m = AleFsiForwardModel(**COARSE, material=material, warm_start=False)
+        sol = m.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path)
+        shapes[material] = [sol.interface(c).vertices for c in coords]
+        d = sol.diagnostics["max_displacement"]
+        assert d[1] / d[0] == pytest.approx(2.0, rel=5e-3)
+    diff = [np.abs(a - b).max() for a, b in zip(shapes["svk"], shapes["neo_hooke"], strict=True)]
+    order = np.log2(np.array(diff[1:]) / np.array(diff[:-1]))
+    np.testing.assert_allclose(order, 2.0, atol=0.1)
+    assert diff[-1] < 1e-3 * max(d)
+
+
+def test_failures_are_forward_model_errors(model, tmp_path):
+    with pytest.raises(fbia.ForwardModelError, match="outside") as info:
+        model.solve({"E": 400.0, "nu": 0.55}, [{"inflow_rate": 50.0}], tmp_path)
+    assert info.value.reason == "invalid_parameter"
+    with pytest.raises(fbia.ForwardModelError) as info:
+        model.solve({"E": 30.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
+    assert info.value.reason in {
+        "newton_divergence",
+        "ale_jacobian",
+        "solid_jacobian",
+        "element_quality",
+    }
+    with pytest.raises(fbia.ConfigError, match="unknown parameter"):
+        model.solve({"G": 1.0}, [{"inflow_rate": 50.0}], tmp_path)
+    with pytest.raises(fbia.ConfigError, match="inflow_rate"):
+        model.solve({"E": 400.0}, [{"time": 1.0}], tmp_path)
+    with pytest.raises(fbia.ConfigError, match="both a parameter and a coordinate"):
+        model.solve({"inflow_rate": 60.0}, [{"inflow_rate": 50.0}], tmp_path)
+    # the model is usable after a failure
+    ok = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 10.0}], tmp_path)
+    assert ok.diagnostics["max_displacement"][0] > 0
+
+
+def test_bad_geometry_is_a_config_error():
+    with pytest.raises(fbia.ConfigError, match="floor"):
+        AleFsiForwardModel(outline=[(0.5, 0.1), (0.8, 0.4), (1.1, 0.0)]).build_mesh()
+    with pytest.raises(fbia.ConfigError, match="not both"):
+        AleFsiForwardModel(mesh_file="x.msh", subdomains=[[(0, 0), (1, 0), (1, 1)]])
+
+
+def test_heterogeneous_subdomains(tmp_path):
+    # Paper A Fig. 9: a footing layer, a large middle, a top layer (SVK, Paper A values)
+    layers = [
+        [(0.0, -0.1), (2.0, -0.1), (2.0, 0.08), (0.0, 0.08)],
+        [(0.0, 0.08), (2.0, 0.08), (2.0, 0.36), (0.0, 0.36)],
+    ]
+    het = AleFsiForwardModel(**COARSE, subdomains=layers, warm_start=False)
+    assert het.parameter_names() == ["E_1", "nu_1", "E_2", "nu_2", "E_3", "nu_3", "inflow_rate"]
+    assert het.solver.solids == ["solid_1", "solid_2", "solid_3"]
+    coords = [{"inflow_rate": 100.0}]
+    paper = {"E_1": 500.0, "nu_1": 0.2, "E_2": 200.0, "nu_2": 0.1, "E_3": 1000.0, "nu_3": 0.3}
+    d_paper = het.solve(paper, coords, tmp_path).diagnostics["max_displacement"][0]
+    uniform = {k: (400.0 if k.startswith("E") else 0.3) for k in paper}
+    d_uniform = het.solve(uniform, coords, tmp_path).diagnostics["max_displacement"][0]
+    # the same uniform material on the layered mesh matches the homogeneous model
+    homo = AleFsiForwardModel(**COARSE, warm_start=False)
+    d_homo = homo.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path).diagnostics["max_displacement"][
+        0
+    ]
+    assert d_uniform == pytest.approx(d_homo, rel=0.03)
+    # a soft middle layer makes the mound more compliant than a uniform 400 Pa one
+    assert d_paper > d_uniform
+    softer_top = dict(paper, E_3=300.0)
+    assert het.solve(softer_top, coords, tmp_path).diagnostics["max_displacement"][0] > d_paper
+
+
+def test_user_mesh_round_trip_gives_the_same_answer(tmp_path):
+    from fbia.plugins.ale_fsi.geometry import write_mesh
+
+    model = AleFsiForwardModel(**COARSE, curved=False, warm_start=False)  # files: straight
+    path = write_mesh(model.solver.mesh, tmp_path / "cell.msh")
+    user = AleFsiForwardModel(mesh_file=path, warm_start=False)
+    coords = [{"inflow_rate": 100.0}]
+    a = model.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path).interface(coords[0])
+    b = user.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path).interface(coords[0])
+    assert a.vertices.shape == b.vertices.shape
+    assert np.abs(a.vertices - b.vertices).max() < 1e-10
+
+
+def test_vtu_output_and_interface_forces(tmp_path):
+    import meshio
+
+    m = AleFsiForwardModel(**COARSE, write_vtu=True, warm_start=False)
+    sol = m.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
+    path = sol.fields["vtu_0"]
+    data = meshio.read(path)
+    assert {"velocity", "pressure", "displacement", "interface_force"} <= set(data.point_data)
+    assert set(np.unique(data.cell_data["subdomain"][0])) == {0, 1}
+    # the nodal interface forces add up to the fluid force on the biofilm
+    total = data.point_data["interface_force"][:, :2].sum(axis=0)
+    np.testing.assert_allclose(total, sol.diagnostics["fluid_force"][0], rtol=1e-10)
+    assert total[0] > 0  # drag pushes downstream
+    umax = np.linalg.norm(data.point_data["velocity"], axis=1).max()
+    assert 150.0 < umax < 500.0  # mean 100 mm/s, accelerated over the mound
+
+
+def test_transient_mode_reaches_the_quasi_static_state(tmp_path):
+    rate = 50.0
+    opts = dict(COARSE, warm_start=False)
+    static = AleFsiForwardModel(**opts).solve({}, [{"inflow_rate": rate}], tmp_path)
+    trans = AleFsiForwardModel(
+        **opts, mode="transient", time_step=0.1, ramp_time=0.5, inflow_rate=rate
+    )
+    times = [{"time": 1.5}, {"time": 0.25}, {"time": 0.0}]
+    sol = trans.solve({}, times, tmp_path)
+    full = static.diagnostics["max_displacement"][0]
+    end, mid, rest = sol.diagnostics["max_displacement"]
+    assert rest == 0.0  # at rest at t = 0
+    # half-way up the cosine ramp the inflow is rate/2: about half the final deformation
+    assert 0.3 * full < mid < 0.7 * full
+    # a second after the ramp (backward Euler) the state is the quasi-static one
+    ref = static.interface({"inflow_rate": rate}).vertices
+    np.testing.assert_allclose(sol.interface({"time": 1.5}).vertices, ref, rtol=0, atol=1e-5 * full)
+    assert end == pytest.approx(full, rel=1e-5)
+
+
+def test_conformance_checks_of_fbia_testing(tmp_path):
+    from fbia import testing as ft
+
+    assert ft.check_options(AleFsiForwardModel) == sorted(AleFsiForwardModel.Options.model_fields)
+    params, coords = ft.example_run(AleFsiForwardModel)
+    model = AleFsiForwardModel(**ft.example_options(AleFsiForwardModel))
+    failing = {"E": 20.0, "nu": 0.3}  # far too soft for 100 mm^2/s: the solid collapses
+    solution = ft.check_forward_model(model, params, coords, tmp_path, failing_parameters=failing)
+    assert solution.covers(coords)
+
+
+def test_pickled_model_rebuilds_its_mesh_and_gives_the_same_answer(model, tmp_path):
+    import pickle
+
+    coords = [{"inflow_rate": 40.0}]
+    a = model.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path).interface(coords[0])
+    clone = pickle.loads(pickle.dumps(model))  # what a process pool ships to its workers
+    assert clone.options == model.options and clone._solver is None
+    b = clone.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path).interface(coords[0])
+    assert np.abs(a.vertices - b.vertices).max() < 1e-12
