@@ -703,7 +703,7 @@ class AleFsiSolver:
         """
         ngs = self.ngs
         if not hasattr(self, "_iface_cache"):
-            chains = _interface_chains(self.mesh, ngs)
+            chains = interface_chains(self.mesh, ngs)
             ir = ngs.IntegrationRule([(0.0,), (0.5,), (1.0,)], [0.0, 0.0, 0.0])
             pts = self.mesh.MapToAllElements(ir, ngs.BND)
             xy = np.c_[np.asarray(ngs.x(pts)).ravel(), np.asarray(ngs.y(pts)).ravel()]
@@ -845,7 +845,7 @@ def ramp(t: float, ramp_time: float, steps: int) -> float:
     return (k + 0.5 * (1.0 - math.cos(math.pi * local))) / steps
 
 
-def _interface_chains(mesh: Any, ngs: Any) -> list[list[tuple[int, int]]]:
+def interface_chains(mesh: Any, ngs: Any) -> list[list[tuple[int, int]]]:
     """The interface as chains of ``(boundary element, start vertex)``, solid on the right."""
     solid_names = set(solid_regions(mesh))
     pts = np.array([v.point for v in mesh.vertices])

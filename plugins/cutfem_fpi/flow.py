@@ -1,0 +1,370 @@
+"""Cut-FEM flow solve: Navier-Stokes outside, primal Darcy inside a level-set-described biofilm.
+
+One background mesh, one level set ``lset`` (negative in the porous biofilm, positive in the
+channel fluid), two cut spaces solved monolithically (Paper A "Fluid-poroelastic solid
+interaction", eq. 14-15, after the FPI method of its ref. [16]):
+
+* channel fluid ``(u, p)`` -- cut Taylor-Hood P2/P1 on the elements that have a fluid part;
+* pore pressure ``p_d`` -- P2 on the elements that have a porous part, Darcy flux
+  ``q = phi (v^pf - v^ps) = -(k / mu) grad p_d`` (eq. 10b, steady, skeleton at rest).
+
+With ``n_F`` the unit normal out of the fluid (into the biofilm) and ``t`` the tangent, the
+interface conditions enter as natural interface integrals (``dCut(lset, IF)``):
+
+* eq. 14b  ``n_F . sigma n_F = -p_d``  and eq. 14d (Beavers-Joseph)
+  ``t . sigma n_F = -(u.t - beta_BJ q.t) / kappa`` replace the fluid traction;
+* eq. 14c  ``u . n_F = q . n_F`` replaces the Darcy flux through the interface;
+
+so the coupling terms ``+(p_d, v.n_F)_Gamma`` and ``-(u.n_F, w)_Gamma`` are skew and the
+interface mass balance holds to round-off.  The Saffman simplification drops ``beta_BJ q.t``.
+The interface permeability is eq. 15, ``kappa = sqrt(tr k) / (alpha_BJ mu sqrt 3)``.  Ghost
+penalties (direct facet-patch form) on both sides keep the system well conditioned for any
+cut; a second-order :class:`xfem.lsetcurv.LevelSetMeshAdaptation` makes the geometry
+third-order accurate.
+
+Inhomogeneous interface data ``g_mass`` (eq. 14c), ``g_normal`` (14b), ``g_tangent`` (14d) and
+volume sources exist for manufactured solutions; the physical problem sets them to zero.
+
+>>> from ngsolve import Mesh, sqrt, x, y                           # doctest: +SKIP
+>>> from ngsolve.meshes import MakeStructured2DMesh                # doctest: +SKIP
+>>> mesh = MakeStructured2DMesh(quads=False, nx=16, ny=16)         # doctest: +SKIP
+>>> flow = CutFlow(mesh, sqrt((x - .5)**2 + (y - .5)**2) - .3, FlowSettings(),
+...                dirichlet="left|right|top|bottom")              # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fbia.core.errors import ForwardModelError
+
+
+@dataclass(frozen=True)
+class FlowSettings:
+    """Physics and numerics of :class:`CutFlow` (units mm, s, g)."""
+
+    viscosity: float = 1e-3  # mu^F = mu^pf, g/(mm s)
+    density: float = 1e-3  # rho^F, g/mm^3; 0 gives Stokes
+    alpha_bj: float = 1.0  # Beavers-Joseph alpha (eq. 15)
+    beta_bj: float = 1.0  # Beavers-Joseph beta (eq. 14d)
+    saffman: bool = False  # drop beta_BJ q.t in eq. 14d
+    order: int = 2  # velocity and pore-pressure order; fluid pressure order - 1
+    ghost_penalty: float = 0.1  # gamma of the facet-patch ghost penalties
+    lset_order: int = 2  # order of the level-set mesh adaptation
+    newton_tol: float = 1e-9  # relative velocity change that ends the Newton iteration
+    newton_max_iter: int = 20
+
+
+@dataclass
+class FlowReport:
+    """What one flow solve did."""
+
+    iterations: int = 0
+    ndof: int = 0
+    time_setup: float = 0.0
+    time_solve: float = 0.0
+    norms: list[float] = field(default_factory=list)
+
+
+class CutFlow:
+    """Spaces, forms and solver of the cut Navier-Stokes/Darcy problem on one background mesh.
+
+    Parameters
+    ----------
+    mesh
+        Background mesh (fixed for the whole run).
+    lset
+        Level set (coefficient function), negative in the porous body.
+    settings
+        Physics and numerics.
+    dirichlet
+        Boundaries (``|``-separated regex) with prescribed fluid velocity, or a pair
+        ``(x, y)`` per velocity component.
+    permeability
+        Spatial permeability ``k`` of the porous body in mm^2: a scalar, a scalar coefficient
+        function or a 2x2 matrix coefficient function (eq. 11 with ``k = J^-1 F K F^T``).
+    """
+
+    def __init__(
+        self,
+        mesh: Any,
+        lset: Any,
+        settings: FlowSettings,
+        dirichlet: str | tuple[str, str],
+        permeability: Any = 1.0,
+    ) -> None:
+        import ngsolve as ngs
+
+        self.ngs = ngs
+        self.mesh = mesh
+        self.settings = settings
+        o = settings.order
+        dx, dy = (dirichlet, dirichlet) if isinstance(dirichlet, str) else dirichlet
+        self._dirichlet = "|".join(b for b in (dx, dy) if b)
+        self.V = ngs.VectorH1(mesh, order=o, dirichletx=dx, dirichlety=dy)
+        self.Q = ngs.H1(mesh, order=o - 1)
+        self.D = ngs.H1(mesh, order=o)
+        self.X = ngs.FESpace([self.V, self.Q, self.D], dgjumps=True)  # facet-patch couplings
+        self.gfx = ngs.GridFunction(self.X)  # full (uncompressed) state: warm starts survive
+        self.sources: dict[str, Any] = {}
+        self.set_permeability(permeability)
+        self.set_level_set(lset)
+
+    # -- geometry ----------------------------------------------------------------------------
+    def set_level_set(self, lset: Any) -> None:
+        """(Re)build the cut geometry for a new level set; the state vector is kept."""
+        import xfem
+        from xfem.lsetcurv import LevelSetMeshAdaptation
+
+        ngs = self.ngs
+        t0 = time.perf_counter()
+        s = self.settings
+        self.lsetadap = LevelSetMeshAdaptation(
+            self.mesh, order=s.lset_order, threshold=0.1, discontinuous_qn=True
+        )
+        self.deformation = self.lsetadap.CalcDeformation(lset)
+        self.lsetp1 = self.lsetadap.lset_p1
+        self.lset = lset
+        ci = xfem.CutInfo(self.mesh, self.lsetp1)
+        cut = ci.GetElementsOfType(xfem.IF)
+        # one layer of elements around the cut elements is active on both sides: the ghost
+        # penalty extends the discrete fields there, so that values on the skeleton's own
+        # interface (which differs from the discrete level set by O(h^2)) are always defined
+        near = xfem.GetFacetsWithNeighborTypes(
+            self.mesh, a=cut, b=cut, bnd_val_a=False, bnd_val_b=False, use_and=False
+        )
+        ring = xfem.GetElementsWithNeighborFacets(self.mesh, near)
+        self.els = {
+            "fluid": ci.GetElementsOfType(xfem.HASPOS) | ring,
+            "porous": ci.GetElementsOfType(xfem.HASNEG) | ring,
+            "if": cut,
+        }
+        self.facets = {
+            side: xfem.GetFacetsWithNeighborTypes(
+                self.mesh,
+                a=self.els[side],
+                b=ring,
+                bnd_val_a=False,
+                bnd_val_b=False,
+                use_and=True,
+            )
+            for side in ("fluid", "porous")
+        }
+        if sum(self.els["if"]) == 0:
+            raise ForwardModelError("the level set does not cut the background mesh", "geometry")
+        free = self.X.FreeDofs()
+        active = ngs.BitArray(self.X.ndof)
+        active.Clear()
+        offs = np.cumsum([0] + [sp.ndof for sp in (self.V, self.Q, self.D)])
+        for k, (sp, side) in enumerate(((self.V, "fluid"), (self.Q, "fluid"), (self.D, "porous"))):
+            dofs = xfem.GetDofsOfElements(sp, self.els[side])
+            for i in np.flatnonzero(np.array(dofs, dtype=bool)):
+                active.Set(int(offs[k] + i))
+        self.active = active
+        self.freedofs = ngs.BitArray(free) & active
+        self.time_geometry = time.perf_counter() - t0
+        self._inverse = None
+
+    def set_permeability(self, k: Any) -> None:
+        """Spatial permeability (mm^2): scalar, scalar CF or 2x2 matrix CF (eq. 11)."""
+        ngs = self.ngs
+        k = ngs.CoefficientFunction(k)
+        if k.dim == 1:
+            self.k_matrix = k * ngs.Id(2)
+        elif k.dim == 4:
+            self.k_matrix = k.Reshape((2, 2))
+        else:
+            raise ValueError(f"permeability must be a scalar or 2x2, got dimension {k.dim}")
+        self.k_trace = ngs.Trace(self.k_matrix)
+
+    # -- measures and normals ----------------------------------------------------------------
+    def measures(self) -> dict[str, Any]:
+        import xfem
+
+        d = self.deformation
+        return {
+            "dx_f": xfem.dCut(
+                self.lsetp1, xfem.POS, deformation=d, definedonelements=self.els["fluid"]
+            ),
+            "dx_p": xfem.dCut(
+                self.lsetp1, xfem.NEG, deformation=d, definedonelements=self.els["porous"]
+            ),
+            "ds": xfem.dCut(self.lsetp1, xfem.IF, deformation=d, definedonelements=self.els["if"]),
+            "dw_f": xfem.dFacetPatch(deformation=d, definedonelements=self.facets["fluid"]),
+            "dw_p": xfem.dFacetPatch(deformation=d, definedonelements=self.facets["porous"]),
+        }
+
+    def normal_fluid(self) -> Any:
+        """Unit normal out of the fluid into the biofilm, ``n_F = -grad lset / |grad lset|``."""
+        ngs = self.ngs
+        g = ngs.grad(self.lsetp1)
+        return -1.0 / ngs.Norm(g) * g
+
+    def kappa(self) -> Any:
+        """Interface permeability, eq. 15: sqrt(tr k) / (alpha_BJ mu sqrt 3)  [mm^2 s/g]."""
+        s = self.settings
+        return self.ngs.sqrt(self.k_trace) / (s.alpha_bj * s.viscosity * math.sqrt(3.0))
+
+    # -- forms -------------------------------------------------------------------------------
+    def _forms(self, convection: Any | None) -> tuple[Any, Any]:
+        """Bilinear form (linearised at ``convection``) and right-hand side (eq. 1, 10, 14)."""
+        ngs = self.ngs
+        s = self.settings
+        m = self.measures()
+        (u, p, pd), (v, q, w) = self.X.TnT()
+        mu, rho = s.viscosity, s.density
+        h = ngs.specialcf.mesh_size
+        nF = self.normal_fluid()
+        t = ngs.CoefficientFunction((-nF[1], nF[0]))
+        kmu = self.k_matrix / mu
+        kappa = self.kappa()
+        eps = ngs.Sym
+
+        import xfem
+
+        a = xfem.RestrictedBilinearForm(
+            self.X,
+            element_restriction=self.els["fluid"] | self.els["porous"],
+            facet_restriction=self.facets["fluid"] | self.facets["porous"],
+            check_unused=False,
+        )
+        # channel fluid: (eq. 1a, 1b) with c^F = v^F (fixed grid)
+        stokes = 2 * mu * ngs.InnerProduct(eps(ngs.Grad(u)), eps(ngs.Grad(v)))
+        stokes += -p * ngs.div(v) - q * ngs.div(u)
+        if convection is not None and rho > 0:
+            uk = convection
+            # Newton for rho (grad u) u: (grad du) u_k + (grad u_k) du; rhs (grad u_k) u_k
+            stokes += rho * (ngs.Grad(u) * uk + ngs.Grad(uk) * u) * v
+        a += stokes * m["dx_f"]
+        # pore fluid: -div(k/mu grad p_d) = g (eq. 10a/10b steady)
+        a += ngs.InnerProduct(kmu * ngs.grad(pd), ngs.grad(w)) * m["dx_p"]
+        # interface, eq. 14b-d
+        a += pd * (v * nF) * m["ds"]
+        a += -(u * nF) * w * m["ds"]
+        a += (1.0 / kappa) * (u * t) * (v * t) * m["ds"]
+        if not s.saffman:
+            qd = -kmu * ngs.grad(pd)  # Darcy flux q = phi (v^pf - v^ps)
+            a += -(s.beta_bj / kappa) * (qd * t) * (v * t) * m["ds"]
+        # ghost penalties (direct facet-patch version) on both sides
+        g = s.ghost_penalty
+        a += g * mu / h**2 * (u - u.Other()) * (v - v.Other()) * m["dw_f"]
+        a += -g / mu * (p - p.Other()) * (q - q.Other()) * m["dw_f"]
+        kscale = 0.5 * self.k_trace / mu
+        a += g * kscale / h**2 * (pd - pd.Other()) * (w - w.Other()) * m["dw_p"]
+
+        f = ngs.LinearForm(self.X)
+        if convection is not None and rho > 0:
+            f += rho * (ngs.Grad(convection) * convection) * v * m["dx_f"]
+        src = self.sources
+        if "f" in src:
+            f += src["f"] * v * m["dx_f"]
+        if "g" in src:
+            f += src["g"] * w * m["dx_p"]
+        if "g_mass" in src:  # eq. 14c: u.n_F - q.n_F = g_mass
+            f += -src["g_mass"] * w * m["ds"]
+        if "g_normal" in src:  # eq. 14b: n_F.sigma n_F + p_d = g_normal
+            f += src["g_normal"] * (v * nF) * m["ds"]
+        if "traction" in src:  # prescribed fluid traction sigma n on an outer boundary
+            cf, bnd = src["traction"]
+            f += cf * v * ngs.ds(definedon=self.mesh.Boundaries(bnd))
+        if "g_tangent" in src:  # eq. 14d: u.t - beta q.t + kappa t.sigma n_F = g_tangent
+            f += (src["g_tangent"] / kappa) * (v * t) * m["ds"]
+        return a, f
+
+    # -- solve -------------------------------------------------------------------------------
+    @property
+    def velocity(self) -> Any:
+        return self.gfx.components[0]
+
+    @property
+    def pressure(self) -> Any:
+        return self.gfx.components[1]
+
+    @property
+    def pore_pressure(self) -> Any:
+        return self.gfx.components[2]
+
+    @property
+    def ndof(self) -> int:
+        return int(sum(self.freedofs))
+
+    def solve(self, dirichlet_velocity: Any | None = None, where: str = "flow") -> FlowReport:
+        """Solve (Newton for Navier-Stokes, one linear solve for Stokes); warm start from the
+        current state.  ``dirichlet_velocity`` is set on the Dirichlet boundaries."""
+        ngs = self.ngs
+        s = self.settings
+        rep = FlowReport(ndof=self.ndof, time_setup=self.time_geometry)
+        inactive = ~self.active
+        vec = self.gfx.vec.FV().NumPy()
+        vec[np.array(inactive, dtype=bool)] = 0.0
+        if dirichlet_velocity is not None:
+            tmp = ngs.GridFunction(self.V)
+            tmp.Set(dirichlet_velocity, definedon=self.mesh.Boundaries(self._dirichlet))
+            idx = np.flatnonzero(~np.array(self.V.FreeDofs(), dtype=bool))
+            vec[idx] = tmp.vec.FV().NumPy()[idx]
+        newton = s.density > 0
+        uk = ngs.GridFunction(self.V)
+        for it in range(1, (s.newton_max_iter if newton else 1) + 1):
+            t0 = time.perf_counter()
+            uk.vec.data = self.gfx.components[0].vec
+            a, f = self._forms(uk if newton else None)
+            with ngs.TaskManager():
+                a.Assemble()
+                f.Assemble()
+                res = f.vec.CreateVector()
+                res.data = f.vec - a.mat * self.gfx.vec
+                inv = a.mat.Inverse(self.freedofs, inverse="pardiso")
+                du = self.gfx.vec.CreateVector()
+                du.data = inv * res
+            self.gfx.vec.data += du
+            rep.time_solve += time.perf_counter() - t0
+            rep.iterations = it
+            d = du.FV().NumPy()[: self.V.ndof]
+            unorm = float(np.linalg.norm(self.gfx.vec.FV().NumPy()[: self.V.ndof]))
+            change = float(np.linalg.norm(d)) / max(unorm, 1e-300)
+            rep.norms.append(change)
+            if not np.isfinite(change):
+                raise ForwardModelError(f"{where}: the flow solve produced NaN", "flow_diverged")
+            if not newton or change < s.newton_tol:
+                return rep
+        raise ForwardModelError(
+            f"{where}: Navier-Stokes Newton did not converge in {s.newton_max_iter} iterations "
+            f"(last relative change {rep.norms[-1]:.2e})",
+            "flow_newton",
+        )
+
+    # -- post-processing ---------------------------------------------------------------------
+    def integrate(self, cf: Any, region: str, order: int = 6) -> float:
+        """Integral of ``cf`` over ``fluid``, ``porous`` or ``if`` (the interface)."""
+        import xfem
+
+        dom = {"fluid": xfem.POS, "porous": xfem.NEG, "if": xfem.IF}[region]
+        lset_dom = {"levelset": self.lsetp1, "domain_type": dom}
+        return float(
+            xfem.Integrate(
+                levelset_domain=lset_dom,
+                cf=cf,
+                mesh=self.mesh,
+                order=order,
+                deformation=self.deformation,
+            )
+        )
+
+    def interface_mass_balance(self) -> tuple[float, float]:
+        """(fluid flux u.n_F into the biofilm, Darcy flux q.n_F) through the interface (mm^2/s)."""
+        ngs = self.ngs
+        nF = self.normal_fluid()
+        qd = -self.k_matrix / self.settings.viscosity * ngs.grad(self.pore_pressure)
+        return (
+            self.integrate(self.velocity * nF, "if"),
+            self.integrate(qd * nF, "if"),
+        )
+
+    def state(self) -> NDArray[np.float64]:
+        return np.array(self.gfx.vec.FV().NumPy(), copy=True)

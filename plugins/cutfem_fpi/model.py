@@ -1,0 +1,308 @@
+"""The ``cutfem_fpi`` forward model: fixed-grid fluid-poroelastic interaction.
+
+>>> from fbia.plugins.cutfem_fpi import CutFemFpiForwardModel
+>>> model = CutFemFpiForwardModel(background_mesh_size=0.08, interface_mesh_size=0.06)
+>>> model.parameter_names()
+['E', 'nu', 'phi0', 'K', 'inflow_rate']
+>>> sol = model.solve({"E": 300.0, "phi0": 0.25}, [{"inflow_rate": 100.0}], "run")  # doctest: +SKIP
+
+Coordinates are inflow levels ``{"inflow_rate": r}`` (mm^2/s, plane strain) or, in the
+quasi-2-D setting of Paper A, ``{"inflow_volume_rate": Q}`` (mm^3/s over a channel of
+``thickness`` mm; ``r = Q / thickness``).  The levels are solved in ascending order, each
+starting from the previous one, so the result does not depend on the order requested.
+Physics and numerics: :mod:`.flow`, :mod:`.skeleton`, :mod:`.coupled`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field
+
+from fbia.core.errors import ConfigError, ForwardModelError
+from fbia.core.interface import Interface
+from fbia.core.observation import Coordinate, Solution
+from fbia.core.options import Configurable, PluginOptions
+
+Point = tuple[float, float]
+
+
+class CutFemFpiForwardModel(Configurable):
+    """Fluid-poroelastic interaction on a fixed background grid (Paper A eq. 10-15).
+
+    Navier-Stokes in the channel and Darcy flow in the biofilm on one background mesh cut by
+    the deformed biofilm (CutFEM, ngsxfem), coupled through the Beavers-Joseph interface
+    conditions (eq. 14-15); a neo-Hooke poroelastic skeleton (eq. 10c, 12-13) with
+    Kozeny-Carman permeability (eq. 11) on the biofilm's own mesh; partitioned coupling with
+    Aitken relaxation.  Parameters: ``E`` [Pa], ``nu`` [-], ``phi0`` [-], ``K`` [mm^2],
+    ``inflow_rate`` [mm^2/s].  Failures (coupling or Newton divergence, porosity outside
+    (0, 1), inverted skeleton) raise :class:`fbia.ForwardModelError` with a ``reason``.
+    """
+
+    dim = 2
+
+    class Options(PluginOptions):
+        E: float = Field(300.0, gt=0, description="Young's modulus of the skeleton [Pa]")
+        nu: float = Field(0.3, gt=-1.0, lt=0.5, description="Poisson's ratio of the skeleton [-]")
+        phi0: float = Field(0.25, gt=0, lt=1, description="initial porosity [-]")
+        K: float = Field(1e-4, gt=0, description="reference permeability (eq. 11) [mm^2]")
+        inflow_rate: float = Field(
+            100.0, description="2-D volume inflow rate of the parabolic profile [mm^2/s]"
+        )
+        thickness: float = Field(
+            0.01,
+            gt=0,
+            description="quasi-2-D channel thickness: a coordinate {'inflow_volume_rate': Q} "
+            "means inflow_rate = Q / thickness [mm]",
+        )
+        channel_length: float = Field(2.0, gt=0, description="flow-cell length [mm]")
+        channel_height: float = Field(1.0, gt=0, description="flow-cell height [mm]")
+        outline: list[Point] | None = Field(
+            None,
+            description="biofilm outline from the upstream to the downstream foot on y = 0; "
+            "default: the ale_fsi mound (Paper A Fig. 2) [mm]",
+        )
+        smooth_outline: bool = Field(
+            True, description="interpolate the outline by a cubic spline [-]"
+        )
+        background_mesh_size: float = Field(
+            0.05, gt=0, description="element size of the fixed background mesh [mm]"
+        )
+        interface_mesh_size: float = Field(
+            0.04, gt=0, description="element size of the biofilm (skeleton) mesh [mm]"
+        )
+        fluid_density: float = Field(1e-3, ge=0, description="fluid density, 0: Stokes [g/mm^3]")
+        fluid_viscosity: float = Field(
+            1e-3, gt=0, description="viscosity of channel and pore fluid [g/(mm s)]"
+        )
+        alpha_bj: float = Field(1.0, gt=0, description="Beavers-Joseph alpha (eq. 15) [-]")
+        beta_bj: float = Field(1.0, ge=0, description="Beavers-Joseph beta (eq. 14d) [-]")
+        saffman: bool = Field(
+            False, description="Beavers-Joseph-Saffman: drop beta_BJ q.t in eq. 14d [-]"
+        )
+        kappa: float = Field(100.0, gt=0, description="bulk modulus of psi_vol (eq. 13a) [Pa]")
+        eta: float = Field(1.0, gt=0, description="porosity penalty of psi_pen (eq. 13b) [Pa]")
+        outflow: Literal["horizontal", "do_nothing"] = Field(
+            "horizontal", description="outflow: v_y = 0 and traction-free in x, or free [-]"
+        )
+        ghost_penalty: float = Field(0.1, gt=0, description="ghost-penalty factor gamma [-]")
+        coupling_tol: float = Field(
+            1e-6, gt=0, description="interface change that ends the coupling [mm]"
+        )
+        coupling_max_iter: int = Field(40, ge=1, description="coupling iterations per level [-]")
+        omega0: float = Field(0.5, gt=0, le=1, description="first Aitken relaxation factor [-]")
+        flow_newton_tol: float = Field(
+            1e-8, gt=0, description="relative velocity change ending the NS Newton [-]"
+        )
+        voxel_size: float = Field(
+            0.004, gt=0, description="grid spacing of the signed-distance level set [mm]"
+        )
+        write_vtu: bool = Field(
+            False, description="write VTU fields per coordinate into the workdir [-]"
+        )
+        threads: int = Field(1, ge=1, description="NGSolve task-manager threads [-]")
+
+    def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
+        super().__init__(options, **kwargs)
+        self._solver: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"options": self.options}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["options"])  # type: ignore[misc]
+
+    # -- protocol ----------------------------------------------------------------------------
+    @classmethod
+    def example_parameters(cls) -> tuple[dict[str, float], list[dict[str, float]]]:
+        """Paper A's poroelastic example (E = 300 Pa, phi0 = 0.25) at two inflow levels."""
+        return {"E": 300.0, "phi0": 0.25}, [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}]
+
+    @classmethod
+    def example_options(cls) -> dict[str, Any]:
+        """A coarse, cheap instance for conformance runs."""
+        return {
+            "background_mesh_size": 0.1,
+            "interface_mesh_size": 0.08,
+            "coupling_tol": 1e-5,
+            "voxel_size": 0.01,
+        }
+
+    def parameter_names(self) -> list[str]:
+        return ["E", "nu", "phi0", "K", "inflow_rate"]
+
+    def solve(
+        self, parameters: Mapping[str, float], coordinates: Sequence[Coordinate], workdir: Path
+    ) -> Solution:
+        """Coupled steady states at every coordinate; :class:`ForwardModelError` on failure."""
+        t_start = time.perf_counter()
+        params = self._check_parameters(parameters)
+        levels = self._levels(coordinates, params)
+        solver = self._get_solver()
+        solver.set_material(params["E"], params["nu"], params["phi0"], params["K"])
+        solver.reset()
+        t_setup = time.perf_counter() - t_start
+        n = len(levels)
+        curves: list[Any] = [None] * n
+        diag: dict[str, Any] = {
+            "coupling_iterations": [0] * n,
+            "aitken_factors": [[] for _ in range(n)],
+            "flow_newton_iterations": [0] * n,
+            "skeleton_newton_iterations": [0] * n,
+            "max_displacement": [0.0] * n,
+            "porosity_range": [[0.0, 0.0]] * n,
+            "interface_flux": [0.0] * n,
+            "inflow_outflow_flux": [[0.0, 0.0]] * n,
+        }
+        times = {"level_set": 0.0, "flow": 0.0, "skeleton": 0.0, "transfer": 0.0}
+        fields: dict[str, Path] = {}
+        solved: dict[float, int] = {}
+        for i in sorted(range(n), key=lambda j: (abs(levels[j]), levels[j])):
+            rate = levels[i]
+            if rate in solved:
+                j = solved[rate]
+                for key in diag:
+                    diag[key][i] = diag[key][j]
+                curves[i] = curves[j]
+                continue
+            rep = solver.solve(rate, f"cutfem_fpi, inflow rate {rate:g} mm^2/s")
+            for k, v in rep.times.items():
+                times[k] += v
+            curves[i] = solver.interface_curve()
+            diag["coupling_iterations"][i] = rep.iterations
+            diag["aitken_factors"][i] = rep.omegas
+            diag["flow_newton_iterations"][i] = rep.flow_iterations
+            diag["skeleton_newton_iterations"][i] = rep.skeleton_iterations
+            diag["max_displacement"][i] = float(
+                np.max(np.linalg.norm(curves[i] - solver.sampler.reference, axis=1))
+            )
+            diag["porosity_range"][i] = list(solver.porosity_range())
+            diag["interface_flux"][i] = solver.flow.interface_mass_balance()[0]
+            diag["inflow_outflow_flux"][i] = list(solver.boundary_fluxes())
+            if self.options.write_vtu:
+                from .output import write_vtu
+
+                fields.update(write_vtu(solver, Path(workdir), i))
+            solved[rate] = i
+        diag.update(
+            ndof_flow=solver.flow.ndof if solver.flow is not None else 0,
+            ndof_skeleton=solver.skeleton.ndof,
+            time_split=times,
+            setup_time=t_setup,
+            wall_time=time.perf_counter() - t_start,
+        )
+        pairs = [(c, Interface.polyline(cv)) for c, cv in zip(coordinates, curves, strict=True)]
+        return Solution.from_pairs(pairs, fields=fields, diagnostics=diag)
+
+    # -- internals ---------------------------------------------------------------------------
+    def _check_parameters(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        names = self.parameter_names()
+        unknown = [k for k in parameters if k not in names]
+        if unknown:
+            raise ConfigError(
+                f"unknown parameter(s) {unknown}; valid: {', '.join(names)}", "cutfem_fpi.solve"
+            )
+        o = self.options
+        params = {"E": o.E, "nu": o.nu, "phi0": o.phi0, "K": o.K, "inflow_rate": o.inflow_rate}
+        params.update({k: float(v) for k, v in parameters.items()})
+        for k, v in params.items():
+            if not math.isfinite(v):
+                raise ForwardModelError(f"parameter {k} is not finite ({v})", "invalid_parameter")
+        if not params["E"] > 0:
+            raise ForwardModelError(f"E = {params['E']} Pa is not positive", "invalid_parameter")
+        if not -1.0 < params["nu"] < 0.5:
+            raise ForwardModelError(
+                f"nu = {params['nu']} is outside (-1, 0.5)", "invalid_parameter"
+            )
+        if not 0.0 < params["phi0"] < 1.0:
+            raise ForwardModelError(
+                f"phi0 = {params['phi0']} is outside (0, 1)", "porosity_out_of_range"
+            )
+        if not params["K"] > 0:
+            raise ForwardModelError(f"K = {params['K']} mm^2 is not positive", "invalid_parameter")
+        return params
+
+    def _levels(self, coordinates: Sequence[Coordinate], params: dict[str, float]) -> list[float]:
+        where = "cutfem_fpi.solve: coordinates"
+        if len(coordinates) == 0:
+            raise ConfigError("no coordinates requested", where)
+        out = []
+        for c in coordinates:
+            keys = set(c)
+            if keys <= {"inflow_rate"}:
+                out.append(float(c.get("inflow_rate", params["inflow_rate"])))
+            elif keys == {"inflow_volume_rate"}:
+                out.append(float(c["inflow_volume_rate"]) / self.options.thickness)
+            else:
+                raise ConfigError(
+                    "coordinates take 'inflow_rate' [mm^2/s] or 'inflow_volume_rate' "
+                    f"[mm^3/s], got {sorted(keys)}",
+                    where,
+                )
+            if not math.isfinite(out[-1]):
+                raise ConfigError(f"inflow level {out[-1]} is not finite", where)
+        return out
+
+    def _get_solver(self) -> Any:
+        if self._solver is None:
+            import os
+
+            os.environ.setdefault("MKL_NUM_THREADS", str(self.options.threads))
+            import ngsolve as ngs
+
+            from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE, build_flow_cell
+
+            from .coupled import (
+                CouplingSettings,
+                PoroFsiSolver,
+                channel_mesh,
+                skeleton_mesh_from_flow_cell,
+            )
+            from .flow import FlowSettings
+            from .skeleton import SkeletonSettings
+
+            o = self.options
+            ngs.SetNumThreads(o.threads)
+            cell = build_flow_cell(
+                length=o.channel_length,
+                height=o.channel_height,
+                outline=DEFAULT_OUTLINE if o.outline is None else o.outline,
+                smooth=o.smooth_outline,
+                mesh_size=max(o.interface_mesh_size, 0.25 * o.channel_height),
+                interface_mesh_size=o.interface_mesh_size,
+                curve_order=1,
+            )
+            self._solver = PoroFsiSolver(
+                channel_mesh(o.channel_length, o.channel_height, o.background_mesh_size),
+                skeleton_mesh_from_flow_cell(cell),
+                o.channel_length,
+                o.channel_height,
+                FlowSettings(
+                    viscosity=o.fluid_viscosity,
+                    density=o.fluid_density,
+                    alpha_bj=o.alpha_bj,
+                    beta_bj=o.beta_bj,
+                    saffman=o.saffman,
+                    ghost_penalty=o.ghost_penalty,
+                    newton_tol=o.flow_newton_tol,
+                ),
+                SkeletonSettings(kappa=o.kappa, eta=o.eta),
+                CouplingSettings(
+                    tol=o.coupling_tol,
+                    max_iter=o.coupling_max_iter,
+                    omega0=o.omega0,
+                    voxel_size=o.voxel_size,
+                ),
+                outflow=o.outflow,
+            )
+        return self._solver
+
+    @property
+    def solver(self) -> Any:
+        """The underlying :class:`~fbia.plugins.cutfem_fpi.coupled.PoroFsiSolver`."""
+        return self._get_solver()
