@@ -34,6 +34,8 @@ _LAZY = {
     "load_study": "fbia.core.study:load_study",
     "least_squares": "fbia.iterators.levenberg_marquardt:least_squares",
     "smc": "fbia.iterators.smc:smc",
+    "DaskEvaluator": "fbia.core.dask_executor:DaskEvaluator",
+    "StudyStore": "fbia.core.store:StudyStore",
 }
 
 __all__ = [*_core_all, *_LAZY, "__version__"]

@@ -4,14 +4,20 @@
 
     fbia validate study.toml                  check everything that needs no forward run
     fbia forward study.toml --set E=400 --set nu=0.3 [--output DIR]
-    fbia run study.toml [--workers N] [--output DIR]
+    fbia run study.toml [--workers N] [--output DIR] [--fresh] [--retry-failed]
+                        [--address tcp://HOST:PORT]
     fbia plugins [--json]
     fbia --version
+
+``fbia run`` on an output folder that holds a study store resumes the study: every stored run
+of the same problem is reused, none is run again; ``--fresh`` starts over, ``--retry-failed``
+runs stored failures again, ``--address`` sends the runs to a running Dask scheduler.
 
 Exit status: 0 done (``fbia run``: the result, converged or not, is written; its status is in
 the report); 1 a forward run failed (``fbia forward``, or ``fbia run`` without an iterator), or
 a file could not be written; 2 bad input (study file, data files, plugin
-names, options, arguments): one line ``fbia: error: <message>`` on stderr, no traceback;
+names, options, arguments; a store made for a different problem): one line
+``fbia: error: <message>`` on stderr, no traceback;
 130 interrupted by Ctrl-C, after saving what was computed.
 """
 
@@ -75,6 +81,21 @@ def _parser() -> argparse.ArgumentParser:
         help="worker processes (overrides [executor]; 1 runs serially)",
     )
     r.add_argument("--output", metavar="DIR", help="output folder (default: the study's)")
+    r.add_argument(
+        "--fresh",
+        action="store_true",
+        help="start over: delete the study store and run folders of the output folder",
+    )
+    r.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="run the stored failed runs again instead of reusing their failure",
+    )
+    r.add_argument(
+        "--address",
+        metavar="TCP",
+        help="run on the Dask scheduler at this address (overrides [executor])",
+    )
 
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -157,7 +178,13 @@ def _forward(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     study = _load(args)
-    result = study.run(args.output, args.workers)
+    result = study.run(
+        args.output,
+        args.workers,
+        fresh=args.fresh,
+        retry_failed=args.retry_failed,
+        address=args.address,
+    )
     if study.iterator is None and not result.success:
         return _fail(result.message, 1)
     return 0

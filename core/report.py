@@ -1,10 +1,14 @@
-"""What a study writes: the evaluation log, provenance, interface files, tables and plots.
+"""What a study writes: the evaluation log, progress, provenance, interfaces, tables and plots.
 
-Everything that goes into a study's output folder is written here, so that the persistent
-store of later versions replaces one class (:class:`EvaluationLog`) and nothing else::
+Everything that goes into a study's output folder is written here or by the study store
+(:mod:`fbia.core.store`)::
 
     output/
-      evaluations.jsonl     one JSON record per forward evaluation, appended as it finishes
+      store.sqlite          every forward run of every session (the reference; see fbia.core.store)
+      evaluations.jsonl     this session's records, one JSON line each, as the iterator gets them
+                            (runs reused from the store included, marked "reused": true)
+      fbia.log              what was printed, one line per record and batch, per session
+      runs/                 one working folder per run (failed runs' kept; all with keep_runs)
       result.json           the Result (status, message, x, history, provenance, evaluations)
       report.txt            the summary and the discrepancy table printed at the end
       interfaces/           observed and simulated interfaces: CSV (2-D) and VTU (2-D, 3-D)
@@ -22,6 +26,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 import math
 import os
 import platform
@@ -29,7 +34,9 @@ import re
 import shutil
 import socket
 import sys
-from collections.abc import Iterable, Mapping, Sequence
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -42,6 +49,8 @@ from fbia.core.registry import plugin_versions
 
 __all__ = [
     "EvaluationLog",
+    "RunProgress",
+    "log_to_file",
     "discrepancy_rows",
     "format_table",
     "now",
@@ -64,8 +73,8 @@ class EvaluationLog:
 
     Each record is written and flushed the moment it is handed over, so a study that stops
     (error, Ctrl-C, kill) keeps every evaluation that finished.  Opening a log truncates an
-    existing file: resuming a study is the job of the persistent store that replaces this
-    class.
+    existing file: the log is one session's readable copy; the study store
+    (:class:`~fbia.core.store.StudyStore`) is what a resumed study reads.
 
     Parameters
     ----------
@@ -79,12 +88,13 @@ class EvaluationLog:
         self._fh: TextIO | None = self.path.open("w", encoding="utf-8")
         self.records: list[Evaluation] = []
 
-    def append(self, record: Evaluation) -> None:
-        """Write one record (its index, x, status, message, residuals, D, time, workdir)."""
+    def append(self, record: Evaluation, **extra: Any) -> None:
+        """Write one record (its index, x, status, message, residuals, D, time, workdir) and
+        any ``extra`` keys (e.g. ``reused``, ``worker``)."""
         self.records.append(record)
         if self._fh is None:
             raise ValueError(f"evaluation log {self.path} is closed")
-        line = json.dumps(_jsonable(record.to_dict()), allow_nan=False, default=str)
+        line = json.dumps(_jsonable({**record.to_dict(), **extra}), allow_nan=False, default=str)
         self._fh.write(line + "\n")
         self._fh.flush()
 
@@ -131,16 +141,20 @@ def provenance(
     study_text: str | None = None,
     study_sha256: str | None = None,
     seed: int | None = None,
+    seeds: Mapping[str, Any] | None = None,
     executor: Mapping[str, Any] | None = None,
     plugins: Sequence[Any] = (),
     started: str | None = None,
     finished: str | None = None,
+    store: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything needed to tell later how a result was made.
 
     fbia, Python, numpy and scipy versions; the plugins used (registry name, class,
-    distribution, version); the study file's path, text and SHA-256; the seed; the executor;
-    host, platform, command line; start and end time (UTC).
+    distribution, version); the study file's path, text and SHA-256; the study's seed and
+    every seed derived from it (``seeds``); the executor and its settings; host, platform,
+    command line; start and end time (UTC); the store (path, problem hash, runs per status,
+    the sessions that made them: a resumed result tells which runs came from which session).
     """
     import scipy
 
@@ -156,6 +170,7 @@ def provenance(
         "study_sha256": study_sha256,
         "study_text": study_text,
         "seed": seed,
+        "seeds": dict(seeds or {}),
         "executor": dict(executor or {}),
         "host": socket.gethostname(),
         "platform": platform.platform(),
@@ -163,7 +178,167 @@ def provenance(
         "command": [Path(sys.argv[0]).name, *sys.argv[1:]] if sys.argv else [],
         "started": started,
         "finished": finished,
+        "store": None if store is None else dict(store),
     }
+
+
+# -- progress and the log file -----------------------------------------------------------------
+@contextmanager
+def log_to_file(path: Path, name: str = "fbia") -> Iterator[logging.Logger]:
+    """Append the ``fbia`` logger's records (INFO and up) to ``path`` while inside."""
+    logger = logging.getLogger(name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    previous = logger.level
+    logger.setLevel(logging.INFO)
+    logger.addHandler(handler)
+    try:
+        yield logger
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+        logger.setLevel(previous)
+
+
+def _duration(seconds: float) -> str:
+    seconds = max(0.0, seconds)
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
+
+
+class RunProgress:
+    """What a study shows and logs while forward runs go on (an evaluator's ``listener``).
+
+    Every record goes to ``evaluations.jsonl`` (with ``reused`` and ``worker``) and to the log
+    file.  On a terminal, a batch with runs to make shows a progress bar (done / failed /
+    running, ETA; tqdm) that disappears when the batch is done.  Elsewhere (a file, a batch
+    job's output) a batch that lasts longer than ``interval`` seconds gets a plain line every
+    ``interval`` seconds (done, failed, running, time left) and one when it ends; quick
+    batches print nothing.
+
+    Parameters
+    ----------
+    log
+        The session's evaluation log.
+    echo
+        Where plain lines go (print).
+    tty
+        Show bars (default: whether stderr is a terminal).
+    interval
+        Seconds between plain progress lines.
+    """
+
+    def __init__(
+        self,
+        log: EvaluationLog,
+        echo: Callable[[str], None] = print,
+        tty: bool | None = None,
+        interval: float = 10.0,
+    ) -> None:
+        self.log = log
+        self.echo = echo
+        self.tty = sys.stderr.isatty() if tty is None else tty
+        self.interval = interval
+        self.logger = logging.getLogger("fbia")
+        self.batch = 0
+        self.totals = {"runs": 0, "reused": 0, "failed": 0}
+        self._bar: Any = None
+        self._lines = 0
+        self.to_run = self.slots = self.done = self.failed = self.reused = 0
+        self.t0 = self.shown = time.perf_counter()
+
+    def batch_started(self, total: int, reused: int, to_run: int, slots: int) -> None:
+        self.batch += 1
+        self.to_run, self.slots, self.done, self.failed = to_run, max(1, slots), 0, 0
+        self.reused = reused
+        self.t0 = self.shown = time.perf_counter()
+        self._lines = 0
+        self.logger.info(
+            "batch %d: %d points, %d from the store, %d to run on %d worker(s)",
+            self.batch,
+            total,
+            reused,
+            to_run,
+            self.slots,
+        )
+        if to_run and self.tty:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=to_run,
+                desc=f"batch {self.batch}",
+                unit="run",
+                leave=False,
+                dynamic_ncols=True,
+                file=sys.stderr,
+            )
+            self._bar.set_postfix_str(self._counts(), refresh=True)
+
+    def _counts(self) -> str:
+        running = min(self.slots, self.to_run - self.done)
+        stored = f", {self.reused} from the store" if self.reused else ""
+        return f"failed {self.failed}, running {running}{stored}"
+
+    def eta(self) -> float | None:
+        """Seconds left in this batch, from the pace of the finished runs (None before one)."""
+        if not self.done:
+            return None
+        return (time.perf_counter() - self.t0) / self.done * (self.to_run - self.done)
+
+    def record(self, record: Evaluation, reused: bool, worker: str | None) -> None:
+        self.log.append(record, reused=reused, worker=worker)
+        if reused:
+            self.totals["reused"] += 1
+            self.logger.info(
+                "eval %d %s (from the store)%s", record.index, record.status, _brief(record)
+            )
+            return
+        self.totals["runs"] += 1
+        self.done += 1
+        self.failed += not record.ok
+        self.totals["failed"] += not record.ok
+        self.logger.info(
+            "eval %d %s in %.3g s on %s%s",
+            record.index,
+            record.status,
+            record.time,
+            worker or "?",
+            _brief(record),
+        )
+        if self._bar is not None:
+            self._bar.set_postfix_str(self._counts(), refresh=False)
+            self._bar.update(1)
+        elif time.perf_counter() - self.shown >= self.interval:
+            self.line()
+
+    def line(self) -> str:
+        """Echo (and return) the plain progress line of the batch."""
+        eta = self.eta()
+        left = (
+            f", about {_duration(eta)} left" if eta is not None and self.done < self.to_run else ""
+        )
+        text = f"  batch {self.batch}: {self.done}/{self.to_run} runs done, {self._counts()}{left}"
+        self.echo(text)
+        self.shown = time.perf_counter()
+        self._lines += 1
+        return text
+
+    def batch_finished(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+        elif self._lines:
+            self.line()
+
+
+def _brief(record: Evaluation) -> str:
+    if record.ok:
+        return f", D = {record.distance:.6g}"
+    return f": {record.message}" if record.message else ""
 
 
 # -- interfaces --------------------------------------------------------------------------------

@@ -59,9 +59,26 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     options = { x0 = [ { E = 200.0, nu = 0.4 }, { E = 700.0, nu = -0.5 } ] }
 
     [executor]
-    kind = "processes"          # serial | processes (default processes)
+    kind = "processes"          # serial | processes | dask (default processes)
     workers = 2                 # default: the number of cores
-    keep_runs = false           # keep every run's working folder in <output>/runs
+    keep_runs = false           # keep every successful run's folder in <output>/runs too
+                                # (failed runs' folders are always kept)
+    timeout = 3600.0            # optional wall-time limit of one run [s]; a run past it is
+                                # killed and recorded as failed ("time-out after 3600 s")
+    isolate = true              # each run in a child process of its own (default: with a
+                                # timeout, and always for dask); a crash costs that child only
+    address = "tcp://10.0.0.5:8786"   # dask: a running scheduler ...
+    cluster = "slurm"           # ... or "local" (default) | slurm | pbs | sge | lsf | htcondor
+                                # | moab | oar (dask-jobqueue) with `workers` workers
+    cluster_options = { cores = 8, memory = "16GB", walltime = "04:00:00" }  # passed through
+
+Resume: every finished run is stored in ``<output>/store.sqlite`` the moment it ends.  Running
+the study again on the same output folder reuses every stored run whose inputs and problem
+(model, measure, observations, fixed inputs, noise) are the same and runs only the others;
+since the iterators are deterministic given the seed, the result is the one an uninterrupted run
+gives.  A store made for a different problem is an error that says what changed;
+``fresh=True`` (``fbia run --fresh``) starts over, ``retry_failed=True`` runs stored failures
+again.
 
 Seeds: the synthetic noise uses ``numpy.random.SeedSequence(seed, spawn_key=(0,))`` and an
 iterator whose options have a ``seed`` the file does not set gets the state of
@@ -78,6 +95,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import shutil
 import time
 import tomllib
 from collections.abc import Callable, Mapping, Sequence
@@ -90,14 +108,21 @@ import numpy as np
 
 from fbia.core import report
 from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.evaluator import make_evaluator
+from fbia.core.evaluator import EXECUTOR_KINDS, make_evaluator
 from fbia.core.interface import Interface
 from fbia.core.observation import MeasurementPoints, Observation, check_coordinate
 from fbia.core.parameters import Parameter, Prior
 from fbia.core.problem import Evaluation, InverseProblem, Result
 from fbia.core.registry import Registry, default_registry
+from fbia.core.store import StudyStore
 
-__all__ = ["ExecutorSpec", "Study", "SyntheticSpec", "load_study"]
+__all__ = ["STORE_NAME", "ExecutorSpec", "Study", "SyntheticSpec", "load_study"]
+
+#: The study store's file name in the output folder.
+STORE_NAME = "store.sqlite"
+#: ``cluster`` values of [executor] (kept in step with fbia.core.dask_executor.CLUSTERS,
+#: which is not imported here so that reading a study file never imports Dask)
+CLUSTERS = ("local", "slurm", "pbs", "sge", "lsf", "htcondor", "moab", "oar")
 
 #: Top-level sections of a study file and what each holds.
 SECTIONS: dict[str, str] = {
@@ -111,7 +136,7 @@ SECTIONS: dict[str, str] = {
     "measure": "discrepancy measure name and options",
     "likelihood": "noise_std",
     "iterator": "iterator name and options",
-    "executor": "serial or processes, workers",
+    "executor": "serial, processes or dask; workers, time-out, cluster",
 }
 _KEYS: dict[str, tuple[str, ...]] = {
     "study": ("name", "seed", "output"),
@@ -123,9 +148,17 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "observations": ("coordinate", "interface", "points", "noise_std", "name"),
     "synthetic": ("truth", "coordinates", "noise_std", "noise", "points", "seed"),
     "likelihood": ("noise_std",),
-    "executor": ("kind", "workers", "keep_runs"),
+    "executor": (
+        "kind",
+        "workers",
+        "keep_runs",
+        "timeout",
+        "isolate",
+        "address",
+        "cluster",
+        "cluster_options",
+    ),
 }
-EXECUTOR_KINDS = ("serial", "processes")
 #: how [synthetic] noise is added (fbia.synthetic_observations): along the normals (Paper A)
 #: or on every coordinate (Paper B eq. 16)
 NOISE_KINDS = ("normal", "isotropic")
@@ -141,31 +174,97 @@ def derived_seed(seed: int, stream: int) -> int:
 
 @dataclass(frozen=True)
 class ExecutorSpec:
-    """How forward runs are executed: ``serial`` or a local process pool of ``workers``."""
+    """How forward runs are executed (the ``[executor]`` section).
+
+    ``kind`` is ``serial``, ``processes`` (a local pool of ``workers``) or ``dask`` (a running
+    scheduler at ``address``, else a cluster started for the study: ``cluster = "local"`` or a
+    dask-jobqueue kind with ``cluster_options``).  ``timeout`` is the wall-time limit of one run
+    in seconds; ``isolate`` runs each run in a child process of its own.
+    """
 
     kind: str = "processes"
     workers: int | None = None
     keep_runs: bool = False
+    timeout: float | None = None
+    isolate: bool | None = None
+    address: str | None = None
+    cluster: str = "local"
+    cluster_options: Mapping[str, Any] = field(default_factory=dict)
 
     def with_workers(self, workers: int | None) -> ExecutorSpec:
-        """The command line's ``--workers N``: 1 runs serially, more on a process pool."""
+        """The command line's ``--workers N``: 1 runs serially, more on a process pool; for
+        ``dask``, the number of workers of the cluster started for the study."""
         if workers is None:
             return self
         if workers < 1:
             raise ConfigError(f"--workers must be at least 1, got {workers}")
+        if self.kind == "dask":
+            if self.address:
+                raise ConfigError("--workers does not apply to a running Dask scheduler (address)")
+            return replace(self, workers=workers)
         return replace(self, kind="serial" if workers == 1 else "processes", workers=workers)
 
-    def make(self, output: Path, on_record: Callable[[Evaluation], None] | None = None) -> Any:
-        """The evaluator; run folders go to ``<output>/runs`` when ``keep_runs``."""
-        options: dict[str, Any] = {"on_record": on_record}
-        if self.keep_runs:
-            options["workdir"] = output / "runs"
+    def with_address(self, address: str | None) -> ExecutorSpec:
+        """The command line's ``--address``: the runs go to that Dask scheduler."""
+        if not address:
+            return self
+        return replace(
+            self, kind="dask", address=address, workers=None, cluster="local", cluster_options={}
+        )
+
+    def make(
+        self, output: Path, on_record: Callable[[Evaluation], None] | None = None, **options: Any
+    ) -> Any:
+        """The evaluator; run folders go to ``<output>/runs`` (successful runs' folders are
+        removed unless ``keep_runs``).  ``options`` (store, listener, retry_failed) are passed
+        on."""
+        settings: dict[str, Any] = {
+            "workdir": output / "runs",
+            "keep_workdirs": self.keep_runs,
+            "on_record": on_record,
+            "timeout": self.timeout,
+            "isolate": self.isolate,
+            **options,
+        }
         if self.kind == "processes":
-            options["workers"] = self.workers
-        return make_evaluator(self.kind, **options)
+            settings["workers"] = self.workers
+        elif self.kind == "dask":
+            settings.update(
+                address=self.address,
+                workers=self.workers,
+                cluster=self.cluster,
+                cluster_options=dict(self.cluster_options),
+            )
+        return make_evaluator(self.kind, **settings)
 
     def describe(self) -> dict[str, Any]:
-        return {"kind": self.kind, "workers": self.workers, "keep_runs": self.keep_runs}
+        out: dict[str, Any] = {
+            "kind": self.kind,
+            "workers": self.workers,
+            "keep_runs": self.keep_runs,
+        }
+        if self.timeout is not None:
+            out["timeout"] = self.timeout
+        if self.isolate is not None:
+            out["isolate"] = self.isolate
+        if self.kind == "dask":
+            out.update(
+                address=self.address,
+                cluster=self.cluster,
+                cluster_options=dict(self.cluster_options),
+            )
+        return out
+
+    def label(self) -> str:
+        """E.g. ``processes, 2 workers, time-out 600 s``."""
+        parts = [self.kind]
+        if self.kind == "dask":
+            parts.append(f"scheduler {self.address}" if self.address else f"{self.cluster} cluster")
+        if self.workers and self.kind != "serial":
+            parts.append(f"{self.workers} workers")
+        if self.timeout is not None:
+            parts.append(f"time-out {self.timeout:g} s")
+        return ", ".join(parts)
 
 
 @dataclass(frozen=True)
@@ -314,8 +413,7 @@ class Study:
             f"states     {'; '.join(obs)}",
             f"measure    {self.measure_name} {_opts(self.measure)}".rstrip(),
             f"iterator   {self.iterator_name or '(none: one forward run)'}",
-            f"executor   {self.executor.kind}"
-            + (f", {self.executor.workers} workers" if self.executor.workers else ""),
+            f"executor   {self.executor.label()}",
             f"seed       {self.seed}",
             f"output     {self.output}",
         ]
@@ -340,10 +438,22 @@ class Study:
         output: str | Path | None = None,
         workers: int | None = None,
         echo: Callable[[str], None] = print,
+        *,
+        fresh: bool = False,
+        retry_failed: bool = False,
+        address: str | None = None,
     ) -> Result:
         """Run the study (the iterator, or one forward run if there is none) and write the
-        output folder; see :func:`run_study`."""
-        return run_study(self, output, workers, echo)
+        output folder, resuming from its store; see :func:`run_study`."""
+        return run_study(
+            self,
+            output,
+            workers,
+            echo,
+            fresh=fresh,
+            retry_failed=retry_failed,
+            address=address,
+        )
 
 
 def _opts(obj: Any) -> str:
@@ -804,10 +914,52 @@ class _Reader:
             if "workers" in spec
             else None
         )
-        keep = spec.get("keep_runs", False)
-        if not isinstance(keep, bool):
-            raise ConfigError(f"expected true or false, got {keep!r}", f"{where} keep_runs")
-        return ExecutorSpec(kind, workers, keep)
+        flags: dict[str, bool | None] = {}
+        for key in ("keep_runs", "isolate"):
+            value = spec.get(key)
+            if value is not None and not isinstance(value, bool):
+                raise ConfigError(f"expected true or false, got {value!r}", f"{where} {key}")
+            flags[key] = value
+        timeout = (
+            self.number(spec["timeout"], f"{where} timeout", positive=True)
+            if "timeout" in spec
+            else None
+        )
+        if timeout is not None and flags["isolate"] is False:
+            raise ConfigError(
+                "a time-out needs isolated runs (only a run in its own process can be "
+                "stopped): drop isolate = false or the timeout",
+                f"{where} isolate",
+            )
+        dask_only = [k for k in ("address", "cluster", "cluster_options") if k in spec]
+        if dask_only and kind != "dask":
+            raise ConfigError(
+                f'{", ".join(dask_only)} only for kind = "dask" (kind is {kind!r})',
+                f"{where} {dask_only[0]}",
+            )
+        address = self.string(spec["address"], f"{where} address") if "address" in spec else None
+        cluster = self.string(spec.get("cluster", "local"), f"{where} cluster")
+        if cluster not in CLUSTERS:
+            raise ConfigError(
+                f"unknown cluster {cluster!r}; valid: {', '.join(CLUSTERS)}", f"{where} cluster"
+            )
+        options = self.table(spec.get("cluster_options", {}), f"{where} cluster_options")
+        if address is not None and (workers is not None or "cluster" in spec or options):
+            raise ConfigError(
+                "a scheduler address names a running cluster: workers, cluster and "
+                "cluster_options do not apply",
+                f"{where} address",
+            )
+        return ExecutorSpec(
+            kind,
+            workers,
+            bool(flags["keep_runs"]),
+            timeout,
+            flags["isolate"],
+            address,
+            cluster,
+            dict(options),
+        )
 
 
 def _model_dim(model: Any) -> int | None:
@@ -900,16 +1052,37 @@ def run_study(
     output: str | Path | None = None,
     workers: int | None = None,
     echo: Echo = print,
+    *,
+    fresh: bool = False,
+    retry_failed: bool = False,
+    address: str | None = None,
 ) -> Result:
     """Run a study and write its output folder (default: the study's ``output``).
 
-    With an iterator: builds the evaluator from ``[executor]`` (``workers`` overrides it),
-    drives the iterator step by step (one progress line per second at most), appends every
-    evaluation to ``evaluations.jsonl`` the moment it finishes, then solves once more at the
+    With an iterator: opens the study store ``<output>/store.sqlite`` (resuming: every run
+    stored there for the same problem is reused, never run again), builds the evaluator from
+    ``[executor]`` (``workers`` and ``address`` override it), drives the iterator step by step
+    with a progress display, stores every evaluation the moment it finishes (and appends it to
+    ``evaluations.jsonl``; ``fbia.log`` gets every line), then solves once more at the
     result's ``x`` and writes ``interfaces/``, ``plots/``, ``result.json`` (with provenance)
     and ``report.txt``.  Without an iterator: what :func:`forward_study` does, in ``output``.
 
-    On Ctrl-C or an error the evaluations finished so far are already on disk; a
+    Parameters
+    ----------
+    fresh
+        Delete the store (and the run folders) first and start over.
+    retry_failed
+        Run stored failed runs again (once) instead of reusing their failure.
+    address
+        Send the runs to the Dask scheduler at this address.
+
+    Raises
+    ------
+    ConfigError
+        The store holds runs of a different problem (the message says what changed), or is
+        in use by another run.
+
+    On Ctrl-C or an error the evaluations finished so far are already stored; a
     ``result.json`` with status ``"interrupted"`` or ``"error"`` is written and the exception
     goes on to the caller.
     """
@@ -919,26 +1092,67 @@ def run_study(
         echo("the study has no [iterator]: one forward run at the start point")
         return _forward(study, None, out, echo, started)
     problem = study.problem
-    executor = study.executor.with_workers(workers)
+    executor = study.executor.with_workers(workers).with_address(address)
     out.mkdir(parents=True, exist_ok=True)
+    store = StudyStore(out / STORE_NAME, fresh=fresh)
+    try:
+        if fresh:
+            shutil.rmtree(out / "runs", ignore_errors=True)
+        store.bind(problem)
+        with report.log_to_file(out / "fbia.log") as logger:
+
+            def say(line: str) -> None:
+                echo(line)
+                logger.info(line)
+
+            return _run_stored(
+                study, problem, executor, store, out, started, say, retry_failed, fresh
+            )
+    finally:
+        store.close()
+
+
+def _run_stored(
+    study: Study,
+    problem: InverseProblem,
+    executor: ExecutorSpec,
+    store: StudyStore,
+    out: Path,
+    started: str,
+    echo: Echo,
+    retry_failed: bool,
+    fresh: bool,
+) -> Result:
+    _announce_resume(study, store, echo, retry_failed, fresh)
     log = report.EvaluationLog(out / "evaluations.jsonl")
     progress = _Progress(echo, log, problem.names)
+    listener = report.RunProgress(log, echo)
     echo(
         f"running {study.iterator_name} on {study.model_name} with the {study.measure_name} "
-        f"measure ({executor.kind}"
-        + (f", {executor.workers} workers" if executor.kind == "processes" else "")
-        + f"); evaluations go to {log.path}"
+        f"measure ({executor.label()}); evaluations go to {store.path}"
     )
     executor_info = executor.describe()
+    store.begin_session(executor_info, study.sha256)
     try:
-        evaluator = executor.make(out, on_record=log.append)
-        executor_info["workers"] = getattr(evaluator, "workers", 1)
+        evaluator = executor.make(out, store=store, listener=listener, retry_failed=retry_failed)
         try:
+            executor_info.update(evaluator.describe())
+            if executor.kind == "dask":
+                where = (
+                    f"the Dask scheduler at {executor_info['scheduler']}"
+                    if executor_info["cluster"] == "scheduler"
+                    else f"a Dask {executor_info['cluster']} cluster ({executor_info['scheduler']})"
+                )
+                echo(
+                    f"{where}: {executor_info['workers']} worker thread(s), ready after "
+                    f"{executor_info['startup_seconds']:.3g} s"
+                )
             result = _drive(study.iterator, problem, evaluator, progress)
         finally:
             evaluator.close()
     except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
         interrupted = isinstance(exc, KeyboardInterrupt)
+        store.end_session("interrupted" if interrupted else "error")
         partial = _partial(
             study,
             log,
@@ -948,10 +1162,16 @@ def run_study(
             else f"the iterator stopped with {type(exc).__name__}: {exc}",
         )
         log.close()
-        _finish(study, partial, out, started, echo, executor_info, quiet=True)
+        _finish(study, partial, out, started, echo, executor_info, quiet=True, store=store)
         raise
+    store.end_session("done")
     log.close()
     progress.last()
+    totals = listener.totals
+    echo(
+        f"{totals['runs'] + totals['reused']} evaluations: {totals['runs']} run now "
+        f"({totals['failed']} failed), {totals['reused']} taken from the store"
+    )
     if not isinstance(result, Result):
         raise TypeError(
             f"iterator {study.iterator_name!r} returned {type(result).__name__}, not fbia.Result"
@@ -961,7 +1181,7 @@ def run_study(
         result.evaluations = list(log.records)
     # The result is saved before the extras below, which only add files to it: a plot that
     # fails is reported (echoed and kept in result.info["warnings"]), never fatal.
-    _finish(study, result, out, started, echo, executor_info, quiet=True)
+    _finish(study, result, out, started, echo, executor_info, quiet=True, store=store)
     files: dict[str, Any] = {}
     warnings: list[str] = []
 
@@ -1008,8 +1228,34 @@ def run_study(
     if warnings:
         result.info["warnings"] = warnings
     result.info.setdefault("files", files)
-    _finish(study, result, out, started, echo, executor_info)
+    _finish(study, result, out, started, echo, executor_info, store=store)
     return result
+
+
+def _announce_resume(
+    study: Study, store: StudyStore, echo: Echo, retry_failed: bool, fresh: bool
+) -> None:
+    """Say what the store already holds and what will be done with it."""
+    if fresh:
+        echo(f"starting over (--fresh): the store {store.path} was emptied")
+    n = len(store)
+    if not n:
+        return
+    failed = n - store.counts().get("ok", 0)
+    again = " (failed ones run again: --retry-failed)" if retry_failed and failed else ""
+    echo(
+        f"resuming: {store.path} holds {n} evaluations of this problem ({failed} failed); "
+        f"each is reused, not run again{again}"
+    )
+    sessions = store.sessions()
+    last = sessions[-1] if sessions else None
+    if last is not None and last["study_sha256"] != study.sha256:
+        echo(
+            "note: the study file changed since the last run; its model, measure and "
+            "observations did not, so the stored runs stay valid"
+        )
+    if last is not None and last["status"] == "running":
+        echo(f"note: the last run (started {last['started']}) was stopped without a word")
 
 
 def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Progress) -> Any:
@@ -1101,6 +1347,7 @@ def _finish(
     echo: Echo,
     executor: Mapping[str, Any] | None = None,
     quiet: bool = False,
+    store: StudyStore | None = None,
 ) -> None:
     """Provenance, ``result.json`` and ``report.txt``; echo the report unless ``quiet``."""
     problem = study.problem
@@ -1109,21 +1356,34 @@ def _finish(
         study_text=study.text,
         study_sha256=study.sha256,
         seed=study.seed,
+        seeds=study_seeds(study),
         executor=executor or {"kind": "serial", "workers": 1},
         plugins=[problem.model, problem.measure, study.iterator],
         started=started,
         finished=report.now(),
+        store=None if store is None else store.describe(),
     )
     result.info.setdefault("problem", problem.describe())
     result.save(out / "result.json")
     truth = study.synthetic.truth if study.synthetic is not None else None
     text = report.result_report(study.name, result, out, truth)
-    for folder in (out / "run", out / "best"):  # a model's working folder, if it wrote nothing
+    for folder in (out / "run", out / "best", out / "runs"):  # left empty: not worth a folder
         if folder.is_dir() and not any(folder.iterdir()):
             folder.rmdir()
     (out / "report.txt").write_text(text + "\n", encoding="utf-8")
     if not quiet:
         echo(text)
+
+
+def study_seeds(study: Study) -> dict[str, int | None]:
+    """The study's seed and those derived from it: of the synthetic data and the iterator."""
+    options = getattr(study.iterator, "options", None)
+    seed = getattr(options, "seed", None)
+    return {
+        "study": study.seed,
+        "synthetic": study.synthetic.seed if study.synthetic is not None else None,
+        "iterator": seed if isinstance(seed, int) else None,
+    }
 
 
 def _point(x: Mapping[str, float], names: Sequence[str] | None = None) -> str:

@@ -12,12 +12,20 @@ evaluation has an exact expected value.  Its options make it fail on purpose:
 (KeyboardInterrupt, as Ctrl-C during a run).  With ``rendezvous`` (a file path),
 a dying run first creates that file, and a run with E below ``wait_below`` waits for the file
 and then 0.5 s more: so the two are under way together when the worker dies.
+
+Injected faults for the evaluation engine (``fault_rate``): a fraction of the inputs, chosen
+by a hash of (E, nu) (:func:`injected_fault`), fails (ForwardModelError), hangs (starts a
+``sleep 600`` solver, writes both process ids to ``hang.pids`` in the run's folder and waits
+for it) or kills its own process (``os._exit(7)``), a third each.  ``delay`` makes every run
+take that long (a stand-in for an expensive model).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
+import subprocess
 import time
 from collections.abc import Generator, Mapping, Sequence
 from pathlib import Path
@@ -52,6 +60,10 @@ class ToyMoundForwardModel(fbia.Configurable):
         wait_below: float = Field(-math.inf, description="E below which to wait [Pa]")
         slow_above: float = Field(math.inf, description="E above which to sleep 30 s [Pa]")
         rendezvous: str = Field("", description="file a dying run creates first")
+        delay: float = Field(0.0, ge=0, description="wall time every run takes [s]")
+        fault_rate: float = Field(
+            0.0, ge=0, lt=1, description="fraction of inputs with an injected fault [-]"
+        )
 
     def parameter_names(self) -> Sequence[str]:
         return ("E", "nu", "inflow_rate")
@@ -61,6 +73,17 @@ class ToyMoundForwardModel(fbia.Configurable):
     ) -> fbia.Solution:
         E = parameters.get("E", 400.0)
         nu = parameters.get("nu", 0.3)
+        if self.options.delay:
+            time.sleep(self.options.delay)
+        fault = injected_fault(E, nu, self.options.fault_rate)
+        if fault == "fail":
+            raise fbia.ForwardModelError(f"injected failure at E = {E}")
+        if fault == "exit":
+            os._exit(7)
+        if fault == "hang":
+            solver = subprocess.Popen(["sleep", "600"])
+            (Path(workdir) / "hang.pids").write_text(f"{os.getpid()} {solver.pid}\n")
+            solver.wait()
         if E > self.options.slow_above:
             time.sleep(30.0)
         if E > self.options.die_above:
@@ -84,6 +107,21 @@ class ToyMoundForwardModel(fbia.Configurable):
             q = c.get("inflow_rate", parameters.get("inflow_rate", self.options.inflow_rate))
             pairs.append((c, fbia.Interface.polyline(toy_curve(E, nu, q))))
         return fbia.Solution.from_pairs(pairs, diagnostics={"E": E})
+
+
+def injected_fault(E: float, nu: float, rate: float) -> str | None:
+    """The fault of the toy model at (E, nu): "fail", "hang", "exit" or None.
+
+    u = the SHA-256 of repr(E), repr(nu) as a number in [0, 1); a fault when u < rate, its
+    kind by u in thirds of [0, rate).
+    """
+    if rate <= 0:
+        return None
+    digest = hashlib.sha256(f"{E!r},{nu!r}".encode()).digest()
+    u = int.from_bytes(digest[:8], "big") / 2.0**64
+    if u >= rate:
+        return None
+    return ("fail", "hang", "exit")[min(2, int(3 * u / rate))]
 
 
 class VerticalMeasure(fbia.Configurable):
@@ -167,3 +205,55 @@ def toy_problem(**model_options: Any) -> fbia.InverseProblem:
             fbia.Parameter("nu", bounds=(-0.8, 0.5)),
         ],
     )
+
+
+#: A 4 x 4 grid (what GridIterator(n=4) evaluates on E in [100, 760] Pa, nu in [-0.8, 0.5])
+#: where ``fault_rate = 0.2`` injects 4 faults (25 %): one failure, one hang, two exits.
+FAULT_BOUNDS = ((100.0, 760.0), (-0.8, 0.5))
+FAULT_GRID = [
+    {"E": float(E), "nu": float(nu)}
+    for E in np.linspace(*FAULT_BOUNDS[0], 4)
+    for nu in np.linspace(*FAULT_BOUNDS[1], 4)
+]
+
+
+def check_injected_faults(records: Sequence[fbia.Evaluation], timeout: float) -> None:
+    """Assert that every record of FAULT_GRID (rate 0.2) has the status and message of its
+    fault, that the ok ones are exact, and that each hung run's processes were killed."""
+    kinds = [injected_fault(x["E"], x["nu"], 0.2) for x in FAULT_GRID]
+    assert sorted(k for k in kinds if k) == ["exit", "exit", "fail", "hang"]
+    assert [r.x for r in records] == FAULT_GRID
+    reference = toy_curve(400.0, 0.3)[:, 1]
+    for r, kind in zip(records, kinds, strict=True):
+        if kind is None:
+            assert r.status == "ok", r.message
+            exact = toy_curve(r.x["E"], r.x["nu"])[:, 1] - reference
+            np.testing.assert_allclose(r.residuals, exact, atol=1e-15)
+            continue
+        assert r.status == "failed" and r.residuals is None
+        if kind == "fail":
+            assert r.message == f"injected failure at E = {r.x['E']}"
+        elif kind == "exit":
+            assert r.message.startswith(
+                "the process running this evaluation died (exit status 7: e.g. os._exit"
+            )
+        else:
+            assert r.message.startswith(f"time-out after {timeout:g} s: the run was stopped")
+            assert timeout <= r.time < timeout + 5.0
+            # the run's process and the solver it started were killed, not left running
+            pids = [int(p) for p in (Path(r.workdir) / "hang.pids").read_text().split()]
+            for pid in pids:
+                assert not _alive(pid), f"process {pid} of the hung run is still running"
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process runs (a zombie, dead but not yet reaped by its parent, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    stat = Path(f"/proc/{pid}/stat")
+    try:
+        return stat.read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:  # gone meanwhile, or no /proc
+        return stat.parent.exists()

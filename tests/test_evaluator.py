@@ -1,24 +1,30 @@
-"""SerialEvaluator and ProcessPoolEvaluator: same records, order, folders, failures, crashes.
+"""SerialEvaluator and ProcessPoolEvaluator: same records, order, folders, failures, crashes,
+time-outs.
 
 The toy model (tests/_models.py) is closed form, so every ok record has exact residuals.  It
 fails on purpose: ForwardModelError above E = 650 Pa, RuntimeError above 680 Pa, os._exit above
-750 Pa, and takes 30 s above 790 Pa.  One problem object and one pool (2 spawned workers)
-serve the pool tests, so the workers start once (plus the restarts that a killed worker
-forces).
+750 Pa, and takes 30 s above 790 Pa; with ``fault_rate`` it fails, hangs or exits on a fraction
+of its inputs.  One problem object and one pool (2 spawned workers) serve the pool tests, so
+the workers start once (plus the restarts that a killed worker forces).
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import signal
+import socket
 import threading
 import time
 
 import numpy as np
 import pytest
-from _models import toy_curve, toy_problem
+from _models import FAULT_GRID, check_injected_faults, toy_curve, toy_problem
 
 import fbia
+from fbia.core import report
+from fbia.core.store import StudyStore
 
 PROBLEM = toy_problem(fail_above=650.0, bug_above=680.0, die_above=750.0, slow_above=790.0)
 POINTS = [{"E": E, "nu": nu} for E, nu in [(200.0, 0.1), (400.0, 0.3), (600.0, -0.2), (300.0, 0.0)]]
@@ -108,6 +114,35 @@ def test_a_run_that_kills_its_worker_fails_alone_and_the_pool_carries_on(pool):
     assert again[1].distance == 0.0
 
 
+def test_injected_faults_with_a_time_out_leave_the_pool_working(pool):
+    # 16 runs, 4 with faults: a failure, a hang past the 1 s time-out, two os._exit; each
+    # worker runs its runs in a child process, so the pool itself is never broken
+    problem = toy_problem(fault_rate=0.2)
+    pool.timeout, pool.isolate = 1.0, True
+    try:
+        records = pool.evaluate(problem, FAULT_GRID)
+        check_injected_faults(records, timeout=1.0)
+        workers = set(pool._pool._processes)
+        clean = [r.x for r in records if r.ok][:2]
+        assert [r.status for r in pool.evaluate(problem, clean)] == ["ok", "ok"]
+        assert set(pool._pool._processes) == workers  # the same worker processes
+    finally:
+        pool.timeout, pool.isolate = None, False
+
+
+def test_serial_isolated_runs_survive_hangs_and_exits(tmp_path):
+    with fbia.SerialEvaluator(workdir=tmp_path, timeout=1.0) as ev:
+        assert ev.isolate
+        check_injected_faults(ev.evaluate(toy_problem(fault_rate=0.2), FAULT_GRID), 1.0)
+
+
+def test_a_time_out_needs_isolation():
+    with pytest.raises(fbia.ConfigError, match=r"^a time-out needs isolated runs"):
+        fbia.SerialEvaluator(timeout=1.0, isolate=False)
+    with pytest.raises(fbia.ConfigError, match=r"^timeout must be a positive number"):
+        fbia.make_evaluator("processes", timeout=0.0)
+
+
 def test_ctrl_c_stops_the_workers_at_once_and_keeps_the_finished_records(pool):
     # (runs after the other tests of the module pool: it stops the pool's processes)
     # Ctrl-C arrives 0.5 s after the first record, while both workers are in 30 s runs.
@@ -166,5 +201,45 @@ def test_serial_on_record_sees_every_record_in_order():
 
 
 def test_make_evaluator_rejects_unknown_kinds():
-    with pytest.raises(fbia.ConfigError, match=r"unknown executor 'dask2'; valid: serial, proc"):
+    with pytest.raises(
+        fbia.ConfigError, match=r"unknown executor 'dask2'; valid: serial, processes, dask$"
+    ):
         fbia.make_evaluator("dask2")
+    with pytest.raises(fbia.ConfigError, match=r"bad option for executor 'serial': .*'workers'"):
+        fbia.make_evaluator("serial", workers=2)
+
+
+def test_progress_lines_bar_and_log_follow_the_batch(tmp_path, capsys):
+    batch = [*POINTS, {"E": 660.0, "nu": 0.3}]
+    lines: list[str] = []
+    with (
+        StudyStore(tmp_path / "s.sqlite") as store,
+        report.EvaluationLog(tmp_path / "e.jsonl") as log,
+    ):
+        plain = report.RunProgress(log, lines.append, tty=False, interval=0.0)
+        with fbia.SerialEvaluator(store=store, listener=plain) as ev:
+            ev.evaluate(PROBLEM, batch)
+            ev.evaluate(PROBLEM, batch[3:])  # from the store: nothing to show
+        # a line per finished run (interval 0) with the time left, and one at the end
+        assert len(lines) == 6
+        assert re.fullmatch(
+            r"  batch 1: 1/5 runs done, failed 0, running 1, about \d+ s left", lines[0]
+        )
+        assert lines[-1] == "  batch 1: 5/5 runs done, failed 1, running 0"
+        assert plain.totals == {"runs": 5, "reused": 2, "failed": 1}
+        # on a terminal: a bar with the same counts, on stderr
+        bar = report.RunProgress(log, lines.append, tty=True)
+        with fbia.SerialEvaluator(store=store, listener=bar) as ev:
+            ev.evaluate(PROBLEM, [{"E": 700.0, "nu": 0.1}, {"E": 210.0, "nu": 0.1}])
+        err = capsys.readouterr().err
+        assert "batch 1:   0%|" in err and "0/2 [00:00<?, ?run/s, failed 0, running 1]" in err
+        assert err.endswith(" " * 60 + "\r")  # the bar is gone when the batch is done
+        assert len(lines) == 6  # no plain lines from a bar
+    records = [json.loads(line) for line in (tmp_path / "e.jsonl").read_text().splitlines()]
+    assert [(r["index"], r["reused"]) for r in records] == [
+        (0, False), (1, False), (2, False), (3, False), (4, False), (5, True), (6, True),
+        (0, False), (1, False),
+    ]  # fmt: skip
+    assert all(
+        r["worker"] == f"{socket.gethostname()}:{os.getpid()}" for r in records if not r["reused"]
+    )

@@ -1,0 +1,205 @@
+"""The study store: exact round trips, the problem hash, reuse instead of recomputation, locks.
+
+The toy model (tests/_models.py) is closed form, so every stored value has an exact expected
+value; everything here runs serially in this process (no worker start-up).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sqlite3
+
+import numpy as np
+import pytest
+from _models import toy_curve, toy_problem
+
+import fbia
+from fbia.core.store import (
+    StudyStore,
+    evaluation_key,
+    gaussian_log_likelihood,
+    problem_fingerprint,
+    problem_hash,
+)
+
+POINTS = [{"E": 200.0, "nu": 0.1}, {"E": 400.0, "nu": 0.3}, {"E": 700.0, "nu": 0.2}]
+
+
+def _exact_residuals(E: float, nu: float) -> np.ndarray:
+    return toy_curve(E, nu)[:, 1] - toy_curve(400.0, 0.3)[:, 1]
+
+
+def _problem(noise_std: float | None = 0.01, **options) -> fbia.InverseProblem:
+    problem = toy_problem(fail_above=650.0, **options)
+    return dataclasses.replace(problem, noise_std=noise_std)
+
+
+@pytest.fixture
+def store(tmp_path):
+    with StudyStore(tmp_path / "store.sqlite") as s:
+        yield s
+
+
+def test_records_round_trip_exactly_with_the_log_likelihood_of_eq_5(store, tmp_path):
+    problem = _problem()
+    store.bind(problem)
+    with fbia.SerialEvaluator(workdir=tmp_path / "runs", store=store) as ev:
+        records = ev.evaluate(problem, POINTS)
+    assert [r.status for r in records] == ["ok", "ok", "failed"]
+    stored = store.lookup(store.key(p) for p in POINTS)
+    assert len(stored) == 3 and len(store) == 3
+    for r, p in zip(records, POINTS, strict=True):
+        run = stored[store.key(p)]
+        got = run.record
+        assert (got.index, got.x, got.status, got.message) == (r.index, p, r.status, r.message)
+        assert (got.time, got.workdir, got.distances) == (r.time, r.workdir, r.distances)
+        assert got.diagnostics == r.diagnostics
+        assert run.attempt == 1 and run.worker and run.session is None
+        if r.ok:  # bit-exact residuals; L = -n/2 log(2 pi s^2) - D^2 / (2 s^2), n = 21
+            np.testing.assert_array_equal(got.residuals, r.residuals)
+            np.testing.assert_array_equal(got.residuals, _exact_residuals(p["E"], p["nu"]))
+            d = np.linalg.norm(_exact_residuals(p["E"], p["nu"]))
+            expected = -10.5 * math.log(2 * math.pi * 1e-4) - d**2 / 2e-4
+            assert run.log_likelihood == pytest.approx(expected, rel=1e-14)
+        else:
+            assert got.residuals is None and run.log_likelihood == -math.inf
+            assert got.message == "mesh distortion at E = 700.0"
+    # the SQLite file is in WAL mode and readable by any client
+    db = sqlite3.connect(store.path)
+    assert db.execute("PRAGMA journal_mode").fetchone() == ("wal",)
+    rows = db.execute("SELECT status, count(*) FROM evaluations GROUP BY status").fetchall()
+    assert dict(rows) == {"ok": 2, "failed": 1}
+    db.close()
+
+
+def test_log_likelihood_sums_observations_with_their_own_sigmas():
+    ev = fbia.Evaluation(0, {}, residuals=np.zeros(10), distances=[0.3, 0.4])
+    # n_k = 5 residuals per observation, sigma 0.1 and 0.2
+    expected = sum(
+        -2.5 * math.log(2 * math.pi * s**2) - d**2 / (2 * s**2) for d, s in [(0.3, 0.1), (0.4, 0.2)]
+    )
+    assert gaussian_log_likelihood(ev, [0.1, 0.2]) == pytest.approx(expected, rel=1e-14)
+    assert gaussian_log_likelihood(ev, None) is None
+
+
+def test_the_problem_hash_covers_what_determines_a_run_and_nothing_else():
+    base = problem_hash(problem_fingerprint(_problem()))
+    assert problem_hash(problem_fingerprint(_problem())) == base  # same content, new objects
+    # bounds and priors choose which runs are made, not what a run gives
+    p = _problem()
+    p.parameters = [fbia.Parameter("E", bounds=(50.0, 900.0)), p.parameters[1]]
+    assert problem_hash(problem_fingerprint(p)) == base
+    changed = {
+        "model options": _problem(delay=0.5),
+        "noise": _problem(noise_std=0.02),
+        "fixed inputs": dataclasses.replace(_problem(), fixed={"inflow_rate": 90.0}),
+    }
+    obs = _problem().observations[0]
+    moved = fbia.Interface.polyline(obs.interface.vertices + [0.0, 1e-12])
+    changed["observation data"] = dataclasses.replace(
+        _problem(), observations=[dataclasses.replace(obs, interface=moved)]
+    )
+    hashes = {k: problem_hash(problem_fingerprint(v)) for k, v in changed.items()}
+    assert base not in hashes.values() and len(set(hashes.values())) == len(hashes)
+
+
+def test_keys_are_exact_in_every_bit():
+    sha = "0" * 64
+    assert evaluation_key(sha, {"E": 0.3, "nu": 0.1}) == evaluation_key(sha, {"nu": 0.1, "E": 0.3})
+    assert evaluation_key(sha, {"E": 0.1 + 0.2}) != evaluation_key(sha, {"E": 0.3})
+    assert evaluation_key(sha, {"E": 1.0}) == evaluation_key(sha, {"E": 1})
+    assert evaluation_key(sha, {"E": 1.0}) != evaluation_key("1" * 64, {"E": 1.0})
+
+
+def test_a_store_of_another_problem_says_what_changed(tmp_path):
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        store.bind(_problem())
+        with fbia.SerialEvaluator(store=store) as ev:
+            ev.evaluate(_problem(), POINTS[:2])
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        store.bind(_problem())  # the same problem, built again: fine
+        with pytest.raises(fbia.ConfigError) as info:
+            store.bind(_problem(delay=0.25, noise_std=0.02))
+    message = str(info.value)
+    assert message.startswith(f"{tmp_path / 's.sqlite'}: the store holds 2 evaluations of a ")
+    assert "model options (delay: 0.0 -> 0.25); likelihood noise_std 0.01 -> 0.02" in message
+    assert message.endswith("run with --fresh to start over, or write to another --output")
+
+
+def test_stored_runs_are_reused_and_a_point_asked_twice_in_a_batch_runs_once(tmp_path):
+    problem = _problem()
+    runs = tmp_path / "runs"
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        with fbia.SerialEvaluator(workdir=runs, store=store) as ev:
+            first = ev.evaluate(problem, [POINTS[0], POINTS[2], POINTS[0]])
+            assert ev.reused == {2}
+        assert len(store) == 2
+        assert first[2].distance == first[0].distance and first[2].index == 2
+        # a new session asks again, in another order, and a new point
+        seen: list[int] = []
+        with fbia.SerialEvaluator(
+            workdir=runs, store=store, on_record=lambda r: seen.append(r.index)
+        ) as ev:
+            again = ev.evaluate(problem, [POINTS[2], POINTS[1], POINTS[0]])
+            assert ev.reused == {0, 2}
+        assert len(store) == 3 and sorted(seen) == [0, 1, 2]
+        # numbered by request in this session; stored values unchanged, failures included
+        assert [r.index for r in again] == [0, 1, 2]
+        assert (again[0].status, again[0].message) == ("failed", "mesh distortion at E = 700.0")
+        np.testing.assert_array_equal(again[2].residuals, first[0].residuals)
+        # the new run did not reuse the folder eval_000001 of the stored failed run
+        assert again[0].workdir == str(runs / "eval_000001")
+        assert again[1].workdir == str(runs / "eval_000001-2")
+        assert {r.attempt for r in store.runs()} == {1}
+
+
+def test_retry_failed_runs_each_stored_failure_once_more(tmp_path):
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        with fbia.SerialEvaluator(store=store) as ev:
+            ev.evaluate(_problem(), POINTS)
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        problem = _problem()
+        with fbia.SerialEvaluator(store=store) as ev:  # a stored failure is a finished run
+            assert ev.evaluate(problem, POINTS[2:])[0].status == "failed"
+            assert ev.reused == {0}
+        with fbia.SerialEvaluator(store=store, retry_failed=True) as ev:
+            records = ev.evaluate(problem, POINTS + POINTS[2:])
+            assert ev.reused == {0, 1, 3}  # ok runs reused; the failure runs once, then reused
+        assert [r.status for r in records] == ["ok", "ok", "failed", "failed"]
+        (run,) = [r for r in store.runs() if r.record.status == "failed"]
+        assert run.attempt == 2 and len(store) == 3
+
+
+def test_two_runs_cannot_write_one_store(tmp_path):
+    with StudyStore(tmp_path / "s.sqlite"):
+        with pytest.raises(fbia.ConfigError, match=r"the study store is in use by fbia run pid"):
+            StudyStore(tmp_path / "s.sqlite")
+    StudyStore(tmp_path / "s.sqlite").close()  # released with the first
+
+
+def test_fresh_empties_the_store(tmp_path):
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        with fbia.SerialEvaluator(store=store) as ev:
+            ev.evaluate(_problem(), POINTS)
+    with StudyStore(tmp_path / "s.sqlite", fresh=True) as store:
+        assert len(store) == 0 and store.hash is None
+        store.bind(_problem(delay=0.1))  # a different problem is fine now
+
+
+def test_sessions_record_who_ran_what(tmp_path):
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        store.begin_session({"kind": "serial"}, "abc")
+        with fbia.SerialEvaluator(store=store) as ev:
+            ev.evaluate(_problem(), POINTS[:2])
+        store.end_session("done")
+        store.begin_session({"kind": "processes", "workers": 2}, "abd")
+        with fbia.SerialEvaluator(store=store) as ev:
+            ev.evaluate(_problem(), POINTS)
+        sessions = store.sessions()
+    assert [(s["id"], s["status"], s["evaluations"]) for s in sessions] == [
+        (1, "done", 2),
+        (2, "running", 1),
+    ]
+    assert sessions[1]["executor"] == {"kind": "processes", "workers": 2}
+    assert sessions[0]["study_sha256"] == "abc" and sessions[0]["finished"]
