@@ -9,3 +9,6 @@ def register_iterators(register):  # type: ignore[no-untyped-def]
     from fbia.iterators.levenberg_marquardt import LevenbergMarquardtIterator
 
     register("levenberg_marquardt", LevenbergMarquardtIterator)
+    from fbia.iterators.gp_smc import GpSmcIterator
+
+    register("gp_smc", GpSmcIterator)

@@ -1,0 +1,282 @@
+"""The gp_smc iterator (Paper B): likelihood, design, failed runs, the analytic mound."""
+
+import math
+
+import numpy as np
+import pytest
+
+import fbia
+from fbia.iterators.gp_smc import (
+    GpSmcIterator,
+    laplace_approximation,
+    load_posterior,
+    log_likelihood_of,
+    map_by_binning,
+    save_posterior,
+    sobol_design,
+)
+
+TRUTH = {"E": 400.0, "nu": 0.3}
+FAST = {"n_particles": 1000, "n_rejuvenation": 5, "zeta": 0.9, "seed": 0}
+
+
+def _parameters():
+    return [
+        fbia.Parameter("E", bounds=(100.0, 800.0), unit="Pa"),
+        fbia.Parameter("nu", bounds=(-0.8, 0.5)),
+    ]
+
+
+def _inflow():
+    # Paper B Fig. 10: V_in ~ Beta(2.6, 1.4) on [0, 110] mm^2/s, mode 88 mm^2/s.
+    return fbia.Parameter("inflow_rate", unit="mm^2/s", prior=fbia.priors.beta(2.6, 1.4, 0, 110))
+
+
+def _problem(theta=False, noise_std=0.03, **model_options):
+    model = fbia.forward_model("analytic_mound_2d", n_points=41, **model_options)
+    # The observed state has an empty coordinate: the inflow rate is a model input, fixed at
+    # its true value or uncertain (theta).
+    clean = fbia.forward_model("analytic_mound_2d", n_points=41)
+    obs = fbia.synthetic_observations(
+        clean, {**TRUTH, "inflow_rate": 100.0}, [{}], noise_std=0.0, seed=0
+    )
+    extra = {"uncertain": [_inflow()]} if theta else {"fixed": {"inflow_rate": 100.0}}
+    return fbia.InverseProblem(
+        model=model,
+        measure=fbia.measure("rkhs", sigma_w=0.05),
+        observations=obs,
+        noise_std=noise_std,
+        parameters=_parameters(),
+        **extra,
+    )
+
+
+@pytest.fixture(scope="module")
+def runs():
+    out = {}
+    for theta in (False, True):
+        problem = _problem(theta)
+        it = fbia.iterator("gp_smc", n_train=256, n_test=32, **FAST)
+        out[theta] = (problem, it.run(problem), it)
+    return out
+
+
+# -- the pieces ---------------------------------------------------------------------------------
+def test_gaussian_static_log_likelihood_is_eq_5():
+    ev = fbia.Evaluation(index=0, x={}, residuals=np.array([0.01, -0.02, 0.005]), distances=[0.03])
+    sigma = 0.01
+    expected = -1.5 * math.log(2 * math.pi * sigma**2) - 0.03**2 / (2 * sigma**2)
+    assert log_likelihood_of(ev, [sigma]) == pytest.approx(expected, rel=1e-14)
+    # Two observations with their own noise: sum of eq. 5 per observation (n split evenly).
+    ev2 = fbia.Evaluation(index=0, x={}, residuals=np.zeros(4), distances=[0.03, 0.04])
+    expected2 = (
+        -1.0 * math.log(2 * math.pi * 0.01**2)
+        - 0.03**2 / (2 * 0.01**2)
+        - 1.0 * math.log(2 * math.pi * 0.02**2)
+        - 0.04**2 / (2 * 0.02**2)
+    )
+    assert log_likelihood_of(ev2, [0.01, 0.02]) == pytest.approx(expected2, rel=1e-14)
+    failed = fbia.Evaluation(index=1, x={}, status="failed", message="mesh distortion")
+    assert log_likelihood_of(failed, [sigma]) == -math.inf
+
+
+def test_sobol_design_extends_by_the_next_points_of_the_same_sequence():
+    params = [*_parameters(), _inflow(), fbia.Parameter("g", prior=fbia.priors.normal(1, 2))]
+    small = sobol_design(params, 16, seed=3)
+    large = sobol_design(params, 48, seed=3)
+    np.testing.assert_array_equal(large[:16], small)
+    np.testing.assert_array_equal(large[16:], sobol_design(params, 32, seed=3, start=16))
+    assert np.all((large[:, 0] >= 100) & (large[:, 0] <= 800))
+    assert np.all((large[:, 2] >= 0) & (large[:, 2] <= 110))
+    # An unbounded theta goes through its prior: the design mean approaches the prior mean.
+    assert sobol_design(params, 1024, seed=3)[:, 3].mean() == pytest.approx(1.0, abs=0.02)
+    # Through the prior (Remark 7): the beta-distributed inflow is denser near its mode.
+    through = sobol_design(params, 1024, seed=3, through_prior=True)[:, 2]
+    assert through.mean() == pytest.approx(110 * 2.6 / 4.0, abs=1.0)
+
+
+def test_map_by_binning_finds_the_heaviest_bin():
+    rng = np.random.default_rng(0)
+    x = np.r_[rng.uniform(0, 10, size=(4000, 2)), rng.normal([7.2, 2.2], 0.05, size=(500, 2))]
+    w = np.full(len(x), 1.0 / len(x))
+    params = [fbia.Parameter("a", bounds=(0, 10)), fbia.Parameter("b", bounds=(0, 10))]
+    np.testing.assert_allclose(map_by_binning(x, w, params, bins=20), [7.25, 2.25])
+
+
+def test_laplace_approximation_of_a_gaussian_is_exact():
+    cov = np.array([[4.0, 1.2], [1.2, 0.9]])
+    prec = np.linalg.inv(cov)
+    mu = np.array([1.0, -2.0])
+
+    def log_post(z):
+        d = z - mu
+        return -0.5 * np.einsum("ni,ij,nj->n", d, prec, d)
+
+    lap = laplace_approximation(log_post, mu.copy(), cov)
+    assert lap["negative_definite"]
+    np.testing.assert_allclose(lap["cov"], cov, rtol=1e-6)
+
+
+# -- the analytic mound (Paper B Fig. 9a and 9d behaviour) ----------------------------------------
+def test_map_near_ground_truth_and_surrogate_accurate(runs):
+    problem, result, it = runs[False]
+    assert result.success and result.status == "completed"
+    assert result.nfev == 256 + 32 and result.n_failed == 0
+    assert abs(result.x["E"] - 400.0) < 20.0 and abs(result.x["nu"] - 0.3) < 0.03
+    gp = result.info["gp"]
+    assert gp["loo_relative_l2"] < 0.05 and gp["test_relative_l2"] < 0.05
+    assert gp["test_n"] == 32
+    # The Laplace approximation exists at the MAP and is a proper Gaussian.
+    assert result.info["laplace"]["negative_definite"]
+
+
+def test_posterior_band_follows_the_e_nu_coupling(runs):
+    problem, result, _ = runs[False]
+    cov = result.info["posterior_cov"]
+    corr = cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])
+    assert abs(corr) > 0.5
+    # Along the posterior's long axis the forward model changes much less than across it:
+    # the band lies along a direction of (near) non-identifiability of E and nu.
+    width = problem.upper - problem.lower
+    vals, vecs = np.linalg.eigh(cov / np.outer(width, width))
+    along, across = vecs[:, 1] * width, vecs[:, 0] * width
+    x_map = np.array([result.x["E"], result.x["nu"]])
+
+    def dist(step):
+        return problem.evaluate(dict(zip(problem.names, x_map + step, strict=True))).distance
+
+    assert dist(0.03 * along) < 0.5 * dist(0.03 * across)
+    assert vals[1] > 3 * vals[0]
+
+
+def test_uncertain_inflow_widens_the_posterior(runs):
+    _, plain, _ = runs[False]
+    problem, under, _ = runs[True]
+    assert under.success and under.info["names"] == ["E", "nu", "inflow_rate"]
+    assert under.info["particles"].shape == (1000, 3)
+    det_plain = np.linalg.det(plain.info["posterior_cov"])
+    det_under = np.linalg.det(under.info["posterior_cov"])
+    assert math.sqrt(det_under) > 1.2 * math.sqrt(det_plain)
+    assert under.info["posterior_std"][0] > plain.info["posterior_std"][0]
+    # Less inflow on average than in the data (mean 71.5 mm^2/s < 100): a softer biofilm
+    # explains the deformation, so MAP and mean move to lower E (Paper B Fig. 9d).
+    assert under.x["E"] < plain.x["E"] - 50.0
+    assert under.info["posterior_mean"][0] < plain.info["posterior_mean"][0] - 50.0
+    assert "histogram" in under.info["map_method"] and "laplace" not in under.info
+
+
+def test_failed_runs_are_excluded_from_training_and_reported():
+    # Soft biofilms fail (mesh distortion in the FSI model, Paper B Fig. 5-8).
+    problem = _problem(failure_region={"E": (100.0, 200.0)})
+    result = fbia.iterator("gp_smc", n_train=64, **FAST).run(problem)
+    design = result.info["design"]
+    expected_failed = int(np.sum(design[:, 0] <= 200.0))
+    assert expected_failed > 0
+    assert result.success and result.n_failed == expected_failed
+    failed = [ev for ev in result.evaluations if not ev.ok]
+    assert len(failed) == expected_failed and all(ev.status == "failed" for ev in failed)
+    assert all("mesh distortion" in ev.message for ev in failed)
+    assert result.info["gp"]["n_train"] == 64 - expected_failed
+    assert abs(result.x["E"] - 400.0) < 40.0
+
+
+def test_all_runs_failed_is_an_outcome_not_an_exception():
+    problem = _problem(failure_region={"E": (0.0, 1000.0)})
+    result = fbia.iterator("gp_smc", n_train=8, **FAST).run(problem)
+    assert result.status == "all_failed" and not result.success
+    assert result.n_failed == 8 and "8 of 8 forward runs failed" in result.message
+
+
+def test_direct_mode_agrees_with_the_surrogate():
+    problem = _problem(noise_std=0.05, failure_region={"E": (100.0, 120.0)})
+    opts = {"n_particles": 100, "n_rejuvenation": 1, "zeta": 0.5, "seed": 1}
+    direct = fbia.iterator("gp_smc", mode="direct", **opts).run(problem)
+    assert direct.success and direct.nfev >= 100 and direct.evaluations == []
+    # Every forward run SMC asked for is counted; the prior draws with E <= 120 Pa failed.
+    assert direct.nfev == direct.info["smc"]["nfev_log_likelihood"] and direct.n_failed > 0
+    surrogate = fbia.iterator("gp_smc", n_train=128, **{**opts, "n_particles": 1000}).run(problem)
+    for j in range(2):
+        std = surrogate.info["posterior_std"][j]
+        diff = direct.info["posterior_mean"][j] - surrogate.info["posterior_mean"][j]
+        assert abs(diff) < 0.6 * std
+
+
+def test_posterior_files_round_trip(runs, tmp_path):
+    _, result, _ = runs[True]
+    npz, js = save_posterior(result, tmp_path)
+    data = load_posterior(tmp_path)
+    assert data["names"] == ["E", "nu", "inflow_rate"] and int(data["n_x"]) == 2
+    np.testing.assert_array_equal(data["particles"], result.info["particles"])
+    np.testing.assert_allclose(data["weights"].sum(), 1.0)
+    np.testing.assert_array_equal(data["theta"], result.info["particles"][:, 2:])
+    np.testing.assert_allclose(
+        data["log_posterior"], result.info["log_likelihood"] + result.info["log_prior"]
+    )
+    assert data["design"].shape == (288, 3) and data["train_mask"].sum() == 256
+    meta = data["meta"]
+    assert meta["x_map"] == result.x and meta["gp"]["kernel"] == "matern32"
+    assert math.isfinite(meta["log_evidence"])
+    # The whole Result is JSON too.
+    assert result.save(tmp_path / "result.json").stat().st_size > 0
+
+
+def test_options_are_validated():
+    with pytest.raises(fbia.ConfigError, match=r"unknown option 'n_trian'"):
+        fbia.iterator("gp_smc", n_trian=10)
+    with pytest.raises(fbia.ConfigError, match=r"option 'zeta'"):
+        GpSmcIterator(zeta=1.5)
+    problem = _problem()
+    problem.noise_std = None
+    with pytest.raises(fbia.ConfigError, match=r"has no noise_std and the problem has none"):
+        fbia.iterator("gp_smc", n_train=4, **FAST).run(problem)
+
+
+def test_steps_yield_every_stage():
+    problem = _problem()
+    it = fbia.iterator("gp_smc", n_train=16, **FAST)
+    stages = [state.stage for state in it.steps(problem, fbia.SerialEvaluator())]
+    assert stages[:3] == ["design", "forward_runs", "surrogate"]
+    assert set(stages[3:]) == {"smc"}
+
+
+def test_arviz_reads_the_posterior(runs, tmp_path):
+    arviz = pytest.importorskip("arviz")
+    _, result, _ = runs[True]
+    save_posterior(result, tmp_path)
+    from fbia.iterators.gp_smc import to_inference_data
+
+    idata = to_inference_data(load_posterior(tmp_path))
+    assert isinstance(idata, arviz.InferenceData)
+    assert set(idata.posterior.data_vars) == {"E", "nu", "inflow_rate"}
+    # Equally weighted draws from the particles keep the weighted mean.
+    assert float(idata.posterior["E"].mean()) == pytest.approx(
+        result.info["posterior_mean"][0], rel=0.02
+    )
+
+
+def test_hpd_mass_of_map_truth_and_a_far_point(runs):
+    from fbia.iterators.gp_smc import hpd_mass
+
+    _, result, _ = runs[False]
+    assert hpd_mass(result, result.x) < 0.05
+    truth = hpd_mass(result, TRUTH)
+    assert 0.0 <= truth < 0.5  # the ground truth lies well inside the posterior bulk
+    assert hpd_mass(result, {"E": 750.0, "nu": -0.7}) > 0.99
+    with pytest.raises(fbia.ConfigError, match="without uncertain parameters"):
+        hpd_mass(runs[True][1], {**TRUTH, "inflow_rate": 100.0})
+
+
+def test_design_extends_reusing_the_earlier_runs():
+    problem = _problem(failure_region={"E": (100.0, 150.0)})
+    first = fbia.iterator("gp_smc", n_train=32, **FAST).run(problem)
+    more = fbia.iterator("gp_smc", n_train=64, n_test=8, **FAST).reuse(first).run(problem)
+    # Only the 32 + 8 new points of the same Sobol sequence ran.
+    assert more.nfev == 40 and len(more.evaluations) == 72
+    np.testing.assert_array_equal(more.info["design"][:32], first.info["design"])
+    assert more.evaluations[:32] == first.evaluations
+    new_failed = sum(not ev.ok for ev in more.evaluations[32:])
+    assert more.n_failed == new_failed
+    assert more.info["gp"]["n_train"] == 64 - sum(not ev.ok for ev in more.evaluations[:64])
+    other = fbia.iterator("gp_smc", n_train=64, **{**FAST, "seed": 5})
+    with pytest.raises(fbia.ConfigError, match="not a prefix of this one"):
+        other.reuse(first).run(problem)

@@ -1,0 +1,131 @@
+"""GP surrogate of the log-likelihood (Paper B eq. 26-29, Remarks 9-10)."""
+
+import numpy as np
+import pytest
+from scipy.stats import qmc
+
+import fbia
+from fbia.iterators.gp_surrogate import GpSurrogate, matern32_cross
+
+
+def _log_lik(x):
+    """A smooth, curved log-likelihood on [0, 1]^2 (peak 0 at (0.4, 0.6))."""
+    return -((x[:, 0] - 0.4) ** 2 / 0.08 + (x[:, 1] - 0.6 - 0.5 * (x[:, 0] - 0.4) ** 2) ** 2 / 0.03)
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["single", "ard"])
+def trained(request):
+    x = qmc.Sobol(2, scramble=True, seed=4).random(64)
+    gp = GpSurrogate(ard=request.param, restarts=2).fit(x, _log_lik(x), rng=0)
+    return gp, x
+
+
+def test_recovers_a_known_smooth_function(trained):
+    gp, _ = trained
+    x_test = qmc.Sobol(2, scramble=True, seed=4).random(128)[64:]  # the next Sobol points
+    y_test = _log_lik(x_test)
+    err = gp.test_error(x_test, y_test)
+    # 64 training points: the error is a few per cent of the spread of L.
+    assert err["test_max_abs"] < 0.05 * (y_test.max() - y_test.min())
+    assert err["test_relative_l2"] < 0.03
+    # Its maximum is where the function's maximum is.
+    grid = np.stack(np.meshgrid(np.linspace(0, 1, 101), np.linspace(0, 1, 101)), -1).reshape(-1, 2)
+    np.testing.assert_allclose(grid[np.argmax(gp.predict_mean(grid))], [0.4, 0.6], atol=0.021)
+
+
+def test_fast_mean_equals_gpy_predict(trained):
+    gp, _ = trained
+    x = np.random.default_rng(1).uniform(-0.5, 1.5, size=(3000, 2))  # also far outside
+    mean_gpy, var = gp.predict(x)
+    np.testing.assert_allclose(gp.predict_mean(x), mean_gpy, rtol=0, atol=1e-8)
+    assert np.all(var >= 0)
+
+
+def test_prior_mean_nugget_and_falloff_follow_remark_10(trained):
+    gp, x = trained
+    y = _log_lik(x)
+    span = y.max() - y.min()
+    assert gp.mean_value == pytest.approx(y.min() - 1.0 * span)
+    assert gp.nugget == pytest.approx(1e-5 * span)
+    # Far from the data the surrogate falls to the prior mean, below every training value.
+    far = gp.predict_mean(np.array([[1e4, -1e4]]))[0]
+    assert far == pytest.approx(gp.mean_value, abs=1e-6 * span)
+    # The training data are interpolated up to the nugget.
+    np.testing.assert_allclose(gp.predict_mean(x), y, atol=1e-3 * span)
+
+
+def test_closed_form_leave_one_out_equals_refitting(trained):
+    gp, x = trained
+    y = _log_lik(x)
+    loo = gp.loo()
+    # Brute force with the same hyperparameters: condition the GP on all points but one.
+    hp = gp.hyperparameters()
+    xs = (x - gp.x_mean) / gp.x_std
+    kern = matern32_cross(xs, xs, np.array(hp["lengthscales"]), hp["signal_variance"], gp.ard)
+    kern += gp.nugget * np.eye(len(x))
+    res = []
+    for i in range(len(x)):
+        keep = np.arange(len(x)) != i
+        alpha = np.linalg.solve(kern[np.ix_(keep, keep)], y[keep] - gp.mean_value)
+        res.append(gp.mean_value + kern[i, keep] @ alpha - y[i])
+    res = np.array(res)
+    # (K + sigma_n^2 I) has a condition number ~1e9 with the tiny nugget: agree to 1e-3.
+    assert loo["loo_rmse"] == pytest.approx(np.sqrt(np.mean(res**2)), rel=1e-3)
+    assert loo["loo_max_abs"] == pytest.approx(np.abs(res).max(), rel=1e-3)
+
+
+def test_matern32_kernel_is_eq_27_and_the_product_of_1d_kernels():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=(4, 3))
+    ell = np.array([0.7, 1.3, 2.0])
+    r = np.linalg.norm(a[:, None] - b[None], axis=-1) / 0.7
+    eq27 = 2.5 * (1 + np.sqrt(3) * r) * np.exp(-np.sqrt(3) * r)
+    np.testing.assert_allclose(matern32_cross(a, b, ell[:1], 2.5, product=False), eq27)
+    rj = np.abs(a[:, None] - b[None]) / ell
+    prod = 2.5 * np.prod((1 + np.sqrt(3) * rj) * np.exp(-np.sqrt(3) * rj), axis=-1)
+    np.testing.assert_allclose(matern32_cross(a, b, ell, 2.5, product=True), prod)
+
+
+def test_scg_optimizer_and_gpy_default_training_run():
+    x = qmc.Sobol(2, scramble=True, seed=5).random(32)
+    y = _log_lik(x)
+    scg = GpSurrogate(ard=True, optimizer="scg", restarts=0).fit(x, y, rng=0)
+    default = GpSurrogate(gpy_default=True).fit(x, y, rng=0)
+    tuned = GpSurrogate(restarts=2).fit(x, y, rng=0)
+    for gp in (scg, default, tuned):
+        assert np.isfinite(gp.info["neg_log_evidence"])
+    # Restarts from data-based guesses never end worse than one run from the same first guess.
+    single = GpSurrogate(restarts=0).fit(x, y, rng=0)
+    assert tuned.info["neg_log_evidence"] <= single.info["neg_log_evidence"] + 1e-9
+
+
+def test_bad_options_are_config_errors():
+    with pytest.raises(fbia.ConfigError, match=r"^gp: unknown GP optimizer 'bfgs'; valid: lbfgsb"):
+        GpSurrogate(optimizer="bfgs")
+    with pytest.raises(fbia.ConfigError, match=r"^gp: GP training data must be finite$"):
+        GpSurrogate().fit(np.zeros((3, 1)), [0.0, np.nan, 1.0])
+    with pytest.raises(fbia.ConfigError, match=r"not trained yet"):
+        GpSurrogate().predict_mean(np.zeros((1, 1)))
+
+
+def test_restored_surrogate_predicts_like_the_trained_one(trained):
+    gp, _ = trained
+    again = GpSurrogate.from_state(gp.state())
+    x = np.random.default_rng(2).uniform(-0.2, 1.2, size=(400, 2))
+    mean, var = gp.predict(x)
+    # Same hyperparameters, another Cholesky of an ill-conditioned (K + sigma_n^2 I): the two
+    # agree to ~1e-4 of the spread of L, far below the surrogate error itself.
+    tol = 1e-4 * np.ptp(gp.y_train)
+    np.testing.assert_allclose(again.predict_mean(x), mean, rtol=0, atol=tol)
+    mean2, var2 = again.predict(x)
+    np.testing.assert_allclose(mean2, mean, rtol=0, atol=tol)
+    np.testing.assert_allclose(np.sqrt(var2), np.sqrt(var), rtol=0, atol=1e-3 * np.sqrt(var.max()))
+
+
+def test_fused_numba_mean_equals_numpy_blocks(trained):
+    pytest.importorskip("numba")
+    gp, _ = trained
+    x = np.random.default_rng(3).uniform(-0.5, 1.5, size=(500, 2))
+    np.testing.assert_allclose(
+        gp.predict_mean(x, fused=True), gp.predict_mean(x, fused=False), rtol=0, atol=1e-9
+    )
