@@ -17,6 +17,13 @@ transient    Paper A's transient protocol (ramp over 10 s, state at 15 s) agains
              quasi-static state.
 sweep        20 runs over E in [100, 800] Pa, nu in [-0.8, 0.5] (scrambled Halton, seed 0)
              on one warm-starting model, with the failures counted by reason.
+table1       the LM starts of Paper A Table 1 (SVK and neo-Hooke, 100 mm^2/s) on the coarse
+             test mesh and on the default mesh: solved or why not, and the cost.
+stability    why the "blue" start (E = 200 Pa, nu = 0.4) fails with SVK on the default mesh:
+             along the branch of steady states the smallest det F of the solid and of the ALE
+             map and the smallest eigenvalue of the solid's tangent stiffness relative to the
+             linear one (K(d) v = lambda K(0) v, SVK energy, dead load); the same for neo-Hooke;
+             the rate at which SVK fails on meshes of different interface size.
 turek_hron   CSM1, CFD1, FSI1 (Turek & Hron 2006) through the user-mesh path on a fine mesh,
              errors against the reference values.
 
@@ -62,7 +69,7 @@ def run(model: AleFsiForwardModel, params: dict, coords: list, workdir: Path) ->
 
 def convergence(workdir: Path, quick: bool) -> None:
     print("\n== mesh convergence: default flow cell, E = 400 Pa, nu = 0.3, 100 mm^2/s ==")
-    sizes = [0.08, 0.04, 0.02] if quick else [0.06, 0.04, 0.03, 0.02, 0.015, 0.01]
+    sizes = [0.08, 0.04, 0.02] if quick else [0.06, 0.04, 0.03, 0.02, 0.015, 0.01, 0.0075]
     rows = []
     print(
         f"{'h_iface':>8} {'h_max':>6} {'dofs':>7} {'max|d| mm':>11} {'d(P1) mm':>22} "
@@ -70,13 +77,13 @@ def convergence(workdir: Path, quick: bool) -> None:
     )
     for h in sizes:
         m = AleFsiForwardModel(
-            interface_mesh_size=h, mesh_size=min(4 * h, 0.3), probes=PROBES, warm_start=False
+            interface_mesh_size=h, mesh_size=4 * h, probes=PROBES, warm_start=False
         )
         d = run(m, X_GT, RATE, workdir)
         p = np.array(d["probe_displacements"][0])
         rows.append((h, d["ndof"], d["max_displacement"][0], p))
         print(
-            f"{h:8.3f} {min(4 * h, 0.3):6.3f} {d['ndof']:7d} {d['max_displacement'][0]:11.7f} "
+            f"{h:8.4f} {4 * h:6.3f} {d['ndof']:7d} {d['max_displacement'][0]:11.7f} "
             f"{str(p[0].round(7)):>22} {str(p[1].round(7)):>22} {d['newton_iterations']:6d} "
             f"{d['cpu']:6.2f}"
         )
@@ -117,8 +124,9 @@ def speed(workdir: Path, quick: bool) -> None:
             for label, d in (("cold", cold), ("warm", warm)):
                 print(
                     f"  threads {threads} rep {k} {label}: wall {d['wall']:.3f} s, "
-                    f"cpu {d['cpu']:.3f} s, dofs {d['ndof']}, newton {d['newton_iterations']}, "
-                    f"assembly {d['assembly_time']:.3f} s, solve {d['solve_time']:.3f} s"
+                    f"cpu {d['cpu']:.3f} s, dofs {d['ndof']}, newton {d['newton_iterations']} "
+                    f"({d['jacobians']} Jacobians), assembly {d['assembly_time']:.3f} s, "
+                    f"solve {d['solve_time']:.3f} s (wall)"
                 )
             print(
                 f"  threads {threads} rep {k} meshing + set-up: wall {setup_wall:.3f} s, "
@@ -154,6 +162,129 @@ def sweep(workdir: Path, quick: bool) -> None:
         f"  failures: {sum(failures.values())} of {n} {failures}; total wall {w.sum():.1f} s, "
         f"cpu {c.sum():.1f} s, median wall per run {np.median(w):.2f} s"
     )
+
+
+#: Paper A, Table 1: initial guesses (E [Pa], nu) of the LM runs of the homogeneous example
+TABLE_1 = {
+    "blue": (200.0, 0.4),
+    "orange": (200.0, 0.0),
+    "green": (400.0, 0.45),
+    "red": (400.0, 0.0),
+    "purple": (600.0, 0.4),
+    "brown": (600.0, 0.0),
+    "pink": (400.0, -0.3),
+    "gray": (400.0, -0.6),
+    "olive": (400.0, -0.9),
+    "cyan": (1000.0, 0.0),
+    "black": (1000.0, 0.4),
+}
+COARSE = {"mesh_size": 0.2, "interface_mesh_size": 0.06}
+
+
+def table1(workdir: Path, quick: bool) -> None:
+    print("\n== Paper A Table 1 starts at 100 mm^2/s (fresh model per mesh, no warm start) ==")
+    meshes = {"coarse (test)": COARSE} if quick else {"coarse (test)": COARSE, "default": {}}
+    for material in ("svk", "neo_hooke"):
+        for label, opts in meshes.items():
+            model = AleFsiForwardModel(material=material, warm_start=False, **opts)
+            model.solver  # noqa: B018
+            for name, (E, nu) in TABLE_1.items():
+                t0, c0 = time.perf_counter(), time.process_time()
+                try:
+                    d = run(model, {"E": E, "nu": nu}, RATE, workdir)
+                    status = (
+                        f"ok   max|d| {d['max_displacement'][0]:.5f} mm, min det F solid "
+                        f"{d['min_det_f_solid']:.3f} / fluid {d['min_det_f_fluid']:.3f}, "
+                        f"{d['jacobians']} Jacobians"
+                    )
+                except ForwardModelError as exc:
+                    status = f"FAIL ({exc.reason}) {exc}"
+                wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                print(
+                    f"  {material:9s} {label:13s} {name:6s} E {E:6.0f} nu {nu:+.2f}: "
+                    f"wall {wall:5.2f} s, cpu {cpu:5.2f} s  {status}"
+                )
+
+
+def _solid_stiffness_ratio(solver: object, material: str, E: float, nu: float) -> float:
+    """Smallest lambda of K(d) v = lambda K(0) v for the solid alone (dead load, clamped base)."""
+    import ngsolve as ngs
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as sla
+
+    mesh = solver.mesh
+    W = ngs.VectorH1(mesh, order=2, definedon="solid", dirichlet="solid_fixed")
+    u = W.TrialFunction()
+    mu, lam = E / (2 * (1 + nu)), nu * E / ((1 + nu) * (1 - 2 * nu))
+    F = ngs.Id(2) + ngs.Grad(u)
+    C = F.trans * F
+    if material == "svk":
+        G = 0.5 * (C - ngs.Id(2))
+        energy = mu * ngs.InnerProduct(G, G) + 0.5 * lam * ngs.Trace(G) ** 2
+    else:
+        J = ngs.Det(F)
+        energy = 0.5 * mu * (ngs.Trace(C) - 2) - mu * ngs.log(J) + 0.5 * lam * ngs.log(J) ** 2
+    form = ngs.BilinearForm(W)
+    form += ngs.Variation(energy * ngs.dx("solid", bonus_intorder=2))
+    free = np.flatnonzero(np.array(W.FreeDofs()))
+
+    def stiffness(gf: object) -> object:
+        form.AssembleLinearization(gf.vec)
+        v, c, r = form.mat.CSR()
+        K = sp.csr_matrix((np.array(v), np.array(c), np.array(r)), shape=(W.ndof, W.ndof))
+        return K[free][:, free]
+
+    d = ngs.GridFunction(W)
+    K0 = stiffness(d)
+    d.Set(solver.displacement, definedon=mesh.Materials("solid"))
+    vals = sla.eigsh(stiffness(d), k=1, M=K0, sigma=-0.5, which="LM", return_eigenvectors=False)
+    return float(vals.min())
+
+
+def stability(workdir: Path, quick: bool) -> None:
+    import ngsolve as ngs
+
+    E, nu = TABLE_1["blue"]
+    print(f"\n== stability of the steady states, blue start E = {E:g} Pa, nu = {nu:g} ==")
+    rates = [50.0, 80.0, 90.0, 95.0, 97.0, 97.5, 97.7, 98.0, 99.0, 100.0]
+    for material in ("svk", "neo_hooke"):
+        model = AleFsiForwardModel(material=material)  # warm starts: natural continuation
+        solver = model.solver
+        pts = solver._det_points
+        xy = np.c_[np.asarray(ngs.x(pts)).ravel(), np.asarray(ngs.y(pts)).ravel()]
+        fluid = solver._region_of_point
+        for r in rates if not quick else rates[::3]:
+            t0, c0 = time.perf_counter(), time.process_time()
+            try:
+                d = run(model, {"E": E, "nu": nu}, [{"inflow_rate": r}], workdir)
+            except ForwardModelError as exc:
+                print(
+                    f"  {material:9s} {r:6.1f} mm^2/s: FAIL ({exc.reason}) after wall "
+                    f"{time.perf_counter() - t0:.2f} s, cpu {time.process_time() - c0:.2f} s: {exc}"
+                )
+                break
+            det = np.asarray(ngs.Det(ngs.Id(2) + ngs.Grad(solver.displacement))(pts))[:, 0]
+            ks = np.flatnonzero(~fluid)[np.argmin(det[~fluid])]
+            kf = np.flatnonzero(fluid)[np.argmin(det[fluid])]
+            ratio = _solid_stiffness_ratio(solver, material, E, nu)
+            print(
+                f"  {material:9s} {r:6.1f} mm^2/s: max|d| {d['max_displacement'][0]:.5f} mm, "
+                f"min det F solid {det[ks]:.3f} at {xy[ks].round(3)}, fluid {det[kf]:.3f} at "
+                f"{xy[kf].round(3)}; min eig K(d)/K(0) {ratio:.4f}"
+            )
+    print("  rate at which SVK fails (fresh model, 100 mm^2/s requested) vs interface size:")
+    for h in (0.06, 0.045, 0.03, 0.02) if not quick else (0.06, 0.03):
+        model = AleFsiForwardModel(interface_mesh_size=h, mesh_size=4 * h, warm_start=False)
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            d = run(model, {"E": E, "nu": nu}, RATE, workdir)
+            status = f"solves, max|d| {d['max_displacement'][0]:.5f} mm"
+        except ForwardModelError as exc:
+            status = f"FAIL ({exc.reason}) {exc}"
+        print(
+            f"    h {h:.3f} mm ({model.solver.ndof} dofs): wall {time.perf_counter() - t0:.2f} s,"
+            f" cpu {time.process_time() - c0:.2f} s: {status}"
+        )
 
 
 def transient(workdir: Path, quick: bool) -> None:
@@ -205,6 +336,8 @@ SECTIONS = {
     "convergence": convergence,
     "speed": speed,
     "sweep": sweep,
+    "table1": table1,
+    "stability": stability,
     "transient": transient,
     "turek_hron": turek_hron_fine,
 }

@@ -1,14 +1,16 @@
 """The ale_fsi forward model on the default flow cell (coarse meshes, one NGSolve thread).
 
 Physical checks of the quasi-static monolithic ALE FSI solver: rest at zero inflow, monotone
-deformation in the inflow rate and in 1/E, mass conservation, warm starts that do not change
-the answer, small-strain agreement of SVK and neo-Hooke, interface orientation, failures as
-ForwardModelError, heterogeneous subdomains, user-mesh round trip, VTU output and transient
-mode.  Turek-Hron is in test_ale_fsi_turek_hron.py.
+deformation in the inflow rate and in 1/E, mass conservation with the solid exactly at rest,
+warm starts that do not change the answer, small-strain agreement of SVK and neo-Hooke,
+interface orientation, failures as ForwardModelError, the LM starts of Paper A Table 1, a
+limit point of the steady branch found and reported, heterogeneous subdomains, user-mesh round
+trip, VTU output and transient mode.  Turek-Hron is in test_ale_fsi_turek_hron.py.
 """
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -21,6 +23,21 @@ import fbia  # noqa: E402
 from fbia.plugins.ale_fsi import AleFsiForwardModel  # noqa: E402
 
 COARSE = {"mesh_size": 0.2, "interface_mesh_size": 0.06}
+
+#: Paper A, Table 1: initial guesses (E [Pa], nu) of the LM runs of the homogeneous example
+TABLE_1 = {
+    "blue": (200.0, 0.4),
+    "orange": (200.0, 0.0),
+    "green": (400.0, 0.45),
+    "red": (400.0, 0.0),
+    "purple": (600.0, 0.4),
+    "brown": (600.0, 0.0),
+    "pink": (400.0, -0.3),
+    "gray": (400.0, -0.6),
+    "olive": (400.0, -0.9),
+    "cyan": (1000.0, 0.0),
+    "black": (1000.0, 0.4),
+}
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +140,14 @@ def test_fluid_mass_is_conserved(model, tmp_path):
     q_gamma = solver.flux("interface")
     assert q_in == pytest.approx(80.0, rel=1e-12)  # the parabolic profile is exact in P2
     assert q_out == pytest.approx(q_in, rel=1e-7)
-    assert abs(q_gamma) < 1e-7 * q_in  # the solid is at rest: no flow through the interface
+    # quasi-static: the solid and the interface are at rest exactly (eq. 2.28), their velocity
+    # dofs are no unknowns -- and no fluid crosses the interface
+    assert q_gamma == 0.0
+    V = solver.fes.components[0]
+    on_solid = np.array(V.GetDofs(solver.mesh.Materials("solid")))
+    assert np.all(solver.velocity.vec.FV().NumPy()[on_solid] == 0.0)
+    free = np.array(solver.fes.FreeDofs())
+    assert solver.ndof == free.sum() - (free[: V.ndof] & on_solid).sum()
 
 
 def test_warm_start_does_not_change_the_answer(tmp_path):
@@ -170,6 +194,7 @@ def test_failures_are_forward_model_errors(model, tmp_path):
         model.solve({"E": 30.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
     assert info.value.reason in {
         "newton_divergence",
+        "limit_point",
         "ale_jacobian",
         "solid_jacobian",
         "element_quality",
@@ -183,6 +208,41 @@ def test_failures_are_forward_model_errors(model, tmp_path):
     # the model is usable after a failure
     ok = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 10.0}], tmp_path)
     assert ok.diagnostics["max_displacement"][0] > 0
+
+
+def test_paper_a_table1_starts_solve(model, tmp_path):
+    # Every LM start of Paper A's homogeneous example (SVK, 100 mm^2/s) gives a steady state
+    one = [{"inflow_rate": 100.0}]
+    d = {
+        name: model.solve({"E": E, "nu": nu}, one, tmp_path).diagnostics["max_displacement"][0]
+        for name, (E, nu) in TABLE_1.items()
+    }
+    # the deformation falls with E at fixed nu ...
+    assert d["orange"] > d["red"] > d["brown"] > d["cyan"] > 0
+    assert d["blue"] > d["purple"] > d["black"]
+    # ... and with nu at fixed E (the auxetic starts bulge least)
+    assert d["green"] > d["red"] > d["pink"] > d["gray"] > d["olive"] > 0
+    # the stiff starts deform little (strain ~1e-2): Hooke's law under an unchanged load
+    assert 600.0 * d["brown"] == pytest.approx(1000.0 * d["cyan"], rel=0.01)
+
+
+def test_a_limit_point_is_reported_and_the_branch_below_it_solves(model, tmp_path):
+    # E = 30 Pa cannot carry 100 mm^2/s: the compressed downstream foot of the SVK mound softens
+    # until the branch of steady states turns back; continuation finds that limit point
+    with pytest.raises(fbia.ForwardModelError) as info:
+        model.solve({"E": 30.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
+    assert info.value.reason == "limit_point"
+    message = str(info.value)
+    limit = float(re.search(r"limit point near ([0-9.]+) mm\^2/s", message).group(1))
+    assert 15.0 < limit < 60.0
+    assert "Saint Venant-Kirchhoff softens" in message
+    # just below it the steady states exist; the foot's compression accelerates towards it
+    states = [
+        model.solve({"E": 30.0, "nu": 0.3}, [{"inflow_rate": f * limit}], tmp_path).diagnostics
+        for f in (0.95, 0.99)
+    ]
+    assert states[1]["max_displacement"][0] > states[0]["max_displacement"][0]
+    assert states[1]["min_det_f_solid"] < states[0]["min_det_f_solid"] - 0.1
 
 
 def test_bad_geometry_is_a_config_error():

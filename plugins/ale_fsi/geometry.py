@@ -93,6 +93,7 @@ def build_flow_cell(
     interface_mesh_size: float = 0.03,
     grading: float = 0.3,
     curve_order: int = 2,
+    solid_mesh_size: float | None = None,
 ) -> ngsolve.Mesh:
     """Mesh a 2-D flow cell: a channel ``length`` x ``height`` with a biofilm on its floor.
 
@@ -111,11 +112,15 @@ def build_flow_cell(
     mesh_size
         Maximum element size in mm.
     interface_mesh_size
-        Element size on the fluid-solid interface and inside the biofilm, in mm.
+        Element size on the fluid-solid interface (and inside the biofilm, unless
+        ``solid_mesh_size`` is given), in mm.
     grading
         Netgen's mesh grading (0..1; smaller grows the elements more slowly).
     curve_order
         Polynomial order of the element geometry along the curved outline (1: straight).
+    solid_mesh_size
+        Element size inside the biofilm and on its base, in mm (default:
+        ``interface_mesh_size``); the elements grade from the interface size to it.
     """
     import ngsolve
     from netgen.occ import (
@@ -153,7 +158,8 @@ def build_flow_cell(
     closed = np.vstack([p, p[:1]])
     if not shapely.LineString(closed).is_simple:
         raise ConfigError("the outline intersects itself", where)
-    if not (mesh_size > 0 and interface_mesh_size > 0):
+    h_solid = interface_mesh_size if solid_mesh_size is None else solid_mesh_size
+    if not (mesh_size > 0 and interface_mesh_size > 0 and h_solid > 0):
         raise ConfigError("mesh sizes must be positive", where)
 
     channel = Rectangle(length, height).Face()
@@ -177,11 +183,12 @@ def build_flow_cell(
     biofilm.edges.Min(Y).name = "solid_fixed"
     for e in biofilm.edges:
         e.maxh = interface_mesh_size
-    biofilm.maxh = interface_mesh_size
+    biofilm.edges.Min(Y).maxh = h_solid
+    biofilm.maxh = h_solid
     fluid = channel - biofilm
     fluid.faces.name = FLUID
 
-    parts = _split_subdomains(biofilm, subdomains, interface_mesh_size, where)
+    parts = _split_subdomains(biofilm, subdomains, h_solid, where)
     shape = Glue([fluid, *parts])
     try:
         ngmesh = OCCGeometry(shape, dim=2).GenerateMesh(maxh=mesh_size, grading=grading)

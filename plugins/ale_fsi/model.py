@@ -46,11 +46,19 @@ class AleFsiForwardModel(Configurable):
     eq. 2.16), no-slip and traction balance on the interface, pseudo-solid mesh motion; solved
     monolithically by Newton's method with a direct solver (Pardiso).
 
+    The default mesh (element size 0.03 mm on the interface, 0.06 mm inside the biofilm,
+    0.12 mm in the channel; 4 846 unknowns) puts the largest interface displacement of Paper
+    A's reference state within 0.19 % of a mesh with 3.4x the unknowns (observed order 1.9;
+    ``benchmarks/bench_ale_fsi.py convergence``).
+
     Parameters (``parameter_names``): ``E`` [Pa], ``nu`` [-] -- or ``E_k``, ``nu_k`` per solid
     subdomain k = 1..n -- and ``inflow_rate`` [mm^2/s].  Inputs that are not given keep their
-    option values.  A run that fails (Newton divergence, inverted ALE map or solid, element
-    quality below the threshold, invalid material values) raises
-    :class:`fbia.ForwardModelError` with a ``reason`` tag.
+    option values.  A run that fails raises :class:`fbia.ForwardModelError` with a ``reason``
+    tag: ``limit_point`` (the branch of steady states turns back below the requested inflow:
+    no steady state there -- soft Saint Venant-Kirchhoff biofilms, whose compressed feet
+    soften), ``newton_divergence`` (Newton and the continuation could not get further),
+    ``ale_jacobian``/``solid_jacobian``/``element_quality`` (inverted or degenerate elements)
+    or ``invalid_parameter``.
     """
 
     class Options(PluginOptions):
@@ -96,7 +104,13 @@ class AleFsiForwardModel(Configurable):
         )
         mesh_size: float = Field(0.12, gt=0, description="maximum element size [mm]")
         interface_mesh_size: float = Field(
-            0.03, gt=0, description="element size at the interface and in the biofilm [mm]"
+            0.03, gt=0, description="element size at the fluid-biofilm interface [mm]"
+        )
+        solid_mesh_size: float | None = Field(
+            None,
+            gt=0,
+            description="element size inside the biofilm and on its base, graded from the "
+            "interface size; default 2 x interface_mesh_size [mm]",
         )
         fluid_density: float = Field(1e-3, gt=0, description="fluid density [g/mm^3]")
         fluid_viscosity: float = Field(1e-3, gt=0, description="dynamic viscosity [g/(mm s)]")
@@ -119,7 +133,9 @@ class AleFsiForwardModel(Configurable):
         newton_tol: float = Field(
             1e-10, gt=0, lt=1e-2, description="tolerance on the scaled Newton update [-]"
         )
-        newton_max_iter: int = Field(12, ge=1, description="Newton iterations per solve [-]")
+        newton_max_iter: int = Field(
+            12, ge=1, description="Jacobian assemblies per Newton solve (chord steps extra) [-]"
+        )
         min_det_f: float = Field(
             0.01, ge=0, description="smallest admissible det F of the ALE map and solid [-]"
         )
@@ -180,7 +196,7 @@ class AleFsiForwardModel(Configurable):
 
     @classmethod
     def example_options(cls) -> dict[str, Any]:
-        """Options of a cheap instance for conformance runs (a coarse mesh, ~2 600 dofs)."""
+        """Options of a cheap instance for conformance runs (a coarse mesh, ~1 800 dofs)."""
         return {"mesh_size": 0.2, "interface_mesh_size": 0.06}
 
     def solid_regions(self) -> list[str]:
@@ -243,9 +259,10 @@ class AleFsiForwardModel(Configurable):
 
         solver.timings = {"assembly": 0.0, "solve": 0.0}
         if self.options.mode == "quasi_static":
-            iterations, warm = self._quasi_static(solver, params, levels, record)
+            iterations, jacobians, warm = self._quasi_static(solver, params, levels, record)
             diag["newton_iterations_per_coordinate"] = iterations
             diag["newton_iterations"] = int(sum(iterations))
+            diag["jacobians"] = int(sum(jacobians))
             diag["warm_start"] = warm
         else:
             o = self.options
@@ -264,6 +281,7 @@ class AleFsiForwardModel(Configurable):
                 on_time,
             )
             diag["newton_iterations"] = rep.iterations
+            diag["jacobians"] = rep.jacobians
             diag["warm_start"] = False
         diag.update(per)
         pairs = [(c, Interface.polylines(cs)) for c, cs in zip(coordinates, curves, strict=True)]
@@ -388,6 +406,9 @@ class AleFsiForwardModel(Configurable):
             subdomains=o.subdomains,
             mesh_size=o.mesh_size,
             interface_mesh_size=o.interface_mesh_size,
+            solid_mesh_size=(
+                2.0 * o.interface_mesh_size if o.solid_mesh_size is None else o.solid_mesh_size
+            ),
             curve_order=2 if o.curved else 1,
         )
 
@@ -398,10 +419,15 @@ class AleFsiForwardModel(Configurable):
 
     def _quasi_static(
         self, solver: Any, params: dict[str, float], levels: list[float], record: Any
-    ) -> tuple[list[int], bool]:
-        """Continuation through the requested inflow levels (ascending |rate|)."""
+    ) -> tuple[list[int], list[int], bool]:
+        """Continuation through the requested inflow levels (ascending |rate|).
+
+        Returns the Newton iterations (chord steps included) and the Jacobian assemblies per
+        coordinate, and whether a stored state of an earlier run served as warm start.
+        """
         order = sorted(range(len(levels)), key=lambda i: abs(levels[i]))
         iterations = [0] * len(levels)
+        jacobians = [0] * len(levels)
         key = {k: v for k, v in params.items() if k != "inflow_rate"}
         warm_used = False
         earlier = list(self._store)  # states of earlier runs only
@@ -429,13 +455,16 @@ class AleFsiForwardModel(Configurable):
                 solver.set_state(x0)
                 solver.inflow_rate.Set(r0)
                 try:
-                    rep = solver.solve_steady(rate, continuation=continuation)
+                    # after a failed warm start Newton straight from the cold state would only
+                    # fail again: follow the branch at once
+                    rep = solver.solve_steady(rate, continuation=continuation, direct=error is None)
                     solver.check_state(f"inflow rate {rate:g} mm^2/s")
                 except ForwardModelError as exc:
                     iterations[i] += getattr(exc, "iterations", 0)
                     error = exc
                     continue
                 iterations[i] += rep.iterations
+                jacobians[i] += rep.jacobians
                 warm_used = warm_used or (k == 0 and start is not None)
                 error = None
                 break
@@ -444,7 +473,7 @@ class AleFsiForwardModel(Configurable):
             record(f"inflow rate {rate:g} mm^2/s", i)
             solved[rate] = solver.state()
             self._remember(key, rate, solved[rate])
-        return iterations, warm_used
+        return iterations, jacobians, warm_used
 
     def _remember(self, key: dict[str, float], rate: float, state: NDArray[np.float64]) -> None:
         self._store.append((dict(key), rate, state))
