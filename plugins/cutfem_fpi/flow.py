@@ -57,7 +57,7 @@ class FlowSettings:
     order: int = 2  # velocity and pore-pressure order; fluid pressure order - 1
     ghost_penalty: float = 0.1  # gamma of the facet-patch ghost penalties
     lset_order: int = 2  # order of the level-set mesh adaptation
-    newton_tol: float = 1e-9  # relative velocity change that ends the Newton iteration
+    newton_tol: float = 1e-9  # estimated relative velocity error that ends Newton
     newton_max_iter: int = 20
 
 
@@ -113,26 +113,40 @@ class CutFlow:
         self.X = ngs.FESpace([self.V, self.Q, self.D], dgjumps=True)  # facet-patch couplings
         self.gfx = ngs.GridFunction(self.X)  # full (uncompressed) state: warm starts survive
         self.sources: dict[str, Any] = {}
+        self._newton_rate = 0.0  # M of e_(k+1) <= M e_k^2, the largest seen so far
+        self.lsetadap: Any = None
+        self._markers: NDArray[np.bool_] | None = None  # cut element and facet markers
+        self._k_source: Any = None
+        self._system: dict[str, Any] | None = None  # forms and factorisation of the cut
         self.set_permeability(permeability)
         self.set_level_set(lset)
 
     # -- geometry ----------------------------------------------------------------------------
     def set_level_set(self, lset: Any) -> None:
-        """(Re)build the cut geometry for a new level set; the state vector is kept."""
+        """(Re)build the cut geometry for a new level set; the state vector is kept.
+
+        The mesh adaptation and its P1 level set and deformation are updated in place.  When
+        the new level set cuts the same elements as the last one (late coupling iterations),
+        element and facet markers, active dofs and hence the sparsity pattern are unchanged:
+        the forms are kept and only re-assembled, and the factorisation is only refactored.
+        """
         import xfem
         from xfem.lsetcurv import LevelSetMeshAdaptation
 
         ngs = self.ngs
         t0 = time.perf_counter()
         s = self.settings
-        self.lsetadap = LevelSetMeshAdaptation(
-            self.mesh, order=s.lset_order, threshold=0.1, discontinuous_qn=True
-        )
+        if self.lsetadap is None:
+            self.lsetadap = LevelSetMeshAdaptation(
+                self.mesh, order=s.lset_order, threshold=0.1, discontinuous_qn=True
+            )
         self.deformation = self.lsetadap.CalcDeformation(lset)
         self.lsetp1 = self.lsetadap.lset_p1
         self.lset = lset
         ci = xfem.CutInfo(self.mesh, self.lsetp1)
         cut = ci.GetElementsOfType(xfem.IF)
+        if sum(cut) == 0:
+            raise ForwardModelError("the level set does not cut the background mesh", "geometry")
         # one layer of elements around the cut elements is active on both sides: the ghost
         # penalty extends the discrete fields there, so that values on the skeleton's own
         # interface (which differs from the discrete level set by O(h^2)) are always defined
@@ -140,40 +154,50 @@ class CutFlow:
             self.mesh, a=cut, b=cut, bnd_val_a=False, bnd_val_b=False, use_and=False
         )
         ring = xfem.GetElementsWithNeighborFacets(self.mesh, near)
-        self.els = {
+        els = {
             "fluid": ci.GetElementsOfType(xfem.HASPOS) | ring,
             "porous": ci.GetElementsOfType(xfem.HASNEG) | ring,
             "if": cut,
         }
-        self.facets = {
+        facets = {
             side: xfem.GetFacetsWithNeighborTypes(
-                self.mesh,
-                a=self.els[side],
-                b=ring,
-                bnd_val_a=False,
-                bnd_val_b=False,
-                use_and=True,
+                self.mesh, a=els[side], b=ring, bnd_val_a=False, bnd_val_b=False, use_and=True
             )
             for side in ("fluid", "porous")
         }
-        if sum(self.els["if"]) == 0:
-            raise ForwardModelError("the level set does not cut the background mesh", "geometry")
-        free = self.X.FreeDofs()
-        active = ngs.BitArray(self.X.ndof)
-        active.Clear()
-        offs = np.cumsum([0] + [sp.ndof for sp in (self.V, self.Q, self.D)])
-        for k, (sp, side) in enumerate(((self.V, "fluid"), (self.Q, "fluid"), (self.D, "porous"))):
-            dofs = xfem.GetDofsOfElements(sp, self.els[side])
-            for i in np.flatnonzero(np.array(dofs, dtype=bool)):
-                active.Set(int(offs[k] + i))
-        self.active = active
-        self.freedofs = ngs.BitArray(free) & active
+        markers = np.concatenate(
+            [np.array(b, dtype=bool) for b in (*els.values(), *facets.values())]
+        )
         self.time_geometry = time.perf_counter() - t0
-        self._inverse = None
+        if self._markers is not None and np.array_equal(markers, self._markers):
+            self._stale()  # same cut elements: keep forms, pattern and analysis
+            return
+        self._markers = markers
+        self.els, self.facets = els, facets
+        active = np.concatenate(
+            [
+                np.array(xfem.GetDofsOfElements(sp, els[side]), dtype=bool)
+                for sp, side in ((self.V, "fluid"), (self.Q, "fluid"), (self.D, "porous"))
+            ]
+        )
+        self.active = ngs.BitArray(active)
+        self.freedofs = ngs.BitArray(np.array(self.X.FreeDofs(), dtype=bool) & active)
+        self._system = None  # forms and factorisation of this cut, built by the first solve
+        self.time_geometry = time.perf_counter() - t0
+
+    def _stale(self) -> None:
+        """Coefficients changed, forms and pattern did not: re-assemble before the next solve."""
+        if self._system is not None:
+            self._system["fresh"] = False
 
     def set_permeability(self, k: Any) -> None:
         """Spatial permeability (mm^2): scalar, scalar CF or 2x2 matrix CF (eq. 11)."""
         ngs = self.ngs
+        if self._k_source is not None and k is self._k_source:
+            self._stale()  # same coefficient function, new values
+            return
+        self._k_source = k
+        self._system = None
         k = ngs.CoefficientFunction(k)
         if k.dim == 1:
             self.k_matrix = k * ngs.Id(2)
@@ -294,44 +318,73 @@ class CutFlow:
     def ndof(self) -> int:
         return int(sum(self.freedofs))
 
-    def solve(self, dirichlet_velocity: Any | None = None, where: str = "flow") -> FlowReport:
-        """Solve (Newton for Navier-Stokes, one linear solve for Stokes); warm start from the
-        current state.  ``dirichlet_velocity`` is set on the Dirichlet boundaries."""
+    def solve(
+        self,
+        dirichlet_velocity: Any | None = None,
+        where: str = "flow",
+        tol: float | None = None,
+    ) -> FlowReport:
+        """Newton for Navier-Stokes (one linear solve for Stokes), warm-started from the
+        current state; ``dirichlet_velocity`` is set on the Dirichlet boundaries.
+
+        The forms of the current cut are assembled once and re-assembled in place at each
+        Newton step; the sparse factorisation is analysed once per cut and only refactored
+        (``Update``) afterwards.  ``tol`` (default ``settings.newton_tol``) bounds the
+        estimated relative error of the velocity returned: the relative size of the last
+        Newton step or, once the quadratic rate ``M`` (``e_(k+1) <= M e_k^2``) has been seen,
+        twice what it predicts for the next step, ``2 M step^2``.  A Newton iteration that
+        does not reach ``tol`` in ``settings.newton_max_iter`` steps raises
+        :class:`ForwardModelError`.
+        """
         ngs = self.ngs
         s = self.settings
+        tol = s.newton_tol if tol is None else tol
         rep = FlowReport(ndof=self.ndof, time_setup=self.time_geometry)
-        inactive = ~self.active
         vec = self.gfx.vec.FV().NumPy()
-        vec[np.array(inactive, dtype=bool)] = 0.0
+        vec[~np.array(self.active, dtype=bool)] = 0.0
         if dirichlet_velocity is not None:
             tmp = ngs.GridFunction(self.V)
             tmp.Set(dirichlet_velocity, definedon=self.mesh.Boundaries(self._dirichlet))
             idx = np.flatnonzero(~np.array(self.V.FreeDofs(), dtype=bool))
             vec[idx] = tmp.vec.FV().NumPy()[idx]
         newton = s.density > 0
-        uk = ngs.GridFunction(self.V)
-        for it in range(1, (s.newton_max_iter if newton else 1) + 1):
+        limit = s.newton_max_iter if newton else 1
+        if self._system is None:
+            uk = ngs.GridFunction(self.V)
+            a, f = self._forms(uk if newton else None)
+            self._system = {"uk": uk, "a": a, "f": f, "inv": None, "fresh": False}
+        sysm = self._system
+        a, f, uk = sysm["a"], sysm["f"], sysm["uk"]
+        nv = self.V.ndof
+        for it in range(1, limit + 1):
             t0 = time.perf_counter()
             uk.vec.data = self.gfx.components[0].vec
-            a, f = self._forms(uk if newton else None)
             with ngs.TaskManager():
-                a.Assemble()
-                f.Assemble()
+                if not sysm["fresh"] or newton:
+                    a.Assemble()
+                    f.Assemble()
+                    if sysm["inv"] is None:
+                        sysm["inv"] = a.mat.Inverse(self.freedofs, inverse="pardiso")
+                    else:
+                        sysm["inv"].Update()  # same pattern: numerical factorisation only
+                    sysm["fresh"] = True
                 res = f.vec.CreateVector()
                 res.data = f.vec - a.mat * self.gfx.vec
-                inv = a.mat.Inverse(self.freedofs, inverse="pardiso")
                 du = self.gfx.vec.CreateVector()
-                du.data = inv * res
+                du.data = sysm["inv"] * res
             self.gfx.vec.data += du
             rep.time_solve += time.perf_counter() - t0
             rep.iterations = it
-            d = du.FV().NumPy()[: self.V.ndof]
-            unorm = float(np.linalg.norm(self.gfx.vec.FV().NumPy()[: self.V.ndof]))
+            d = du.FV().NumPy()[:nv]
+            unorm = float(np.linalg.norm(self.gfx.vec.FV().NumPy()[:nv]))
             change = float(np.linalg.norm(d)) / max(unorm, 1e-300)
             rep.norms.append(change)
             if not np.isfinite(change):
                 raise ForwardModelError(f"{where}: the flow solve produced NaN", "flow_diverged")
-            if not newton or change < s.newton_tol:
+            if len(rep.norms) >= 2 and rep.norms[-2] < 0.1:  # quadratic regime
+                self._newton_rate = max(self._newton_rate, change / rep.norms[-2] ** 2)
+            predicted = 2.0 * self._newton_rate * change**2 if self._newton_rate else math.inf
+            if not newton or change < tol or (change < 0.1 and predicted < tol):
                 return rep
         raise ForwardModelError(
             f"{where}: Navier-Stokes Newton did not converge in {s.newton_max_iter} iterations "

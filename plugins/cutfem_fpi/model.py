@@ -38,10 +38,11 @@ class CutFemFpiForwardModel(Configurable):
     Navier-Stokes in the channel and Darcy flow in the biofilm on one background mesh cut by
     the deformed biofilm (CutFEM, ngsxfem), coupled through the Beavers-Joseph interface
     conditions (eq. 14-15); a neo-Hooke poroelastic skeleton (eq. 10c, 12-13) with
-    Kozeny-Carman permeability (eq. 11) on the biofilm's own mesh; partitioned coupling with
-    Aitken relaxation.  Parameters: ``E`` [Pa], ``nu`` [-], ``phi0`` [-], ``K`` [mm^2],
-    ``inflow_rate`` [mm^2/s].  Failures (coupling or Newton divergence, porosity outside
-    (0, 1), inverted skeleton) raise :class:`fbia.ForwardModelError` with a ``reason``.
+    Kozeny-Carman permeability (eq. 11) on the biofilm's own (curved) mesh; partitioned
+    coupling accelerated by interface quasi-Newton (IQN-ILS) or Aitken relaxation.
+    Parameters: ``E`` [Pa], ``nu`` [-], ``phi0`` [-], ``K`` [mm^2], ``inflow_rate``
+    [mm^2/s].  Failures (coupling or Newton divergence, no admissible skeleton state with
+    porosity in (0, 1) and J > 0) raise :class:`fbia.ForwardModelError` with a ``reason``.
     """
 
     dim = 2
@@ -70,6 +71,12 @@ class CutFemFpiForwardModel(Configurable):
         smooth_outline: bool = Field(
             True, description="interpolate the outline by a cubic spline [-]"
         )
+        skeleton_curve_order: int = Field(
+            2,
+            ge=1,
+            le=3,
+            description="geometry order of the biofilm mesh along the outline (1: straight) [-]",
+        )
         background_mesh_size: float = Field(
             0.05, gt=0, description="element size of the fixed background mesh [mm]"
         )
@@ -95,12 +102,32 @@ class CutFemFpiForwardModel(Configurable):
             1e-6, gt=0, description="interface change that ends the coupling [mm]"
         )
         coupling_max_iter: int = Field(40, ge=1, description="coupling iterations per level [-]")
-        omega0: float = Field(0.5, gt=0, le=1, description="first Aitken relaxation factor [-]")
+        omega0: float = Field(
+            0.5, gt=0, le=1, description="relaxation factor of the first coupling iteration [-]"
+        )
         flow_newton_tol: float = Field(
-            1e-8, gt=0, description="relative velocity change ending the NS Newton [-]"
+            1e-8, gt=0, description="estimated relative velocity error ending the NS Newton [-]"
+        )
+        level_set: Literal["nodal", "voxel"] = Field(
+            "nodal",
+            description="level set of the deformed biofilm: 'nodal' = P2 interpolant of the "
+            "signed distance on the background mesh, 'voxel' = bilinear on a voxel grid of "
+            "spacing voxel_size [-]",
         )
         voxel_size: float = Field(
-            0.004, gt=0, description="grid spacing of the signed-distance level set [mm]"
+            0.004, gt=0, description="grid spacing of the voxel level set [mm]"
+        )
+        acceleration: Literal["iqn_ils", "aitken"] = Field(
+            "iqn_ils",
+            description="coupling acceleration: interface quasi-Newton with a least-squares "
+            "inverse Jacobian (IQN-ILS) or Aitken relaxation [-]",
+        )
+        coupling_inexact: float = Field(
+            0.1,
+            ge=0,
+            description="inexact coupling: Newton tolerances of flow and skeleton are "
+            "coupling_inexact * (last interface change) / channel_height, never below "
+            "flow_newton_tol and 1e-10; 0: always exact [-]",
         )
         write_vtu: bool = Field(
             False, description="write VTU fields per coordinate into the workdir [-]"
@@ -130,7 +157,6 @@ class CutFemFpiForwardModel(Configurable):
             "background_mesh_size": 0.1,
             "interface_mesh_size": 0.08,
             "coupling_tol": 1e-5,
-            "voxel_size": 0.01,
         }
 
     def parameter_names(self) -> list[str]:
@@ -139,7 +165,18 @@ class CutFemFpiForwardModel(Configurable):
     def solve(
         self, parameters: Mapping[str, float], coordinates: Sequence[Coordinate], workdir: Path
     ) -> Solution:
-        """Coupled steady states at every coordinate; :class:`ForwardModelError` on failure."""
+        """Coupled steady states at every coordinate; :class:`ForwardModelError` on failure.
+
+        Diagnostics, one entry per coordinate unless said otherwise: ``coupling_iterations``,
+        ``relaxation_factors`` (per coupling iteration: Aitken's factor, or for IQN-ILS
+        ``omega0`` in the first iteration and 1, the full quasi-Newton step, afterwards),
+        ``interface_changes`` (largest interface movement per coupling iteration, mm),
+        ``flow_newton_iterations``, ``skeleton_newton_iterations``, ``max_displacement`` (mm),
+        ``porosity_range``, ``interface_flux`` (net flux into the biofilm, mm^2/s),
+        ``inflow_outflow_flux`` (mm^2/s); for the whole run ``ndof_flow`` and
+        ``ndof_skeleton`` (free dofs), ``time_split`` (level set, flow, skeleton, transfer;
+        s), ``setup_time`` and ``wall_time`` (s).
+        """
         t_start = time.perf_counter()
         params = self._check_parameters(parameters)
         levels = self._levels(coordinates, params)
@@ -151,7 +188,8 @@ class CutFemFpiForwardModel(Configurable):
         curves: list[Any] = [None] * n
         diag: dict[str, Any] = {
             "coupling_iterations": [0] * n,
-            "aitken_factors": [[] for _ in range(n)],
+            "relaxation_factors": [[] for _ in range(n)],
+            "interface_changes": [[] for _ in range(n)],
             "flow_newton_iterations": [0] * n,
             "skeleton_newton_iterations": [0] * n,
             "max_displacement": [0.0] * n,
@@ -175,7 +213,8 @@ class CutFemFpiForwardModel(Configurable):
                 times[k] += v
             curves[i] = solver.interface_curve()
             diag["coupling_iterations"][i] = rep.iterations
-            diag["aitken_factors"][i] = rep.omegas
+            diag["relaxation_factors"][i] = rep.omegas
+            diag["interface_changes"][i] = rep.changes
             diag["flow_newton_iterations"][i] = rep.flow_iterations
             diag["skeleton_newton_iterations"][i] = rep.skeleton_iterations
             diag["max_displacement"][i] = float(
@@ -255,31 +294,23 @@ class CutFemFpiForwardModel(Configurable):
             os.environ.setdefault("MKL_NUM_THREADS", str(self.options.threads))
             import ngsolve as ngs
 
-            from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE, build_flow_cell
-
             from .coupled import (
                 CouplingSettings,
                 PoroFsiSolver,
+                biofilm_mesh,
                 channel_mesh,
-                skeleton_mesh_from_flow_cell,
             )
             from .flow import FlowSettings
             from .skeleton import SkeletonSettings
 
             o = self.options
             ngs.SetNumThreads(o.threads)
-            cell = build_flow_cell(
-                length=o.channel_length,
-                height=o.channel_height,
-                outline=DEFAULT_OUTLINE if o.outline is None else o.outline,
-                smooth=o.smooth_outline,
-                mesh_size=max(o.interface_mesh_size, 0.25 * o.channel_height),
-                interface_mesh_size=o.interface_mesh_size,
-                curve_order=1,
-            )
+            outline = self._outline()
             self._solver = PoroFsiSolver(
                 channel_mesh(o.channel_length, o.channel_height, o.background_mesh_size),
-                skeleton_mesh_from_flow_cell(cell),
+                biofilm_mesh(
+                    outline, o.smooth_outline, o.interface_mesh_size, o.skeleton_curve_order
+                ),
                 o.channel_length,
                 o.channel_height,
                 FlowSettings(
@@ -297,10 +328,37 @@ class CutFemFpiForwardModel(Configurable):
                     max_iter=o.coupling_max_iter,
                     omega0=o.omega0,
                     voxel_size=o.voxel_size,
+                    level_set=o.level_set,
+                    acceleration=o.acceleration,
+                    inexact=o.coupling_inexact,
                 ),
                 outflow=o.outflow,
             )
         return self._solver
+
+    def _outline(self) -> np.ndarray:
+        """The biofilm outline (mm), checked like the ``ale_fsi`` flow cell checks it."""
+        from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
+
+        o = self.options
+        where = "cutfem_fpi options: outline"
+        p = np.asarray(DEFAULT_OUTLINE if o.outline is None else o.outline, dtype=float)
+        if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3 or not np.all(np.isfinite(p)):
+            raise ConfigError(f"needs at least 3 finite points (x, y), got shape {p.shape}", where)
+        tol = 1e-9 * max(o.channel_length, o.channel_height)
+        if abs(p[0, 1]) > tol or abs(p[-1, 1]) > tol:
+            raise ConfigError("must start and end on the channel floor (y = 0)", where)
+        if np.any(p[1:-1, 1] <= tol) or np.any(p[:, 1] >= o.channel_height - tol):
+            raise ConfigError("inner points must lie strictly inside the channel", where)
+        if np.any(p[:, 0] <= tol) or np.any(p[:, 0] >= o.channel_length - tol):
+            raise ConfigError("must stay clear of the inflow and outflow", where)
+        if p[0, 0] >= p[-1, 0]:
+            raise ConfigError("must run from the upstream to the downstream foot", where)
+        import shapely
+
+        if not shapely.LineString(np.vstack([p, p[:1]])).is_simple:
+            raise ConfigError("intersects itself", where)
+        return p
 
     @property
     def solver(self) -> Any:

@@ -21,7 +21,8 @@ and the porosity follows from the constitutive relation of the pore pressure,
 On the interface the traction balance (eq. 14a) with eq. 14b gives the total traction
 ``sigma^P n = -p n + tau t`` (``n`` out of the biofilm, ``t`` its tangent); in the reference
 configuration ``-p J F^-T N dA + tau t |cof(F) N| dA``.  ``solid_fixed`` is clamped.
-Newton's method with NGSolve's symbolic linearisation and a direct solver.
+Newton's method, damped to stay admissible, with NGSolve's symbolic linearisation and a
+direct solver.
 """
 
 from __future__ import annotations
@@ -133,42 +134,81 @@ class Skeleton:
         a += (ngs.InnerProduct(F * S, ngs.Grad(dd)) + constitutive * r) * ngs.dx
         a += -(-p * cofN + self.shear * t_da) * dd * ngs.ds(self.loaded)
         self.form = a
+        self._inverse: Any = None  # factorisation of the Newton matrix, analysed once
+        self._newton_rate = 0.0  # C of e_(k+1) <= C e_k^2, the largest seen so far
+        self._check_points: Any = None
         self.J = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
 
-    def solve(self, where: str = "skeleton") -> int:
-        """Newton from the current state; returns the number of iterations."""
+    def solve(self, where: str = "skeleton", tol: float | None = None) -> int:
+        """Newton from the current state; returns the number of iterations.
+
+        Stops when the energy norm of the Newton correction, or, once the quadratic rate
+        ``C`` (``e_(k+1) <= C e_k^2``) has been seen, twice what it predicts for the next
+        correction, falls below ``tol`` (default ``settings.newton_tol``) times that of the
+        first one.  Steps are damped to stay admissible (:meth:`_step`).  The sparsity
+        pattern never changes, so the factorisation is analysed once and only refactored.
+        """
         ngs = self.ngs
         s = self.settings
-        free = self.X.FreeDofs()
+        tol = s.newton_tol if tol is None else tol
         res = self.gfx.vec.CreateVector()
         du = self.gfx.vec.CreateVector()
         r0 = None
+        rn_old = math.inf
         for it in range(1, s.newton_max_iter + 1):
             with ngs.TaskManager():
                 self.form.Apply(self.gfx.vec, res)
                 self.form.AssembleLinearization(self.gfx.vec)
-                inv = self.form.mat.Inverse(free, inverse="pardiso")
-                du.data = inv * res
+                if self._inverse is None:
+                    self._inverse = self.form.mat.Inverse(self.X.FreeDofs(), inverse="pardiso")
+                else:
+                    self._inverse.Update()
+                du.data = self._inverse * res
             rn = float(np.sqrt(abs(ngs.InnerProduct(du, res))))
             if not math.isfinite(rn):
                 raise ForwardModelError(f"{where}: Newton produced NaN", "skeleton_newton")
             r0 = rn if r0 is None else r0
-            self.gfx.vec.data -= du
-            self.check(where)
-            if rn <= s.newton_tol * max(r0, 1e-300) or rn < 1e-14:
+            damped = self._step(du, where)
+            if it >= 2 and rn < 0.1 * r0 and not damped:  # quadratic: e_(k+1) <= C e_k^2
+                self._newton_rate = max(self._newton_rate, rn / rn_old**2)
+            predicted = 2.0 * self._newton_rate * rn**2 if self._newton_rate else math.inf
+            if min(rn, predicted) <= tol * max(r0, 1e-300) or rn < 1e-14:
                 return it
+            rn_old = rn
         raise ForwardModelError(
             f"{where}: skeleton Newton did not converge in {s.newton_max_iter} iterations",
             "skeleton_newton",
         )
 
+    def _step(self, du: Any, where: str) -> bool:
+        """``x -= alpha du`` with the largest ``alpha`` in 1, 1/2, ..., 1/256 that keeps the
+        state admissible (0 < phi < 1, J > 0): the penalty and volumetric energies (eq. 13)
+        are barriers at J phi = 0 and J (1 - phi) = 0, which a full Newton step can jump.
+        Returns whether the step was damped; raises when no step length is admissible."""
+        x0 = self.gfx.vec.CreateVector()
+        x0.data = self.gfx.vec
+        alpha = 1.0
+        for _ in range(9):
+            self.gfx.vec.data = x0 - alpha * du
+            phi, J = self._ranges()
+            if np.all(np.isfinite(phi)) and 0.0 < phi.min() and phi.max() < 1.0 and J.min() > 0:
+                return alpha < 1.0
+            alpha *= 0.5
+        self.check(where)
+        return True
+
+    def _ranges(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Porosity and J at the element vertices and centres."""
+        ngs = self.ngs
+        if self._check_points is None:
+            ir = ngs.IntegrationRule([(0, 0), (1, 0), (0, 1), (1 / 3, 1 / 3)], [0.0] * 4)
+            self._check_points = self.mesh.MapToAllElements(ir, ngs.VOL)
+        pts = self._check_points
+        return np.asarray(self.porosity(pts)).ravel(), np.asarray(self.J(pts)).ravel()
+
     def check(self, where: str) -> None:
         """Raise unless 0 < phi < 1 and J > 0 at the element vertices and centres."""
-        ngs = self.ngs
-        ir = ngs.IntegrationRule([(0, 0), (1, 0), (0, 1), (1 / 3, 1 / 3)], [0.0] * 4)
-        pts = self.mesh.MapToAllElements(ir, ngs.VOL)
-        phi = np.asarray(self.porosity(pts)).ravel()
-        J = np.asarray(self.J(pts)).ravel()
+        phi, J = self._ranges()
         if not np.all(np.isfinite(phi)) or phi.min() <= 0.0 or phi.max() >= 1.0:
             raise ForwardModelError(
                 f"{where}: porosity left (0, 1): range [{phi.min():.3g}, {phi.max():.3g}]",
