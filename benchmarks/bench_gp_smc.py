@@ -74,6 +74,13 @@ def main() -> None:
         default=15,
         help="iteration cap of GPy's default training (1000 in GPy; ~6 s each here)",
     )
+    ap.add_argument("--skip-default", action="store_true", help="skip GPy's default training")
+    ap.add_argument(
+        "--smc-steps",
+        type=int,
+        default=0,
+        help="stop SMC after this many tempering steps (0: run to gamma = 1)",
+    )
     args = ap.parse_args()
     if args.quick:
         args.n_train, args.n_particles, args.n_rej, args.zeta = 300, 1000, 5, 0.95
@@ -93,7 +100,7 @@ def main() -> None:
     )
 
     rows = []
-    for label, gp in [
+    trainings = [
         (
             f"GPy default (var=1, l=1, one L-BFGS-B run, max_iters={args.default_iters})",
             GpSurrogate(ard=True, gpy_default=True, max_iters=args.default_iters),
@@ -102,7 +109,8 @@ def main() -> None:
             "tuned (data-based guess + 2 restarts on 800-point prefix, bounds, 20-iter polish)",
             GpSurrogate(ard=True, restarts=2, subset=800, polish_iters=20),
         ),
-    ]:
+    ]
+    for label, gp in trainings[1:] if args.skip_default else trainings:
         t0 = time.perf_counter()
         gp.fit(x_tr, y_tr, rng=np.random.default_rng(0))
         seconds = time.perf_counter() - t0
@@ -151,6 +159,16 @@ def main() -> None:
             break
         if state.step % 10 == 0:
             print(f"  {state}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+        if args.smc_steps and state.step >= args.smc_steps:
+            t_part = time.perf_counter() - t0
+            _, peak_py = tracemalloc.get_traced_memory()
+            print(
+                f"SMC stopped after {state.step} steps at gamma = {state.gamma:.4g}: "
+                f"{t_part:.1f} s ({t_part / state.step:.2f} s per step), {sampler.nfev} "
+                f"log-likelihood evaluations; peak memory {peak_py / 2**20:.0f} MiB traced, "
+                f"{peak_rss_mb():.0f} MiB peak RSS"
+            )
+            return
     t_smc = time.perf_counter() - t0
     _, peak_py = tracemalloc.get_traced_memory()
     tracemalloc.stop()
