@@ -13,9 +13,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	@touch $(STAMP)
 
-# The flow-cell example: Levenberg-Marquardt with the finite-element FSI model (about a
-# minute), LM with the closed-form stand-in from all eleven Table 1 starts (seconds), and the
-# Bayesian GP + SMC calibration of Paper B on the stand-in (about 20 s).
+# The flow-cell example: Levenberg-Marquardt with the finite-element FSI model (seconds with
+# warm starts), LM with the closed-form stand-in from all eleven Table 1 starts (seconds), and
+# the Bayesian GP + SMC calibration of Paper B with the FSI model (about a minute).
 demo: $(STAMP)
 	$(BIN)/fbia run examples/flow_cell/study_fsi.toml
 	$(BIN)/fbia run examples/flow_cell/study.toml
