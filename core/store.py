@@ -57,6 +57,8 @@ from typing import IO, Any
 import numpy as np
 
 from fbia.core.errors import ConfigError
+from fbia.core.likelihood import gaussian_log_likelihood as _log_likelihood
+from fbia.core.likelihood import noise_levels
 from fbia.core.problem import Evaluation, InverseProblem, _jsonable
 
 __all__ = [
@@ -238,38 +240,9 @@ def _describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str
 
 
 # -- the likelihood stored with every run ------------------------------------------------------
-def noise_levels(problem: InverseProblem) -> list[float] | None:
-    """sigma_N of every observation (its own ``noise_std``, else the problem's), or None when
-    one has none (then no log-likelihood is stored)."""
-    out = []
-    for obs in problem.observations:
-        sigma = obs.noise_std if obs.noise_std is not None else problem.noise_std
-        if sigma is None:
-            return None
-        out.append(float(sigma))
-    return out
-
-
 def gaussian_log_likelihood(record: Evaluation, sigmas: Sequence[float] | None) -> float | None:
-    """The Gaussian static log-likelihood of Paper B eq. (5) of one record.
-
-    L = -n/2 log(2 pi sigma_N^2) - D^2 / (2 sigma_N^2), summed over the observations with
-    n_k = n / (number of observations) when their sigmas differ.  ``-inf`` for a failed run,
-    None without noise levels.
-    """
-    if sigmas is None:
-        return None
-    if not record.ok or record.distances is None or record.residuals is None:
-        return -math.inf
-    dist = np.asarray(record.distances, dtype=float)
-    sig = np.asarray(sigmas, dtype=float)
-    n = len(record.residuals)
-    if np.all(sig == sig[0]):
-        return float(
-            -0.5 * n * math.log(2 * math.pi * sig[0] ** 2) - np.sum(dist**2) / (2 * sig[0] ** 2)
-        )
-    n_k = n / len(dist)
-    return float(np.sum(-0.5 * n_k * np.log(2 * math.pi * sig**2) - dist**2 / (2 * sig**2)))
+    """Paper B eq. (5) of one record (:mod:`fbia.core.likelihood`), None without noise levels."""
+    return None if sigmas is None else _log_likelihood(record, sigmas)
 
 
 # -- the store ---------------------------------------------------------------------------------

@@ -56,6 +56,8 @@ from scipy.stats import qmc
 from fbia.core.errors import ConfigError
 from fbia.core.evaluator import Evaluator
 from fbia.core.iteration import IteratorBase
+from fbia.core.likelihood import gaussian_log_likelihood
+from fbia.core.likelihood import noise_levels as _noise_levels
 from fbia.core.options import PluginOptions
 from fbia.core.parameters import Parameter, Prior
 from fbia.core.problem import Evaluation, InverseProblem, Result
@@ -83,37 +85,18 @@ class GpSmcState:
 # -- the likelihood (eq. 4-5) -------------------------------------------------------------------
 def noise_levels(problem: InverseProblem) -> list[float]:
     """sigma_N of every observation: its own ``noise_std``, else ``problem.noise_std``."""
-    out = []
-    for obs in problem.observations:
-        sigma = obs.noise_std if obs.noise_std is not None else problem.noise_std
-        if sigma is None:
-            raise ConfigError(
-                f"observation {obs.label()!r} has no noise_std and the problem has none: the "
-                "Gaussian likelihood (Paper B eq. 5) needs sigma_N [mm]",
-                "gp_smc",
-            )
-        out.append(float(sigma))
-    return out
-
-
-def log_likelihood_of(ev: Evaluation, sigmas: Sequence[float]) -> float:
-    """Gaussian static log-likelihood (eq. 5) of one evaluation record; -inf if it failed.
-
-    n_k: with one sigma for all observations, n = the total residual count; with different
-    sigmas, the residuals are taken as split evenly among the observations.
-    """
-    if not ev.ok or ev.distances is None or ev.residuals is None:
-        return -math.inf
-    dist = np.asarray(ev.distances, dtype=float)
-    sig = np.asarray(sigmas, dtype=float)
-    n_total = len(ev.residuals)
-    if np.all(sig == sig[0]):
-        return float(
-            -0.5 * n_total * math.log(2 * math.pi * sig[0] ** 2)
-            - np.sum(dist**2) / (2 * sig[0] ** 2)
+    sigmas = _noise_levels(problem)
+    if sigmas is None:
+        raise ConfigError(
+            "an observation has no noise_std and the problem has none: the Gaussian "
+            "likelihood (Paper B eq. 5) needs sigma_N [mm]",
+            "gp_smc",
         )
-    n_k = n_total / len(dist)
-    return float(np.sum(-0.5 * n_k * np.log(2 * math.pi * sig**2) - dist**2 / (2 * sig**2)))
+    return sigmas
+
+
+#: Gaussian static log-likelihood (eq. 5) of one evaluation record; -inf if it failed.
+log_likelihood_of = gaussian_log_likelihood
 
 
 # -- the design ---------------------------------------------------------------------------------

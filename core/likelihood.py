@@ -1,0 +1,45 @@
+"""The Gaussian static likelihood of Paper B (eq. 4-5), shared by the store and the iterators.
+
+L(x, theta) = sum_k [ -n_k/2 log(2 pi sigma_k^2) - D_k^2 / (2 sigma_k^2) ]
+
+over the observations k with discrepancy D_k (the measure's ``distance``) and noise level
+sigma_k (the observation's ``noise_std``, else the problem's).  With one sigma for all
+observations n = the total residual count; with different sigmas the residuals are taken as
+split evenly among the observations.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from fbia.core.problem import Evaluation, InverseProblem
+
+
+def noise_levels(problem: InverseProblem) -> list[float] | None:
+    """sigma_N [mm] of every observation (its own ``noise_std``, else the problem's), or None
+    when one has none (then there is no likelihood)."""
+    out = []
+    for obs in problem.observations:
+        sigma = obs.noise_std if obs.noise_std is not None else problem.noise_std
+        if sigma is None:
+            return None
+        out.append(float(sigma))
+    return out
+
+
+def gaussian_log_likelihood(record: Evaluation, sigmas: Sequence[float]) -> float:
+    """Paper B eq. (5) for one evaluation record; ``-inf`` for a failed run."""
+    if not record.ok or record.distances is None or record.residuals is None:
+        return -math.inf
+    dist = np.asarray(record.distances, dtype=float)
+    sig = np.asarray(sigmas, dtype=float)
+    n = len(record.residuals)
+    if np.all(sig == sig[0]):
+        return float(
+            -0.5 * n * math.log(2 * math.pi * sig[0] ** 2) - np.sum(dist**2) / (2 * sig[0] ** 2)
+        )
+    n_k = n / len(dist)
+    return float(np.sum(-0.5 * n_k * np.log(2 * math.pi * sig**2) - dist**2 / (2 * sig**2)))
