@@ -49,12 +49,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Self
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.options import PluginOptions
+from fbia.core.interface import Interface
+from fbia.core.observation import Solution
+from fbia.core.options import Configurable, PluginOptions
 
 #: Gain of the lean (bending) response, C_B [-].
 BENDING_GAIN = 6.0
@@ -246,3 +250,72 @@ def diagnostics(states: Sequence[MoundState], max_displacement: Sequence[float])
             for s, d in zip(states, max_displacement, strict=True)
         ],
     }
+
+
+class MoundModel(Configurable):
+    """What the 2-D mound and the 3-D dome share: reference shape, parameter names, solve.
+
+    A subclass gives ``Options``, ``_reference_shape()``, ``states()``, ``displacement()`` and
+    ``field_suffix`` (the file type of written interfaces).
+    """
+
+    field_suffix = ".vtu"
+
+    def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
+        super().__init__(options, **kwargs)
+        self._reference = self._reference_shape()
+
+    def _reference_shape(self) -> Interface:
+        raise NotImplementedError
+
+    def states(
+        self, parameters: Mapping[str, float], coordinates: Sequence[Mapping[str, float]]
+    ) -> list[MoundState]:
+        raise NotImplementedError
+
+    def displacement(self, state: MoundState) -> np.ndarray:
+        raise NotImplementedError
+
+    @classmethod
+    def example_parameters(cls) -> tuple[dict[str, float], list[dict[str, float]]]:
+        """Paper A's reference point E = 400 Pa, nu = 0.3 at two inflow rates."""
+        return {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}]
+
+    def parameter_names(self) -> Sequence[str]:
+        """``E`` [Pa], ``nu`` [-], ``inflow_rate`` [mm^2/s in 2-D, mm^3/s in 3-D],
+        ``load_scale`` [-]."""
+        return PARAMETER_NAMES
+
+    def undeformed(self) -> Interface:
+        """The undeformed interface (what zero inflow gives)."""
+        return self._reference
+
+    def solve(
+        self,
+        parameters: Mapping[str, float],
+        coordinates: Sequence[Mapping[str, float]],
+        workdir: Path,
+    ) -> Solution:
+        """One deformed interface per coordinate.
+
+        Raises
+        ------
+        fbia.ConfigError
+            Unknown parameter names or coordinate keys.
+        fbia.ForwardModelError
+            E <= 0, nu outside (-1, 0.5), non-finite inputs, or inputs inside the option
+            ``failure_region`` (simulated mesh distortion).
+        """
+        states = self.states(parameters, coordinates)
+        pairs, dmax, fields = [], [], {}
+        suffix = self.field_suffix
+        for k, (coordinate, state) in enumerate(zip(coordinates, states, strict=True)):
+            u = self.displacement(state)
+            gamma = self._reference.with_vertices(self._reference.vertices + u)
+            pairs.append((coordinate, gamma))
+            dmax.append(float(np.linalg.norm(u, axis=1).max()))
+            if self.options.write_fields:  # type: ignore[attr-defined]
+                fields[f"interface_{k}"] = gamma.write(Path(workdir) / f"interface_{k}{suffix}")
+        if self.options.write_fields:  # type: ignore[attr-defined]
+            fields["undeformed"] = self._reference.write(Path(workdir) / f"undeformed{suffix}")
+        return Solution.from_pairs(pairs, fields=fields, diagnostics=diagnostics(states, dmax))

@@ -39,25 +39,21 @@ enters.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any, Self
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from fbia.core.interface import Interface
-from fbia.core.observation import Solution
-from fbia.core.options import Configurable
 from fbia.plugins.analytic._mechanics import (
-    PARAMETER_NAMES,
+    MoundModel,
     MoundOptions,
     MoundState,
-    diagnostics,
     resolve_states,
 )
 
 
-class AnalyticMound2DForwardModel(Configurable):
+class AnalyticMound2DForwardModel(MoundModel):
     """Closed-form FSI stand-in: a 2-D mound that leans and flattens under the flow.
 
     See the module docstring for the geometry and the formulas.
@@ -87,29 +83,16 @@ class AnalyticMound2DForwardModel(Configurable):
                 )
             return self
 
+    field_suffix = ".csv"  # written interfaces
     options: Options
 
-    def __init__(self, options: Options | None = None, /, **kwargs: Any) -> None:
-        super().__init__(options, **kwargs)
-        self._reference = _mound_polyline(self.options)
+    def _reference_shape(self) -> Interface:
+        return _mound_polyline(self.options)
 
     @classmethod
     def example_options(cls) -> dict[str, Any]:
         """Options of a cheap instance (for the conformance checks of ``fbia.testing``)."""
         return {"n_points": 41}
-
-    @classmethod
-    def example_parameters(cls) -> tuple[dict[str, float], list[dict[str, float]]]:
-        """Paper A's reference point E = 400 Pa, nu = 0.3 at two inflow rates [mm^2/s]."""
-        return {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}]
-
-    def parameter_names(self) -> Sequence[str]:
-        """``E`` [Pa], ``nu`` [-], ``inflow_rate`` [mm^2/s], ``load_scale`` [-]."""
-        return PARAMETER_NAMES
-
-    def undeformed(self) -> Interface:
-        """The undeformed interface (what zero inflow gives)."""
-        return self._reference
 
     def states(
         self, parameters: Mapping[str, float], coordinates: Sequence[Mapping[str, float]]
@@ -134,35 +117,6 @@ class AnalyticMound2DForwardModel(Configurable):
         ux = state.lean * eta**2 - state.flattening * (X - x_crest) * eta
         uy = -state.flattening * Y
         return np.c_[ux, uy]
-
-    def solve(
-        self,
-        parameters: Mapping[str, float],
-        coordinates: Sequence[Mapping[str, float]],
-        workdir: Path,
-    ) -> Solution:
-        """One deformed interface per coordinate.
-
-        Raises
-        ------
-        fbia.ConfigError
-            Unknown parameter names or coordinate keys.
-        fbia.ForwardModelError
-            E <= 0, nu outside (-1, 0.5), non-finite inputs, or inputs inside the option
-            ``failure_region`` (simulated mesh distortion).
-        """
-        states = self.states(parameters, coordinates)
-        pairs, dmax, fields = [], [], {}
-        for k, (coordinate, state) in enumerate(zip(coordinates, states, strict=True)):
-            u = self.displacement(state)
-            gamma = self._reference.with_vertices(self._reference.vertices + u)
-            pairs.append((coordinate, gamma))
-            dmax.append(float(np.linalg.norm(u, axis=1).max()))
-            if self.options.write_fields:
-                fields[f"interface_{k}"] = gamma.write(Path(workdir) / f"interface_{k}.csv")
-        if self.options.write_fields:
-            fields["undeformed"] = self._reference.write(Path(workdir) / "undeformed.csv")
-        return Solution.from_pairs(pairs, fields=fields, diagnostics=diagnostics(states, dmax))
 
 
 def _mound_polyline(o: AnalyticMound2DForwardModel.Options) -> Interface:

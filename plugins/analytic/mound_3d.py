@@ -34,25 +34,21 @@ coordinate ``{"inflow_rate": Q}`` takes precedence over ``parameters["inflow_rat
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any, Self
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from fbia.core.interface import Interface
-from fbia.core.observation import Solution
-from fbia.core.options import Configurable
 from fbia.plugins.analytic._mechanics import (
-    PARAMETER_NAMES,
+    MoundModel,
     MoundOptions,
     MoundState,
-    diagnostics,
     resolve_states,
 )
 
 
-class AnalyticMound3DForwardModel(Configurable):
+class AnalyticMound3DForwardModel(MoundModel):
     """Closed-form FSI stand-in: a 3-D dome that leans downstream and flattens under the flow.
 
     See the module docstring for the geometry and the formulas.
@@ -94,27 +90,13 @@ class AnalyticMound3DForwardModel(Configurable):
 
     options: Options
 
-    def __init__(self, options: Options | None = None, /, **kwargs: Any) -> None:
-        super().__init__(options, **kwargs)
-        self._reference = _dome_surface(self.options)
+    def _reference_shape(self) -> Interface:
+        return _dome_surface(self.options)
 
     @classmethod
     def example_options(cls) -> dict[str, Any]:
         """Options of a cheap instance (for the conformance checks of ``fbia.testing``)."""
         return {"n_rings": 4}
-
-    @classmethod
-    def example_parameters(cls) -> tuple[dict[str, float], list[dict[str, float]]]:
-        """Paper A's reference point E = 400 Pa, nu = 0.3 at two inflow rates [mm^3/s]."""
-        return {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}]
-
-    def parameter_names(self) -> Sequence[str]:
-        """``E`` [Pa], ``nu`` [-], ``inflow_rate`` [mm^3/s], ``load_scale`` [-]."""
-        return PARAMETER_NAMES
-
-    def undeformed(self) -> Interface:
-        """The undeformed interface (what zero inflow gives)."""
-        return self._reference
 
     def states(
         self, parameters: Mapping[str, float], coordinates: Sequence[Mapping[str, float]]
@@ -142,35 +124,6 @@ class AnalyticMound3DForwardModel(Configurable):
         uy = -state.flattening * (Y - o.centre_y) * eta
         uz = -state.flattening * Z
         return np.c_[ux, uy, uz]
-
-    def solve(
-        self,
-        parameters: Mapping[str, float],
-        coordinates: Sequence[Mapping[str, float]],
-        workdir: Path,
-    ) -> Solution:
-        """One deformed surface per coordinate.
-
-        Raises
-        ------
-        fbia.ConfigError
-            Unknown parameter names or coordinate keys.
-        fbia.ForwardModelError
-            E <= 0, nu outside (-1, 0.5), non-finite inputs, or inputs inside the option
-            ``failure_region`` (simulated mesh distortion).
-        """
-        states = self.states(parameters, coordinates)
-        pairs, dmax, fields = [], [], {}
-        for k, (coordinate, state) in enumerate(zip(coordinates, states, strict=True)):
-            u = self.displacement(state)
-            gamma = self._reference.with_vertices(self._reference.vertices + u)
-            pairs.append((coordinate, gamma))
-            dmax.append(float(np.linalg.norm(u, axis=1).max()))
-            if self.options.write_fields:
-                fields[f"interface_{k}"] = gamma.write(Path(workdir) / f"interface_{k}.vtu")
-        if self.options.write_fields:
-            fields["undeformed"] = self._reference.write(Path(workdir) / "undeformed.vtu")
-        return Solution.from_pairs(pairs, fields=fields, diagnostics=diagnostics(states, dmax))
 
 
 def _dome_surface(o: AnalyticMound3DForwardModel.Options) -> Interface:
