@@ -293,24 +293,20 @@ class GpSurrogate:
         gpy = _gpy()
         d = x.shape[1]
         if self.ard:
-            kern = gpy.kern.Matern32(1, active_dims=[0], name="k0")
-            for j in range(1, d):
-                kern = kern * gpy.kern.Matern32(1, active_dims=[j], name=f"k{j}")
+            from fbia.iterators.gp_kernels import Matern32Product
+
+            kern = Matern32Product(d)
         else:
             kern = gpy.kern.Matern32(d, ARD=False)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = gpy.models.GPRegression(xs, ys, kern, noise_var=self.nugget / self.scale**2)
             model.Gaussian_noise.variance.fix()
-            parts = self._parts(model)
-            for part in parts[1:]:
-                part.variance.fix(1.0)  # one signal variance for the product (Remark 9)
             if not self.gpy_default:
                 # Bounds keep the evidence maximisation away from the degenerate limit
                 # l -> inf, sigma^2 -> inf that a nearly noise-free smooth L invites.
-                for part in parts:
-                    part.lengthscale.constrain_bounded(*LENGTHSCALE_BOUNDS, warning=False)
-                parts[0].variance.constrain_bounded(*VARIANCE_BOUNDS, warning=False)
+                kern.lengthscale.constrain_bounded(*LENGTHSCALE_BOUNDS, warning=False)
+                kern.variance.constrain_bounded(*VARIANCE_BOUNDS, warning=False)
         self.model = model
         max_iters = self.max_iters
         starts: list[Any]
@@ -389,22 +385,14 @@ class GpSurrogate:
             guesses.append((var0 * f_var, ell0 * f_ell))
         return guesses
 
-    @staticmethod
-    def _parts(model: Any) -> list[Any]:
-        kern = model.kern
-        return list(kern.parts) if len(getattr(kern, "parts", [])) > 1 else [kern]
-
     def _set_hyper(self, variance: float, lengthscale: NDArray[np.float64]) -> None:
-        parts = self._parts(self.model)
-        parts[0].variance[:] = variance
-        for part, ell in zip(parts, lengthscale, strict=True):
-            part.lengthscale[:] = ell
+        self.model.kern.variance[:] = variance
+        self.model.kern.lengthscale[:] = lengthscale
 
     def hyperparameters(self) -> dict[str, Any]:
         """Signal variance (in L^2), length scales (standardised inputs), nugget, prior mean."""
-        parts = self._parts(self.model)
-        variance = float(np.prod([float(p.variance[0]) for p in parts]))
-        ells = [float(p.lengthscale[0]) for p in parts]
+        variance = float(self.model.kern.variance[0])
+        ells = [float(v) for v in np.atleast_1d(self.model.kern.lengthscale)]
         return {
             "kernel": "matern32_product" if self.ard else "matern32",
             "signal_variance": variance * self.scale**2,
