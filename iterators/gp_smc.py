@@ -193,6 +193,12 @@ class GpSmcIterator(IteratorBase):
         ess_min: float = Field(
             0.5, ge=0, le=1, description="resample when ESS < ess_min N (fraction of N) [-]"
         )
+        rejuvenate: Literal["every_step", "after_resampling"] = Field(
+            "every_step",
+            description="when particles move: every tempering step (Algorithm 1) or only in "
+            "steps that resample and the last one (resample-move; far fewer likelihood calls "
+            "when zeta is close to 1) [-]",
+        )
         map_bins: int = Field(
             30, ge=2, description="intervals per x of the MAP histogram under theta (Remark 8) [-]"
         )
@@ -315,6 +321,7 @@ class GpSmcIterator(IteratorBase):
             rng=np.random.default_rng([opts.seed, 1]),
             names=names,
             max_steps=opts.max_smc_steps,
+            rejuvenate=opts.rejuvenate,
         )
         gen = sampler.steps()
         while True:

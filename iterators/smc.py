@@ -18,6 +18,10 @@ reweighted particles is ESS_s = zeta ESS_{s-1}, goes to gamma = 1 when no smalle
 resamples (systematic) when ESS drops below ESS_min, and rejuvenates every particle with
 ``n_rejuvenation`` Metropolis-Hastings steps whose Gaussian proposal has the weighted particle
 covariance scaled by ``(a + b * acceptance)**2`` with a = 1/9, b = 8/9 (Paper B ref. [37]).
+With ``rejuvenate="after_resampling"`` the particles move only in the steps that resample
+and in the last one (resample-move, Chopin 2002): the same weighted approximation of every
+pi_gamma, since each move leaves pi_gamma invariant, at a fraction of the likelihood
+evaluations when zeta is close to 1 (hundreds of tempering steps, a few resamplings).
 The log-evidence log p(Y) = sum_s log sum_i W_{s-1}^i exp((gamma_s - gamma_{s-1}) L_i) is a
 by-product.
 
@@ -46,6 +50,8 @@ LogLikelihood = Callable[[NDArray[np.float64]], ArrayLike]
 #: Proposal scale factor a + b * acceptance rate (Paper B ref. [37], Minson et al. 2013).
 SCALE_A = 1.0 / 9.0
 SCALE_B = 8.0 / 9.0
+#: When the particles move: Algorithm 1 (every step) or resample-move.
+REJUVENATE = ("every_step", "after_resampling")
 
 
 def ess(log_weights: NDArray[np.float64]) -> float:
@@ -109,7 +115,7 @@ class SmcResult:
     names
         Parameter names (default ``x0, x1, ...``).
     history
-        One dict per step: gamma, ess, resampled, acceptance, scale, nfev, seconds.
+        One dict per step: gamma, ess, resampled, moved, acceptance, scale, nfev, seconds.
     """
 
     particles: NDArray[np.float64]
@@ -193,6 +199,9 @@ class SequentialMonteCarlo:
         Parameter names for results and plots.
     max_steps
         Stop with an error after this many tempering steps.
+    rejuvenate
+        ``"every_step"`` (Algorithm 1) or ``"after_resampling"``: Metropolis-Hastings moves
+        only in the steps that resample and in the final step to gamma = 1.
     """
 
     def __init__(
@@ -207,6 +216,7 @@ class SequentialMonteCarlo:
         rng: np.random.Generator | None = None,
         names: Sequence[str] | None = None,
         max_steps: int = 10_000,
+        rejuvenate: str = "every_step",
     ) -> None:
         if not callable(log_likelihood):
             raise ConfigError("log_likelihood must be callable: (N, d) array -> (N,) array", "smc")
@@ -223,6 +233,11 @@ class SequentialMonteCarlo:
             raise ConfigError(f"ess_min is a fraction of N in [0, 1], got {ess_min}", "smc")
         if names is not None and len(names) != len(priors):
             raise ConfigError(f"{len(names)} names for {len(priors)} priors", "smc")
+        if rejuvenate not in REJUVENATE:
+            raise ConfigError(
+                f"unknown rejuvenate={rejuvenate!r}; valid: {', '.join(REJUVENATE)}", "smc"
+            )
+        self.rejuvenate = rejuvenate
         self.log_likelihood = log_likelihood
         self.priors = priors
         self.n_particles = int(n_particles)
@@ -293,6 +308,8 @@ class SequentialMonteCarlo:
         gamma = 0.0
         gammas, ess_hist, accept_hist, history = [0.0], [float(n)], [], []
         log_evidence, log_evidence_var = 0.0, 0.0
+        seg_start: NDArray[np.float64] | None = None
+        seg_inc, seg_log_z = np.zeros(n), 0.0
         acceptance = 1.0
         step = 0
         while gamma < 1.0:
@@ -310,9 +327,10 @@ class SequentialMonteCarlo:
             log_w_norm = log_w - logsumexp(log_w)
             log_z_inc = float(logsumexp(log_w_norm + inc))
             log_evidence += log_z_inc
-            w_prev = np.exp(log_w_norm)
-            ratio = np.exp(inc - log_z_inc)
-            log_evidence_var += float(np.sum(w_prev * (ratio - 1.0) ** 2)) / max(ess(log_w), 1.0)
+            if seg_start is None:  # weights where the particles last moved or were resampled
+                seg_start, seg_inc, seg_log_z = log_w_norm, np.zeros(n), 0.0
+            seg_inc = seg_inc + inc
+            seg_log_z += log_z_inc
             log_w = log_w_norm + inc
             log_w -= logsumexp(log_w)
             gamma = new_gamma
@@ -324,7 +342,17 @@ class SequentialMonteCarlo:
                 log_w = np.zeros(n) - math.log(n)
                 resampled = True
             scale = SCALE_A + SCALE_B * acceptance
-            if self.n_rejuvenation:
+            move = self.rejuvenate == "every_step" or resampled or gamma >= 1.0
+            if move or resampled or gamma >= 1.0:
+                # Variance of the evidence factor of the steps since the last move: one
+                # importance-sampling estimate with the same particles (not independent steps).
+                ratio = np.exp(seg_inc - seg_log_z)
+                w0 = np.exp(seg_start)
+                log_evidence_var += float(np.sum(w0 * (ratio - 1.0) ** 2)) / max(
+                    ess(seg_start), 1.0
+                )
+                seg_start = None
+            if self.n_rejuvenation and move:
                 x, loglik, log_prior, acceptance = self._rejuvenate(
                     x, loglik, log_prior, log_w, gamma, scale
                 )
@@ -337,6 +365,7 @@ class SequentialMonteCarlo:
                     "gamma": gamma,
                     "ess": current_ess,
                     "resampled": resampled,
+                    "moved": bool(self.n_rejuvenation and move),
                     "acceptance": acceptance,
                     "scale": scale,
                     "nfev": self.nfev,
@@ -421,6 +450,7 @@ def smc(
     rng: np.random.Generator | None = None,
     names: Sequence[str] | None = None,
     max_steps: int = 10_000,
+    rejuvenate: str = "every_step",
 ) -> SmcResult:
     """Sample exp(L(x)) p(x) with adaptive tempered SMC (Paper B, Algorithm 1).
 
@@ -438,6 +468,7 @@ def smc(
         rng=rng,
         names=names,
         max_steps=max_steps,
+        rejuvenate=rejuvenate,
     )
     gen = sampler.steps()
     while True:

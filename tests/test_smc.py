@@ -12,8 +12,8 @@ from fbia.iterators.smc import SequentialMonteCarlo, ess, systematic_resample
 N = 2000
 
 
-@pytest.fixture(scope="module")
-def linear_gaussian():
+@pytest.fixture(scope="module", params=["every_step", "after_resampling"])
+def linear_gaussian(request):
     """y = A x + e, e ~ N(0, sigma^2 I), independent normal priors: everything is exact."""
     rng = np.random.default_rng(0)
     d, m, sigma = 3, 6, 0.3
@@ -30,7 +30,9 @@ def linear_gaussian():
         return -0.5 * np.sum(r**2, axis=1) / sigma**2 - 0.5 * m * math.log(2 * math.pi * sigma**2)
 
     priors = [fbia.priors.normal(mu, s) for mu, s in zip(m0, s0, strict=True)]
-    post = fbia.smc(log_likelihood, priors, n_particles=N, n_rejuvenation=5, seed=3)
+    post = fbia.smc(
+        log_likelihood, priors, n_particles=N, n_rejuvenation=5, seed=3, rejuvenate=request.param
+    )
     return post, mean, cov, log_z
 
 
@@ -53,6 +55,19 @@ def test_linear_gaussian_log_evidence_within_its_error(linear_gaussian):
     post, _, _, log_z = linear_gaussian
     assert 0 < post.log_evidence_se < 0.05
     assert abs(post.log_evidence - log_z) < 4 * post.log_evidence_se
+
+
+def test_resample_move_moves_only_when_resampling_and_at_the_end(linear_gaussian):
+    post = linear_gaussian[0]
+    moved = [h["moved"] for h in post.history]
+    resampled = [h["resampled"] for h in post.history]
+    assert moved[-1]
+    if all(moved):  # Algorithm 1: every step moves; N evaluations per MH step and step
+        assert post.nfev == N * (1 + 5 * post.n_steps)
+    else:
+        assert any(resampled)
+        assert moved == [r or i == len(moved) - 1 for i, r in enumerate(resampled)]
+        assert post.nfev == N * (1 + 5 * sum(moved)) < N * (1 + 5 * post.n_steps) / 3
 
 
 def _quadrature_moments(log_density, box, n=801):
