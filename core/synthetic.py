@@ -9,7 +9,12 @@ Paper A (homogeneous example) adds the noise to the measured points along their 
 ...                                   [{"inflow_rate": 100.0}], noise_std=0.001, seed=0,
 ...                                   points=12)
 >>> obs[0].coordinate, obs[0].noise_std, len(obs[0].measurement_points)
-({'inflow_rate': 100.0}, 0.001, 12)
+({'inflow_rate': 100.0}, None, 12)
+
+The data noise sigma_n,obs is not the likelihood's sigma_N (Paper B eq. 5, a modelling choice
+that also covers discretisation and segmentation error: Paper B uses sigma_n,obs much smaller
+than sigma_N), so the observations carry no ``noise_std``: sigma_N comes from the problem
+(``InverseProblem(noise_std=...)``, ``[likelihood] noise_std`` in a study).
 """
 
 from __future__ import annotations
@@ -68,8 +73,9 @@ def synthetic_observations(
     Returns
     -------
     list[Observation]
-        One per coordinate, in order, each with its coordinate and ``noise_std`` (None when
-        ``noise_std`` is 0).  Each interface keeps the model's connectivity.
+        One per coordinate, in order, each with its coordinate and ``noise_std=None`` (the
+        likelihood's sigma_N is the problem's, see above). Each interface keeps the model's
+        connectivity.
 
     Raises
     ------
@@ -122,7 +128,7 @@ def synthetic_observations(
                 coordinate=c,
                 points=mp,
                 directions=directions,
-                noise_std=sigma if sigma > 0.0 else None,
+                noise_std=None,
                 name=f"synthetic {label}".strip(),
             )
         )

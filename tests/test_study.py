@@ -217,3 +217,22 @@ def test_synthetic_study_makes_observations_at_the_truth(tmp_path, monkeypatch):
     np.testing.assert_array_equal(obs.interface.vertices, exact.vertices)  # noise_std 0
     assert len(obs.measurement_points) == 5
     assert "(synthetic)" in study.summary()
+
+
+def test_synthetic_data_noise_is_not_the_likelihood_sigma(tmp_path, monkeypatch):
+    """Paper B: sigma_n,obs (eq. 16) makes the data, sigma_N (eq. 5) is the likelihood's."""
+    from fbia.core.likelihood import noise_levels
+
+    monkeypatch.chdir(tmp_path)
+    text = (
+        STUDY.split("[[observations]]")[0]
+        + (
+            "[synthetic]\ntruth = { E = 400.0, nu = 0.3 }\n"
+            "coordinates = [ { inflow_rate = 100.0 } ]\nnoise_std = 0.001\n\n"
+            "[likelihood]\nnoise_std = 0.03\n\n[measure]"
+        )
+        + STUDY.split("[measure]")[1]
+    )
+    write_study(tmp_path, text.replace("[likelihood]\nnoise_std = 0.0005\n", ""))
+    study = load_study("study.toml")
+    assert noise_levels(study.problem) == [0.03]

@@ -57,7 +57,7 @@ def test_same_seed_same_data_other_seed_other_data(m2):
 def test_normal_noise_lies_along_the_vertex_normals_with_the_given_std(m2, exact):
     sigma = 0.002
     (obs,) = synthetic_observations(m2, TRUTH, [Q], sigma, seed=11)
-    assert obs.noise_std == sigma and obs.coordinate == Q
+    assert obs.noise_std is None and obs.coordinate == Q  # sigma_N is the problem's (eq. 5)
     delta = obs.interface.vertices - exact.vertices
     eps = np.einsum("ij,ij->i", delta, exact.vertex_normals)
     np.testing.assert_allclose(delta, eps[:, None] * exact.vertex_normals, atol=1e-15)
