@@ -76,10 +76,14 @@ def main() -> None:
     )
     ap.add_argument("--skip-default", action="store_true", help="skip GPy's default training")
     ap.add_argument(
-        "--smc-steps",
+        "--skip-particles", action="store_true", help="skip the side-by-side with `particles`"
+    )
+    ap.add_argument(
+        "--algorithm1-steps",
         type=int,
-        default=0,
-        help="stop SMC after this many tempering steps (0: run to gamma = 1)",
+        default=50,
+        help="also run Algorithm 1 (moves in every step) for this many tempering steps "
+        "(0: to gamma = 1, about an hour at full size; -1: skip)",
     )
     args = ap.parse_args()
     if args.quick:
@@ -139,6 +143,29 @@ def main() -> None:
     t_pred = time.perf_counter() - t0
     print(f"GP mean at {args.n_particles} particles: {t_pred:.3f} s per call")
 
+    runs = [("after_resampling", 0)]
+    if args.algorithm1_steps >= 0:
+        runs.append(("every_step", args.algorithm1_steps))
+    for mode, max_steps in runs:
+        post = run_smc(gp, params, args, mode, max_steps)
+        if post is None:
+            continue
+        names = [p.name for p in params]
+        print(
+            "  posterior mean: "
+            + ", ".join(f"{n}={v:.3g}" for n, v in zip(names, post.mean, strict=True))
+        )
+        print(
+            "  truth:          "
+            + ", ".join(f"{n}={v:.3g}" for n, v in zip(names, TRUTH, strict=True))
+        )
+    if not args.skip_particles:
+        particles_side_by_side(params, args)
+
+
+def run_smc(gp, params, args, mode: str, max_steps: int):
+    """One SMC run; ``max_steps`` > 0 stops it after that many steps and prints the rate."""
+    print(f"SMC, rejuvenate={mode!r}:")
     tracemalloc.start()
     sampler = SequentialMonteCarlo(
         gp.predict_mean,
@@ -148,6 +175,7 @@ def main() -> None:
         n_rejuvenation=args.n_rej,
         seed=0,
         names=[p.name for p in params],
+        rejuvenate=mode,
     )
     t0 = time.perf_counter()
     gen = sampler.steps()
@@ -157,42 +185,112 @@ def main() -> None:
         except StopIteration as stop:
             post = stop.value
             break
-        if state.step % 10 == 0:
-            print(f"  {state}  ({time.perf_counter() - t0:.0f} s)", flush=True)
-        if args.smc_steps and state.step >= args.smc_steps:
+        if state.step % 100 == 0:
+            print(f"    {state}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+        if max_steps and state.step >= max_steps:
             t_part = time.perf_counter() - t0
             _, peak_py = tracemalloc.get_traced_memory()
+            tracemalloc.stop()
             print(
-                f"SMC stopped after {state.step} steps at gamma = {state.gamma:.4g}: "
+                f"  stopped after {state.step} steps at gamma = {state.gamma:.4g}: "
                 f"{t_part:.1f} s ({t_part / state.step:.2f} s per step), {sampler.nfev} "
-                f"log-likelihood evaluations; peak memory {peak_py / 2**20:.0f} MiB traced, "
-                f"{peak_rss_mb():.0f} MiB peak RSS"
+                f"log-likelihood evaluations; peak memory {peak_py / 2**20:.0f} MiB traced"
             )
-            return
+            return None
     t_smc = time.perf_counter() - t0
     _, peak_py = tracemalloc.get_traced_memory()
     tracemalloc.stop()
+    moves = sum(h["moved"] for h in post.history)
     print(
-        f"SMC: {t_smc:.1f} s, {post.n_steps} tempering steps, {post.nfev} log-likelihood "
-        f"evaluations, final ESS {post.final_ess:.0f}, log-evidence {post.log_evidence:.4g}"
+        f"  {t_smc:.1f} s, {post.n_steps} tempering steps ({moves} with moves, "
+        f"{sum(h['resampled'] for h in post.history)} resamplings), {post.nfev} log-likelihood "
+        f"evaluations, final ESS {post.final_ess:.0f}, log-evidence {post.log_evidence:.4g} "
+        f"+- {post.log_evidence_se:.2g}"
     )
     print(
-        f"peak memory: {peak_py / 2**20:.0f} MiB traced during SMC, "
+        f"  peak memory: {peak_py / 2**20:.0f} MiB traced during SMC, "
         f"{peak_rss_mb():.0f} MiB peak RSS of the process"
     )
+    return post
+
+
+def particles_side_by_side(params, args) -> None:
+    """Likelihood-evaluation counts: this SMC vs ``particles``' adaptive tempering.
+
+    Both sample exp(L) p with the synthetic L itself (cheap), the same N, MH steps per move
+    and ESS rule: particles' ``AdaptiveTempering`` resamples every step and picks the next
+    exponent so that the ESS of the new weights is ESSrmin N, i.e. ESS_s = zeta ESS_(s-1)
+    with ESSrmin = zeta; its moves are ``len_chain - 1`` random-walk MH steps with the
+    weighted particle covariance (not waste-free, not adaptive).
+    """
+    print(f"side by side on the synthetic L itself (N = {args.n_particles}, zeta = {args.zeta}):")
     names = [p.name for p in params]
-    print(
-        "posterior mean: "
-        + ", ".join(f"{n}={v:.3g}" for n, v in zip(names, post.mean, strict=True))
-    )
-    print("truth:          " + ", ".join(f"{n}={v:.3g}" for n, v in zip(names, TRUTH, strict=True)))
+    for mode in ("after_resampling", "every_step"):
+        sampler = SequentialMonteCarlo(
+            synthetic_log_likelihood,
+            [p.prior for p in params],
+            n_particles=args.n_particles,
+            zeta=args.zeta,
+            n_rejuvenation=args.n_rej,
+            seed=0,
+            names=names,
+            rejuvenate=mode,
+        )
+        t0 = time.perf_counter()
+        gen = sampler.steps()
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                post = stop.value
+                break
+        print(
+            f"  fbia SMC ({mode}): {post.n_steps} steps, {post.nfev} evaluations, "
+            f"{time.perf_counter() - t0:.1f} s, mean " + ", ".join(f"{v:.3g}" for v in post.mean)
+        )
     try:
-        import particles  # noqa: F401
+        import particles
+        from particles import distributions as dists
+        from particles import smc_samplers as ssp
     except ImportError:
         print(
-            "particles package: not installed (particles 0.4 requires numpy < 2; this venv "
-            "has numpy " + np.__version__ + "): no side-by-side count"
+            "  particles: not installed. particles 0.4 pins numpy < 2 but runs with numpy 2; "
+            "install it with `.venv/bin/pip install --no-deps particles joblib` to compare"
         )
+        return
+    law = {}
+    for p in params:
+        if p.name == "inflow_rate":
+            law[p.name] = dists.LinearD(dists.Beta(a=2.6, b=1.4), a=110.0, b=0.0)
+        else:
+            law[p.name] = dists.Uniform(a=p.bounds[0], b=p.bounds[1])
+    prior = dists.StructDist(law)
+    count = [0]
+
+    class Bridge(ssp.TemperingBridge):  # type: ignore[misc]
+        def logtarget(self, theta):
+            z = np.column_stack([theta[n] for n in names])
+            count[0] += len(z)
+            return synthetic_log_likelihood(z) + prior.logpdf(theta)
+
+    move = ssp.AdaptiveMCMCSequence(len_chain=args.n_rej + 1, adaptive=False)
+    fk = ssp.AdaptiveTempering(
+        model=Bridge(base_dist=prior),
+        ESSrmin=args.zeta,
+        wastefree=False,
+        move=move,
+        max_iter=100_000,
+    )
+    np.random.seed(0)  # noqa: NPY002 (particles draws from numpy's global generator)
+    alg = particles.SMC(fk=fk, N=args.n_particles, verbose=False)
+    t0 = time.perf_counter()
+    alg.run()
+    mean = [np.average(alg.X.theta[n], weights=alg.W) for n in names]
+    print(
+        f"  particles {particles.__version__ if hasattr(particles, '__version__') else ''}"
+        f" AdaptiveTempering: {alg.t} steps, {count[0]} evaluations, "
+        f"{time.perf_counter() - t0:.1f} s, mean " + ", ".join(f"{v:.3g}" for v in mean)
+    )
 
 
 if __name__ == "__main__":

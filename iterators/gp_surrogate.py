@@ -40,6 +40,9 @@ from fbia.core.errors import ConfigError
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
 _SQRT3 = math.sqrt(3.0)
+#: Largest |scaled input| for the exp-free product-kernel loop (e^a e^-b stays far from
+#: overflow and underflow: e^(2 * 300) ~ 1e260).
+_EXP_FREE_RANGE = 300.0
 OPTIMIZERS = ("lbfgsb", "scg")
 #: Bounds of the length scales (standardised inputs) and of the signal variance (in units of
 #: (max L - min L)^2) during training.
@@ -131,27 +134,33 @@ def _numba_kernels() -> Any:
         return None
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
-    def product_mean(xs, xt_t, alpha, block):
+    def product_mean(xs, xt_t, ep_s, em_s, ep_t, em_t, alpha, block):
+        # exp(-|a - b|) = min(e^-a e^b, e^a e^-b): with the exponentials of every particle
+        # (ep_s = e^a, em_s = e^-a) and training coordinate precomputed, the pair loop has no
+        # exp left and vectorises (numba has no vectorised exp without Intel's SVML).
         m, d = xs.shape
         n = xt_t.shape[1]
         out = np.empty(m)
         n_blocks = (m + block - 1) // block
         for b in numba.prange(n_blocks):
-            s = np.empty(n)
+            e = np.empty(n)
             p = np.empty(n)
             for i in range(b * block, min(m, (b + 1) * block)):
-                s[:] = 0.0
+                e[:] = 1.0
                 p[:] = 1.0
                 for j in range(d):
                     xij = xs[i, j]
+                    epj = ep_s[i, j]
+                    emj = em_s[i, j]
                     row = xt_t[j]
+                    rp = ep_t[j]
+                    rm = em_t[j]
                     for k in range(n):
-                        t = abs(xij - row[k])
-                        s[k] += t
-                        p[k] *= 1.0 + t
+                        p[k] *= 1.0 + abs(xij - row[k])
+                        e[k] *= min(emj * rp[k], epj * rm[k])
                 acc = 0.0
                 for k in range(n):
-                    acc += alpha[k] * p[k] * np.exp(-s[k])
+                    acc += alpha[k] * p[k] * e[k]
                 out[i] = acc
         return out
 
@@ -178,7 +187,32 @@ def _numba_kernels() -> Any:
                 out[i] = acc
         return out
 
-    return product_mean, single_mean
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def product_mean_exp(xs, xt_t, alpha, block):
+        m, d = xs.shape
+        n = xt_t.shape[1]
+        out = np.empty(m)
+        n_blocks = (m + block - 1) // block
+        for b in numba.prange(n_blocks):
+            s = np.empty(n)
+            p = np.empty(n)
+            for i in range(b * block, min(m, (b + 1) * block)):
+                s[:] = 0.0
+                p[:] = 1.0
+                for j in range(d):
+                    xij = xs[i, j]
+                    row = xt_t[j]
+                    for k in range(n):
+                        t = abs(xij - row[k])
+                        s[k] += t
+                        p[k] *= 1.0 + t
+                acc = 0.0
+                for k in range(n):
+                    acc += alpha[k] * p[k] * np.exp(-s[k])
+                out[i] = acc
+        return out
+
+    return product_mean, single_mean, product_mean_exp
 
 
 _KERNELS: Any = False  # not looked up yet
@@ -426,8 +460,15 @@ class GpSurrogate:
         if kernels is not None and len(xs) >= 64:
             scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
             xt_t = np.ascontiguousarray((self._xs * scale).T)
-            kernel = kernels[0] if self.ard else kernels[1]
-            raw = kernel(np.ascontiguousarray(xs * scale), xt_t, self._alpha, 32)
+            a = np.ascontiguousarray(xs * scale)
+            if self.ard and max(np.abs(a).max(), np.abs(xt_t).max()) < _EXP_FREE_RANGE:
+                raw = kernels[0](
+                    a, xt_t, np.exp(a), np.exp(-a), np.exp(xt_t), np.exp(-xt_t), self._alpha, 32
+                )
+            elif self.ard:  # scaled inputs too far out for e^a: the exp-per-pair loop
+                raw = kernels[2](a, xt_t, self._alpha, 32)
+            else:
+                raw = kernels[1](a, xt_t, self._alpha, 32)
             return self.mean_value + self.scale * self._var * raw
         out = np.empty(len(xs))
         rows = max(1, _BLOCK // max(1, len(self._xs)))

@@ -40,7 +40,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
-from scipy.special import logsumexp
 
 from fbia.core.errors import ConfigError
 from fbia.core.parameters import Prior
@@ -54,11 +53,25 @@ SCALE_B = 8.0 / 9.0
 REJUVENATE = ("every_step", "after_resampling")
 
 
+def logsumexp(a: NDArray[np.float64]) -> float:
+    """log sum exp(a) of a 1-D array, -inf when all entries are -inf.
+
+    scipy.special.logsumexp gives the same numbers with ~0.3 ms of array-API overhead per
+    call; an SMC run with zeta close to 1 calls this tens of thousands of times.
+    """
+    m = float(a.max()) if a.size else -math.inf
+    if not math.isfinite(m):
+        return m
+    return m + math.log(float(np.exp(a - m).sum()))
+
+
 def ess(log_weights: NDArray[np.float64]) -> float:
     """Effective sample size 1 / sum(w_i^2) of normalised weights (eq. 14), from log-weights."""
-    if not np.any(np.isfinite(log_weights)):
+    m = float(log_weights.max()) if log_weights.size else -math.inf
+    if not math.isfinite(m):
         return 0.0
-    return float(np.exp(2.0 * logsumexp(log_weights) - logsumexp(2.0 * log_weights)))
+    w = np.exp(log_weights - m)
+    return float(w.sum() ** 2 / np.dot(w, w))
 
 
 def systematic_resample(weights: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.intp]:
@@ -287,8 +300,14 @@ class SequentialMonteCarlo:
         # Particles with L = -inf get weight 0 at any gamma > current gamma.
         lw, ll = log_w[finite], loglik[finite]
 
+        shift = lw.max()
+
         def excess(g: float) -> float:
-            return ess(lw + (g - gamma) * ll) - target
+            # ESS of the reweighted particles: (sum w)^2 / sum w^2, one exp pass (this runs
+            # ~20 times per tempering step, thousands of steps with zeta close to 1).
+            z = lw + (g - gamma) * ll
+            w = np.exp(z - max(shift, float(z.max())))
+            return float(w.sum() ** 2 / np.dot(w, w)) - target
 
         if excess(1.0) >= 0.0:
             return 1.0
