@@ -280,3 +280,24 @@ def test_design_extends_reusing_the_earlier_runs():
     other = fbia.iterator("gp_smc", n_train=64, **{**FAST, "seed": 5})
     with pytest.raises(fbia.ConfigError, match="not a prefix of this one"):
         other.reuse(first).run(problem)
+
+
+@pytest.mark.slow
+def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
+    """The demo's Bayes study with ale_fsi (144 FEM runs, ~1 min): Paper B Fig. 9a behaviour.
+
+    The ground truth lies inside the posterior bulk, the band follows the E-nu coupling and
+    the failed soft runs are reported, not fatal.
+    """
+    from pathlib import Path
+
+    from fbia.iterators.gp_smc import hpd_mass
+
+    example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
+    result = fbia.load_study(example).run(output=tmp_path / "out", echo=lambda s: None)
+    assert result.success and result.nfev == 144 and 0 < result.n_failed < 20
+    assert abs(result.x["E"] - 400.0) < 60.0 and abs(result.x["nu"] - 0.3) < 0.2
+    cov = np.asarray(result.info["posterior_cov"])
+    assert cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]) > 0.5
+    assert hpd_mass(result, TRUTH) < 0.6
+    assert hpd_mass(result, {"E": 750.0, "nu": -0.7}) > 0.99
