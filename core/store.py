@@ -140,11 +140,26 @@ def _class_version(obj: Any) -> dict[str, str]:
 
 
 def _options(obj: Any) -> dict[str, Any]:
+    """A plugin's options; a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
     opts = getattr(obj, "options", None)
     dump = getattr(opts, "model_dump", None)
-    if callable(dump):
-        return dict(_jsonable(dump(mode="json")))
-    return {}
+    if not callable(dump):
+        return {}
+    out = dict(_jsonable(dump(mode="json")))
+    for key, value in dump().items():
+        if isinstance(value, Path):
+            out[key] = _file_digest(value)
+    return out
+
+
+def _file_digest(path: Path) -> dict[str, Any]:
+    """File name and SHA-256 of its bytes: moving a study folder keeps a store valid, editing
+    the mesh file it names does not."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return {"file": str(path), "sha256": None}
+    return {"file": path.name, "sha256": hashlib.sha256(data).hexdigest()}
 
 
 def _digest(*arrays: Any) -> str | None:

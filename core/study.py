@@ -88,7 +88,9 @@ all of them have one.
 
 Every mistake in a study file raises :class:`~fbia.core.errors.ConfigError` with one line that
 names the file and the key, e.g. ``study.toml: [model.options]: unknown option 'mesh_sise';
-valid options: ...``.  Paths in the file are relative to the file's folder.
+valid options: ...``.  Paths in the file are relative to the file's folder, plugin options
+declared as paths (``Path`` fields of a plugin's ``Options``, e.g. a forward model's
+``mesh_file``) included.
 """
 
 from __future__ import annotations
@@ -98,6 +100,7 @@ import math
 import shutil
 import time
 import tomllib
+import typing
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -589,7 +592,9 @@ class _Reader:
         return name, obj
 
     def prepare_options(self, kind: str, name: str, options: dict[str, Any]) -> dict[str, Any]:
-        """Seed and start values that iterators take from the study (see the module doc)."""
+        """Seed and start values that iterators take from the study, and path options
+        relative to the study file's folder (see the module doc)."""
+        options = self.resolve_paths(kind, name, options)
         if kind != "iterator":
             return options
         fields = self.registry.get(kind, name).factory.Options.model_fields
@@ -601,6 +606,18 @@ class _Reader:
                 options["x0"] = self.starts(options["x0"], f"{where} x0")
             elif all(p.initial is not None for p in self.parameters):
                 options["x0"] = {p.name: p.initial for p in self.parameters}
+        return options
+
+    def resolve_paths(self, kind: str, name: str, options: dict[str, Any]) -> dict[str, Any]:
+        """Relative paths given for ``Path`` options, made relative to the study's folder."""
+        schema = getattr(self.registry.get(kind, name).factory, "Options", None)
+        fields = getattr(schema, "model_fields", {})
+        for key, value in options.items():
+            spec = fields.get(key)
+            if spec is None or not isinstance(value, str) or not _is_path_type(spec.annotation):
+                continue
+            path = Path(value).expanduser()
+            options[key] = path if path.is_absolute() else (self.folder / path).resolve()
         return options
 
     def starts(self, x0: Any, where: str) -> Any:
@@ -960,6 +977,11 @@ class _Reader:
             cluster,
             dict(options),
         )
+
+
+def _is_path_type(annotation: Any) -> bool:
+    """Whether an option's type is ``Path`` or a union with it (``Path | None``)."""
+    return annotation is Path or Path in typing.get_args(annotation)
 
 
 def _model_dim(model: Any) -> int | None:

@@ -203,3 +203,30 @@ def test_sessions_record_who_ran_what(tmp_path):
     ]
     assert sessions[1]["executor"] == {"kind": "processes", "workers": 2}
     assert sessions[0]["study_sha256"] == "abc" and sessions[0]["finished"]
+
+
+def test_a_file_option_counts_by_its_content_not_its_folder(tmp_path):
+    """A mesh file named by a study: moving the study keeps its store, editing the file not."""
+    from pathlib import Path
+
+    from fbia.core.options import PluginOptions
+    from fbia.core.store import _options
+
+    class Options(PluginOptions):
+        mesh_file: Path | None = None
+
+    class Model:
+        def __init__(self, path):
+            self.options = Options(mesh_file=path)
+
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "cell.msh").write_text("mesh v1")
+    a, b = (
+        _options(Model(tmp_path / "a" / "cell.msh")),
+        _options(Model(tmp_path / "b" / "cell.msh")),
+    )
+    assert a == b and a["mesh_file"]["file"] == "cell.msh"
+    (tmp_path / "b" / "cell.msh").write_text("mesh v2")
+    assert _options(Model(tmp_path / "b" / "cell.msh")) != a
+    assert _options(Model(None)) == {"mesh_file": None}
