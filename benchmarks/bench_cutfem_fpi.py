@@ -12,7 +12,7 @@
 * ``table5`` -- Levenberg-Marquardt from the three initial guesses of Paper A Table 5 on noise-free
   synthetic data of the default model, robust and paper mode;
 * ``ale``    -- cross-check with ``ale_fsi`` (same flow cell, neo-Hooke E = 300 Pa, nu = 0.3
-  and 0.49): interface distance for K = 1e-4 ... 1e-8 mm^2.
+  and 0.49): interface distance for K = 1e-4 ... 1e-12 mm^2.
 
 Wall times depend on the load of the (shared, 2-core) machine; the load average is printed with
 them and the CPU time of the process is the steadier figure.
@@ -181,7 +181,7 @@ def bench_ale(interface_mesh_size: float = 0.04) -> None:
         cut = CutFemFpiForwardModel(
             interface_mesh_size=interface_mesh_size, coupling_tol=1e-7, nu=nu
         )
-        for K in (1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
+        for K in (1e-4, 1e-6, 1e-8, 1e-10, 1e-12):
             t0 = time.perf_counter()
             with tempfile.TemporaryDirectory() as tmp:
                 sol = cut.solve({"K": K}, [LEVEL], tmp)

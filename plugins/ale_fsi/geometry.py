@@ -349,8 +349,13 @@ def mesh_from_arrays(
     regions: Mapping[str, ArrayLike],
     boundaries: Mapping[str, ArrayLike],
     where: str = "mesh",
+    check: bool = True,
 ) -> ngsolve.Mesh:
-    """An NGSolve mesh from vertex coordinates and named triangle/segment connectivities."""
+    """An NGSolve mesh from vertex coordinates and named triangle/segment connectivities.
+
+    With ``check`` (default) the names must follow this module's convention
+    (:func:`check_mesh`); ``check=False`` builds any named mesh, e.g. a solid region alone.
+    """
     import netgen.meshing as nm
     import ngsolve
 
@@ -370,7 +375,8 @@ def mesh_from_arrays(
         s = np.ascontiguousarray(np.asarray(segs, dtype=np.int32))
         ngmesh.AddElements(dim=1, index=idx, data=s, base=0)
     mesh = ngsolve.Mesh(ngmesh)
-    check_mesh(mesh, where)
+    if check:
+        check_mesh(mesh, where)
     return mesh
 
 

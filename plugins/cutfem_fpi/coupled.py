@@ -9,9 +9,12 @@
 One coupling iteration: level set from the deformed boundary (P2 nodal interpolant of the
 signed distance to a densely sampled polygon, :class:`NodalLevelSet`) -> permeability
 ``k = J^-1 F K F^T`` with Kozeny-Carman ``K`` (eq. 11) moved to the background mesh -> flow
-solve -> pore pressure and shear moved to the skeleton (evaluated at the deformed skeleton
-points) -> skeleton Newton -> update of the skeleton state by interface quasi-Newton
-(IQN-ILS) or Aitken relaxation.  Steady problem: no added-mass instability.
+solve -> pore pressure on the interface and shear moved to the skeleton (evaluated at the
+deformed skeleton points), the pore pressure inside rebuilt from its interface values by
+steady Darcy on the skeleton mesh (exact for any K, and the accurate part of the flow's
+``p_d`` when ``K << h^2``, see :mod:`.flow`) -> skeleton Newton -> update of the skeleton
+state by interface quasi-Newton (IQN-ILS) or Aitken relaxation.  Steady problem: no
+added-mass instability.
 
 Cost (Paper A example, default meshes): the flow dominates.  Its forms and the analysis of
 its factorisation are kept while the cut elements do not change, Newton solves are inexact
@@ -25,6 +28,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,7 +37,7 @@ from numpy.typing import NDArray
 from fbia.core.errors import ConfigError, ForwardModelError
 
 from .flow import CutFlow, FlowSettings
-from .skeleton import Skeleton, SkeletonSettings
+from .skeleton import Skeleton, SkeletonSettings, kozeny_carman
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,7 @@ class CouplingSettings:
     level_set: str = "nodal"  # "nodal": P2 interpolant on the background mesh; "voxel"
     acceleration: str = "iqn_ils"  # "iqn_ils" or "aitken"
     inexact: float = 0.1  # Newton tolerances: inexact * (last interface change) / height
+    pore_pressure: str = "interface"  # skeleton pore pressure: "interface" or "volume"
 
 
 @dataclass
@@ -63,17 +68,28 @@ class CouplingReport:
     skeleton_iterations: int = 0
 
 
-def channel_mesh(length: float, height: float, mesh_size: float) -> Any:
-    """Background mesh of the empty channel: boundaries inflow, outflow, walls."""
+def channel_mesh(
+    length: float, height: float, mesh_size: float, origin: tuple[float, float] = (0.0, 0.0)
+) -> Any:
+    """Background mesh of the empty channel ``origin + [0, length] x [0, height]``:
+    boundaries inflow, outflow, walls.  The grid is the same for every ``origin`` (netgen
+    meshes a moved rectangle differently), so results do not depend on where a user's mesh
+    puts its origin."""
     import ngsolve as ngs
     from netgen.occ import OCCGeometry, Rectangle, X, Y
+
+    from fbia.plugins.ale_fsi.geometry import mesh_arrays, mesh_from_arrays
 
     face = Rectangle(length, height).Face()
     face.edges.Min(X).name = "inflow"
     face.edges.Max(X).name = "outflow"
     face.edges.Min(Y).name = "walls"
     face.edges.Max(Y).name = "walls"
-    return ngs.Mesh(OCCGeometry(face, dim=2).GenerateMesh(maxh=mesh_size))
+    mesh = ngs.Mesh(OCCGeometry(face, dim=2).GenerateMesh(maxh=mesh_size))
+    if origin == (0.0, 0.0):
+        return mesh
+    pts, regions, boundaries = mesh_arrays(mesh)
+    return mesh_from_arrays(pts + np.asarray(origin), regions, boundaries, check=False)
 
 
 def biofilm_mesh(
@@ -112,6 +128,128 @@ def biofilm_mesh(
     if curve_order > 1:
         mesh.Curve(curve_order)
     return mesh
+
+
+@dataclass(frozen=True)
+class FlowCellFile:
+    """What ``cutfem_fpi`` takes from a user's flow-cell mesh (:func:`read_flow_cell`)."""
+
+    skeleton: Any  # NGSolve mesh of the solid: region solid, boundaries interface, solid_fixed
+    origin: tuple[float, float]  # lower left corner of the channel [mm]
+    length: float  # channel length [mm]
+    height: float  # channel height [mm]
+    outline: NDArray[np.float64]  # interface vertices, upstream foot first [mm]
+
+
+def read_flow_cell(path: str | Path) -> FlowCellFile:
+    """The biofilm and channel of a flow-cell mesh file, the same file ``ale_fsi`` reads.
+
+    The file is read and its names checked by :func:`fbia.plugins.ale_fsi.geometry.read_mesh`
+    (regions ``fluid``, ``solid`` or ``solid_1..n``; boundaries ``inflow``, ``outflow``,
+    ``interface``, ``solid_fixed``, optional ``walls``); a file that breaks the convention
+    raises its :class:`ConfigError`, which names the file.  Of the mesh, ``cutfem_fpi`` uses
+
+    * the solid region(s), merged into one region ``solid``: the skeleton mesh in the
+      reference configuration (straight-sided, as the file gives it), with its ``interface``
+      edges (the biofilm outline seen from the fluid, from which the level set is built) and
+      its clamped ``solid_fixed`` edges;
+    * the bounding box: the channel, meshed by the fixed background grid.  The fluid region
+      must therefore fill the box minus the biofilm, with ``inflow`` and ``outflow`` on its
+      left and right sides, and the interface must be one curve from floor to floor (the
+      level-set construction closes it along the floor), without a rigid ``obstacle``.
+    """
+    import ngsolve as ngs
+
+    from fbia.plugins.ale_fsi.geometry import (
+        mesh_arrays,
+        mesh_from_arrays,
+        read_mesh,
+        solid_regions,
+    )
+    from fbia.plugins.ale_fsi.solver import interface_chains
+
+    where = str(path)
+    cell = read_mesh(path)
+    pts, regions, boundaries = mesh_arrays(cell)
+    if "obstacle" in boundaries:
+        raise ConfigError("cutfem_fpi has no rigid obstacles; the mesh names an 'obstacle'", where)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    size = hi - lo
+    lo[np.abs(lo) < 1e-12 * size.max()] = 0.0  # a mesher's round-off at the origin
+    area = sum(float(np.sum(_triangle_areas(pts, t))) for t in regions.values())
+    if abs(area - size[0] * size[1]) > 1e-9 * size[0] * size[1]:
+        raise ConfigError(
+            f"the flow cell must fill its bounding box {lo.tolist()} - {hi.tolist()} (the "
+            f"channel of cutfem_fpi's background grid); the mesh covers {area:.6g} of "
+            f"{size[0] * size[1]:.6g} mm^2",
+            where,
+        )
+    tol = 1e-9 * float(size.max())
+    for name, side in (("inflow", lo[0]), ("outflow", hi[0])):
+        if np.any(np.abs(pts[boundaries[name]][..., 0] - side) > tol):
+            raise ConfigError(f"boundary {name!r} must lie on the side x = {side:g} mm", where)
+    # the solid region(s) alone, renumbered
+    tris = np.vstack([regions[name] for name in solid_regions(cell)])
+    used, local = np.unique(tris, return_inverse=True)
+    renumber = np.full(len(pts), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    edges, counts = np.unique(
+        np.sort(np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1),
+        axis=0,
+        return_counts=True,
+    )
+    outer = {tuple(e) for e in edges[counts == 1]}
+    named = {}
+    for name in ("interface", "solid_fixed"):
+        segs = boundaries[name]
+        on = [tuple(sorted(e)) in outer for e in segs.tolist()]
+        if not all(on):
+            raise ConfigError(
+                f"{on.count(False)} {name!r} edge(s) do not lie on the boundary of the solid", where
+            )
+        named[name] = renumber[segs]
+    loose = outer - {tuple(sorted(e)) for name in named for e in boundaries[name].tolist()}
+    if loose:
+        raise ConfigError(
+            f"{len(loose)} edge(s) of the solid's boundary are neither 'interface' nor "
+            "'solid_fixed'",
+            where,
+        )
+    skeleton = mesh_from_arrays(
+        pts[used], {"solid": local.reshape(tris.shape)}, named, where, check=False
+    )
+    try:
+        chains = interface_chains(skeleton, ngs)
+    except ForwardModelError as exc:
+        raise ConfigError(str(exc), where) from None
+    bnd = list(skeleton.Elements(ngs.BND))
+    chain_pts = [
+        [
+            *(start for _, start in chain),
+            next(v.nr for v in bnd[chain[-1][0]].vertices if v.nr != chain[-1][1]),
+        ]
+        for chain in chains
+    ]
+    if len(chains) != 1 or chain_pts[0][0] == chain_pts[0][-1]:
+        raise ConfigError(
+            "cutfem_fpi needs one biofilm whose 'interface' is one open curve from the floor to "
+            f"the floor; the mesh has {len(chains)} interface curve(s)"
+            + (", closed" if len(chains) == 1 else ""),
+            where,
+        )
+    return FlowCellFile(
+        skeleton=skeleton,
+        origin=(float(lo[0]), float(lo[1])),
+        length=float(size[0]),
+        height=float(size[1]),
+        outline=pts[used][chain_pts[0]],
+    )
+
+
+def _triangle_areas(pts: NDArray[np.float64], tris: NDArray[np.int64]) -> NDArray[np.float64]:
+    a = pts[tris[:, 1]] - pts[tris[:, 0]]
+    b = pts[tris[:, 2]] - pts[tris[:, 0]]
+    return 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
 
 
 class InterfaceSampler:
@@ -185,11 +323,12 @@ def signed_distance(
     points: NDArray[np.float64], curve: NDArray[np.float64], depth: float
 ) -> NDArray[np.float64]:
     """Signed distance of ``points`` to ``curve``, negative in the biofilm: the region enclosed
-    by the curve and the floor (the polygon is closed at ``y = -depth``, well below the floor,
-    so that the zero level inside the channel is the curve alone)."""
+    by the curve and the floor (the polygon is closed ``depth`` below the floor, the height of
+    the curve's feet, so that the zero level inside the channel is the curve alone)."""
     import shapely
 
-    ring = np.vstack([curve, [curve[-1, 0], -depth], [curve[0, 0], -depth]])
+    bottom = min(curve[0, 1], curve[-1, 1]) - depth
+    ring = np.vstack([curve, [curve[-1, 0], bottom], [curve[0, 0], bottom]])
     poly = shapely.Polygon(ring)
     inside = shapely.contains_xy(poly, points[:, 0], points[:, 1])
     dist = polyline_distance(points, curve)
@@ -197,17 +336,23 @@ def signed_distance(
 
 
 def signed_distance_levelset(
-    curve: NDArray[np.float64], length: float, height: float, h: float
+    curve: NDArray[np.float64],
+    length: float,
+    height: float,
+    h: float,
+    origin: tuple[float, float] = (0.0, 0.0),
 ) -> Any:
-    """Voxel level set on the channel ``[0, length] x [0, height]``: the signed distance to
-    ``curve`` (negative in the biofilm) on a grid of spacing ``h``, bilinear in between."""
+    """Voxel level set on the channel ``origin + [0, length] x [0, height]``: the signed
+    distance to ``curve`` (negative in the biofilm) on a grid of spacing ``h``, bilinear in
+    between."""
     import ngsolve as ngs
 
+    x0, y0 = origin
     nx = int(math.ceil(length / h)) + 1
     ny = int(math.ceil(height / h)) + 1
-    X, Y = np.meshgrid(np.linspace(0.0, length, nx), np.linspace(0.0, height, ny))
+    X, Y = np.meshgrid(np.linspace(x0, x0 + length, nx), np.linspace(y0, y0 + height, ny))
     sd = signed_distance(np.c_[X.ravel(), Y.ravel()], curve, height).reshape(ny, nx)
-    return ngs.VoxelCoefficient((0.0, 0.0), (length, height), sd, linear=True)
+    return ngs.VoxelCoefficient((x0, y0), (x0 + length, y0 + height), sd, linear=True)
 
 
 class NodalLevelSet:
@@ -311,11 +456,13 @@ class PoroFsiSolver:
         skeleton_settings: SkeletonSettings,
         coupling: CouplingSettings,
         outflow: str = "horizontal",
+        origin: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         import ngsolve as ngs
 
         self.ngs = ngs
         self.length, self.height = length, height
+        self.origin = (float(origin[0]), float(origin[1]))  # lower left corner of the channel
         self.bg = background
         self.coupling = coupling
         self.skeleton = Skeleton(skeleton_mesh, skeleton_settings)
@@ -355,8 +502,7 @@ class PoroFsiSolver:
         phi0 = self.skeleton.phi0
         F = ngs.Id(2) + ngs.Grad(d)
         J = ngs.Det(F)
-        Jphi = J * phi
-        Kkc = self.K0 * (1 - phi0**2) / phi0**3 * Jphi**3 / (1 - Jphi**2)  # eq. 11
+        Kkc = self.K0 * kozeny_carman(J, phi, phi0)  # eq. 11
         k = (Kkc / J) * F * F.trans
         return ngs.CoefficientFunction((k[0, 0], k[0, 1], k[1, 1], phi))
 
@@ -364,7 +510,9 @@ class PoroFsiSolver:
         """Level set of the deformed biofilm on the background mesh (negative inside)."""
         if self._nodal_lset is not None:
             return self._nodal_lset(curve)
-        return signed_distance_levelset(curve, self.length, self.height, self.coupling.voxel_size)
+        return signed_distance_levelset(
+            curve, self.length, self.height, self.coupling.voxel_size, self.origin
+        )
 
     def _to_background(self) -> None:
         """Permeability and porosity at the background vertices: linear interpolation on the
@@ -433,15 +581,21 @@ class PoroFsiSolver:
         e = self._grad_bg
         gu = ngs.CoefficientFunction((e[0], e[1], e[2], e[3]), dims=(2, 2))
         mesh = sk.mesh
+        interface_only = self.coupling.pore_pressure == "interface"
         mesh.SetDeformation(sk.displacement)
         try:
-            sk.pressure.Set(flow.pore_pressure)
+            if interface_only:
+                sk.pressure.Set(flow.pore_pressure, ngs.BND, definedon=mesh.Boundaries(sk.loaded))
+            else:
+                sk.pressure.Set(flow.pore_pressure)
             n = ngs.specialcf.normal(2)  # out of the biofilm
             t = ngs.CoefficientFunction((-n[1], n[0]))
             tau = self.flow_settings.viscosity * (t * ((gu + gu.trans) * n))
             sk.shear.Set(tau, definedon=mesh.Boundaries("interface"))
         finally:
             mesh.UnsetDeformation()
+        if interface_only:
+            sk.extend_pressure()
 
     # -- one coupled solve -------------------------------------------------------------------
     def solve(self, inflow_rate: float, where: str) -> CouplingReport:
@@ -459,7 +613,8 @@ class PoroFsiSolver:
         sk = self.skeleton
         x = sk.state()
         accel = _Aitken(cs) if cs.acceleration == "aitken" else _IqnIls(cs)
-        prof = 6.0 * inflow_rate / self.height**2 * ngs.y * (self.height - ngs.y)
+        above = ngs.y - self.origin[1]  # height above the floor
+        prof = 6.0 * inflow_rate / self.height**2 * above * (self.height - above)
         inflow = ngs.CoefficientFunction((prof, 0.0))
         wall = ngs.CoefficientFunction((0.0, 0.0))
         bc = self.bg.BoundaryCF({"inflow": inflow}, default=wall)

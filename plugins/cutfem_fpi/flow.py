@@ -22,6 +22,19 @@ penalties (direct facet-patch form) on both sides keep the system well condition
 cut; a second-order :class:`xfem.lsetcurv.LevelSetMeshAdaptation` makes the geometry
 third-order accurate.
 
+Small permeability.  The Darcy stiffness ``K/mu`` and the ghost penalty that scales with it
+vanish beside the coupling terms once ``K << h^2``: ``p_d`` then acts as the Lagrange
+multiplier of ``u.n_F = q.n_F ~ 0`` (eq. 14c), in a space of the same order as the velocity,
+and without a K-independent stabilisation its interface values are wrong by O(1) (at
+K = 1e-10 mm^2 on the flow cell the skeleton then saw porosities outside (0, 1)).  This is
+the discretisation, not round-off: direct solvers with and without equilibration agree on
+that solution.  The pore-pressure ghost penalty therefore has the floor
+``pore_ghost_floor * gamma / mu`` of the fluid pressure's; its interface values then converge
+at second order for any K, like the normal stress they balance (eq. 14b).  Inside the porous
+part, where the band of stabilised elements only extrapolates them, ``p_d`` is O(h) for
+``K << h^2``; the skeleton takes the interface values and rebuilds the inside by Darcy on its
+own mesh (:meth:`.skeleton.Skeleton.extend_pressure`).
+
 Inhomogeneous interface data ``g_mass`` (eq. 14c), ``g_normal`` (14b), ``g_tangent`` (14d) and
 volume sources exist for manufactured solutions; the physical problem sets them to zero.
 
@@ -56,6 +69,9 @@ class FlowSettings:
     saffman: bool = False  # drop beta_BJ q.t in eq. 14d
     order: int = 2  # velocity and pore-pressure order; fluid pressure order - 1
     ghost_penalty: float = 0.1  # gamma of the facet-patch ghost penalties
+    # K-independent part of the pore-pressure ghost penalty, in units of the fluid pressure's
+    # (gamma / mu): for K << h^2 the pore pressure is the multiplier of eq. 14c and needs it
+    pore_ghost_floor: float = 1.0
     lset_order: int = 2  # order of the level-set mesh adaptation
     newton_tol: float = 1e-9  # estimated relative velocity error that ends Newton
     newton_max_iter: int = 20
@@ -279,8 +295,8 @@ class CutFlow:
         g = s.ghost_penalty
         a += g * mu / h**2 * (u - u.Other()) * (v - v.Other()) * m["dw_f"]
         a += -g / mu * (p - p.Other()) * (q - q.Other()) * m["dw_f"]
-        kscale = 0.5 * self.k_trace / mu
-        a += g * kscale / h**2 * (pd - pd.Other()) * (w - w.Other()) * m["dw_p"]
+        gd = g * (0.5 * self.k_trace / h**2 + s.pore_ghost_floor) / mu
+        a += gd * (pd - pd.Other()) * (w - w.Other()) * m["dw_p"]
 
         f = ngs.LinearForm(self.X)
         if convection is not None and rho > 0:

@@ -6,6 +6,14 @@
 ['E', 'nu', 'phi0', 'K', 'inflow_rate']
 >>> sol = model.solve({"E": 300.0, "phi0": 0.25}, [{"inflow_rate": 100.0}], "run")  # doctest: +SKIP
 
+A user mesh of the flow cell, the file ``ale_fsi`` reads, replaces the builder::
+
+    model = CutFemFpiForwardModel(mesh_file="cell.msh", background_mesh_size=0.05)
+
+Its solid region(s) become the skeleton mesh, their ``interface`` edges the biofilm outline
+and its bounding box the channel (:func:`.coupled.read_flow_cell`); the background grid is
+always cutfem's own.
+
 Coordinates are inflow levels ``{"inflow_rate": r}`` (mm^2/s, plane strain) or, in the
 quasi-2-D setting of Paper A, ``{"inflow_volume_rate": Q}`` (mm^3/s over a channel of
 ``thickness`` mm; ``r = Q / thickness``).  The levels are solved in ascending order, each
@@ -22,7 +30,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from fbia.core.errors import ConfigError, ForwardModelError
 from fbia.core.interface import Interface
@@ -61,12 +69,24 @@ class CutFemFpiForwardModel(Configurable):
             description="quasi-2-D channel thickness: a coordinate {'inflow_volume_rate': Q} "
             "means inflow_rate = Q / thickness [mm]",
         )
-        channel_length: float = Field(2.0, gt=0, description="flow-cell length [mm]")
-        channel_height: float = Field(1.0, gt=0, description="flow-cell height [mm]")
+        channel_length: float = Field(
+            2.0, gt=0, description="flow-cell length (with mesh_file: its bounding box) [mm]"
+        )
+        channel_height: float = Field(
+            1.0, gt=0, description="flow-cell height (with mesh_file: its bounding box) [mm]"
+        )
         outline: list[Point] | None = Field(
             None,
             description="biofilm outline from the upstream to the downstream foot on y = 0; "
             "default: the ale_fsi mound (Paper A Fig. 2) [mm]",
+        )
+        mesh_file: Path | None = Field(
+            None,
+            description="user mesh of the flow cell, the file ale_fsi reads (gmsh .msh or any "
+            "meshio format; regions fluid, solid[_k]; boundaries inflow, outflow, interface, "
+            "solid_fixed[, walls]): its solid regions, merged, are the skeleton mesh "
+            "(straight-sided), its interface edges the biofilm outline, its bounding box the "
+            "channel; replaces outline and the builder's geometry options [path]",
         )
         smooth_outline: bool = Field(
             True, description="interpolate the outline by a cubic spline [-]"
@@ -98,6 +118,19 @@ class CutFemFpiForwardModel(Configurable):
             "horizontal", description="outflow: v_y = 0 and traction-free in x, or free [-]"
         )
         ghost_penalty: float = Field(0.1, gt=0, description="ghost-penalty factor gamma [-]")
+        pore_ghost_floor: float = Field(
+            1.0,
+            ge=0,
+            description="K-independent part of the pore-pressure ghost penalty, relative to "
+            "the fluid pressure's gamma/mu: keeps the pore pressure stable for K << h^2, where "
+            "it is the multiplier of the interface mass condition (eq. 14c) [-]",
+        )
+        pore_pressure_transfer: Literal["interface", "volume"] = Field(
+            "interface",
+            description="pore pressure of the skeleton: the flow's values on the interface "
+            "extended by steady Darcy on the skeleton mesh ('interface'), or the flow's field "
+            "interpolated everywhere ('volume') [-]",
+        )
         coupling_tol: float = Field(
             1e-6, gt=0, description="interface change that ends the coupling [mm]"
         )
@@ -133,6 +166,24 @@ class CutFemFpiForwardModel(Configurable):
             False, description="write VTU fields per coordinate into the workdir [-]"
         )
         threads: int = Field(1, ge=1, description="NGSolve task-manager threads [-]")
+
+        @model_validator(mode="after")
+        def _mesh_source(self) -> CutFemFpiForwardModel.Options:
+            builder = (
+                "outline",
+                "smooth_outline",
+                "skeleton_curve_order",
+                "interface_mesh_size",
+                "channel_length",
+                "channel_height",
+            )
+            clash = [k for k in builder if k in self.model_fields_set]
+            if self.mesh_file is not None and clash:
+                raise ValueError(
+                    f"give either mesh_file or {', '.join(clash)}, not both (the mesh file "
+                    "sets the biofilm, its mesh and the channel)"
+                )
+            return self
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         super().__init__(options, **kwargs)
@@ -299,20 +350,30 @@ class CutFemFpiForwardModel(Configurable):
                 PoroFsiSolver,
                 biofilm_mesh,
                 channel_mesh,
+                read_flow_cell,
             )
             from .flow import FlowSettings
             from .skeleton import SkeletonSettings
 
             o = self.options
             ngs.SetNumThreads(o.threads)
-            outline = self._outline()
+            if o.mesh_file is not None:
+                cell = read_flow_cell(o.mesh_file)
+                _check_outline(
+                    cell.outline, cell.origin, cell.length, cell.height, f"{o.mesh_file}: interface"
+                )
+                skeleton_mesh, origin = cell.skeleton, cell.origin
+                length, height = cell.length, cell.height
+            else:
+                length, height, origin = o.channel_length, o.channel_height, (0.0, 0.0)
+                skeleton_mesh = biofilm_mesh(
+                    self._outline(), o.smooth_outline, o.interface_mesh_size, o.skeleton_curve_order
+                )
             self._solver = PoroFsiSolver(
-                channel_mesh(o.channel_length, o.channel_height, o.background_mesh_size),
-                biofilm_mesh(
-                    outline, o.smooth_outline, o.interface_mesh_size, o.skeleton_curve_order
-                ),
-                o.channel_length,
-                o.channel_height,
+                channel_mesh(length, height, o.background_mesh_size, origin),
+                skeleton_mesh,
+                length,
+                height,
                 FlowSettings(
                     viscosity=o.fluid_viscosity,
                     density=o.fluid_density,
@@ -320,6 +381,7 @@ class CutFemFpiForwardModel(Configurable):
                     beta_bj=o.beta_bj,
                     saffman=o.saffman,
                     ghost_penalty=o.ghost_penalty,
+                    pore_ghost_floor=o.pore_ghost_floor,
                     newton_tol=o.flow_newton_tol,
                 ),
                 SkeletonSettings(kappa=o.kappa, eta=o.eta),
@@ -331,13 +393,15 @@ class CutFemFpiForwardModel(Configurable):
                     level_set=o.level_set,
                     acceleration=o.acceleration,
                     inexact=o.coupling_inexact,
+                    pore_pressure=o.pore_pressure_transfer,
                 ),
                 outflow=o.outflow,
+                origin=origin,
             )
         return self._solver
 
     def _outline(self) -> np.ndarray:
-        """The biofilm outline (mm), checked like the ``ale_fsi`` flow cell checks it."""
+        """The biofilm outline option (mm), checked like the ``ale_fsi`` flow cell checks it."""
         from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
 
         o = self.options
@@ -345,22 +409,33 @@ class CutFemFpiForwardModel(Configurable):
         p = np.asarray(DEFAULT_OUTLINE if o.outline is None else o.outline, dtype=float)
         if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3 or not np.all(np.isfinite(p)):
             raise ConfigError(f"needs at least 3 finite points (x, y), got shape {p.shape}", where)
-        tol = 1e-9 * max(o.channel_length, o.channel_height)
-        if abs(p[0, 1]) > tol or abs(p[-1, 1]) > tol:
-            raise ConfigError("must start and end on the channel floor (y = 0)", where)
-        if np.any(p[1:-1, 1] <= tol) or np.any(p[:, 1] >= o.channel_height - tol):
-            raise ConfigError("inner points must lie strictly inside the channel", where)
-        if np.any(p[:, 0] <= tol) or np.any(p[:, 0] >= o.channel_length - tol):
-            raise ConfigError("must stay clear of the inflow and outflow", where)
-        if p[0, 0] >= p[-1, 0]:
-            raise ConfigError("must run from the upstream to the downstream foot", where)
-        import shapely
-
-        if not shapely.LineString(np.vstack([p, p[:1]])).is_simple:
-            raise ConfigError("intersects itself", where)
+        _check_outline(p, (0.0, 0.0), o.channel_length, o.channel_height, where)
         return p
 
     @property
     def solver(self) -> Any:
         """The underlying :class:`~fbia.plugins.cutfem_fpi.coupled.PoroFsiSolver`."""
         return self._get_solver()
+
+
+def _check_outline(
+    p: np.ndarray, origin: tuple[float, float], length: float, height: float, where: str
+) -> None:
+    """Raise :class:`ConfigError` unless the outline ``p`` (n, 2) runs from an upstream to a
+    downstream foot on the floor of the channel ``origin + [0, length] x [0, height]``,
+    strictly inside it otherwise and without self-intersection (what the level set needs)."""
+    import shapely
+
+    x0, y0 = origin
+    tol = 1e-9 * max(length, height)
+    x, y = p[:, 0] - x0, p[:, 1] - y0
+    if abs(y[0]) > tol or abs(y[-1]) > tol:
+        raise ConfigError(f"must start and end on the channel floor (y = {y0:g})", where)
+    if np.any(y[1:-1] <= tol) or np.any(y >= height - tol):
+        raise ConfigError("inner points must lie strictly inside the channel", where)
+    if np.any(x <= tol) or np.any(x >= length - tol):
+        raise ConfigError("must stay clear of the inflow and outflow", where)
+    if x[0] >= x[-1]:
+        raise ConfigError("must run from the upstream to the downstream foot", where)
+    if not shapely.LineString(np.vstack([p, p[:1]])).is_simple:
+        raise ConfigError("intersects itself", where)

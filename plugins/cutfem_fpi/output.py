@@ -6,7 +6,9 @@ Two files per coordinate ``k``:
   0 inside the biofilm), ``pressure`` (Pa, channel fluid), ``pore_pressure`` (Pa, biofilm),
   ``level_set`` (mm, negative in the biofilm) and ``porosity`` (-);
 * ``cutfem_fpi_skeleton_{k:03d}.vtu`` -- the biofilm's reference mesh with ``displacement``
-  (mm; "Warp By Vector" shows the deformed biofilm), ``porosity`` and ``pore_pressure``.
+  (mm; "Warp By Vector" shows the deformed biofilm), ``porosity`` and ``pore_pressure`` (the
+  one the skeleton is loaded with; with ``pore_pressure_transfer = "interface"`` rebuilt from
+  the interface values, the better field when K << h^2).
 """
 
 from __future__ import annotations

@@ -23,6 +23,11 @@ On the interface the traction balance (eq. 14a) with eq. 14b gives the total tra
 configuration ``-p J F^-T N dA + tau t |cof(F) N| dA``.  ``solid_fixed`` is clamped.
 Newton's method, damped to stay admissible, with NGSolve's symbolic linearisation and a
 direct solver.
+
+The pore pressure inside the skeleton can be rebuilt from its values on the interface
+(:meth:`Skeleton.extend_pressure`): the steady Darcy problem ``div q = 0`` pulled back to the
+reference configuration, where ``J F^-1 k F^-T`` is the Kozeny-Carman ``K`` of eq. 11, reads
+``-Div(K Grad p) = 0`` with no flux through ``solid_fixed``.
 """
 
 from __future__ import annotations
@@ -77,7 +82,8 @@ class Skeleton:
         self.P = ngs.L2(mesh, order=1)
         self.X = ngs.FESpace([self.D, self.P])
         self.gfx = ngs.GridFunction(self.X)
-        self.pressure = ngs.GridFunction(ngs.H1(mesh, order=settings.order))  # p on this mesh
+        # p on this mesh; the interface values are Dirichlet data of extend_pressure
+        self.pressure = ngs.GridFunction(ngs.H1(mesh, order=settings.order, dirichlet=loaded))
         self.shear = ngs.GridFunction(ngs.H1(mesh, order=settings.order))  # tau on interface
         self.E = ngs.Parameter(300.0)
         self.nu = ngs.Parameter(0.3)
@@ -134,10 +140,35 @@ class Skeleton:
         a += (ngs.InnerProduct(F * S, ngs.Grad(dd)) + constitutive * r) * ngs.dx
         a += -(-p * cofN + self.shear * t_da) * dd * ngs.ds(self.loaded)
         self.form = a
+        # steady Darcy in the reference configuration, scaled by 1/K0 (eq. 10b, 11)
+        pp, ww = self.pressure.space.TnT()
+        Jh = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
+        darcy = ngs.BilinearForm(self.pressure.space, symmetric=True)
+        darcy += kozeny_carman(Jh, self.porosity, phi0) * ngs.grad(pp) * ngs.grad(ww) * ngs.dx
+        self._darcy = darcy
+        self._darcy_inverse: Any = None
         self._inverse: Any = None  # factorisation of the Newton matrix, analysed once
         self._newton_rate = 0.0  # C of e_(k+1) <= C e_k^2, the largest seen so far
         self._check_points: Any = None
         self.J = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
+
+    def extend_pressure(self) -> None:
+        """The pore pressure inside from its values on the interface (the Dirichlet data held
+        by :attr:`pressure` there): ``-Div(K Grad p) = 0`` with the Kozeny-Carman ``K`` of the
+        current state, no flux through the other boundaries."""
+        ngs = self.ngs
+        p = self.pressure
+        with ngs.TaskManager():
+            self._darcy.Assemble()
+            if self._darcy_inverse is None:
+                self._darcy_inverse = self._darcy.mat.Inverse(
+                    p.space.FreeDofs(), inverse="sparsecholesky"
+                )
+            else:
+                self._darcy_inverse.Update()
+            res = p.vec.CreateVector()
+            res.data = -(self._darcy.mat * p.vec)
+            p.vec.data += self._darcy_inverse * res
 
     def solve(self, where: str = "skeleton", tol: float | None = None) -> int:
         """Newton from the current state; returns the number of iterations.
@@ -222,6 +253,13 @@ class Skeleton:
 
     def set_state(self, vec: NDArray[np.float64]) -> None:
         self.gfx.vec.FV().NumPy()[:] = vec
+
+
+def kozeny_carman(J: Any, phi: Any, phi0: Any) -> Any:
+    """Kozeny-Carman permeability over the reference value K0 (eq. 11):
+    ``(1 - phi0^2) / phi0^3 * (J phi)^3 / (1 - (J phi)^2)``, 1 in the reference state."""
+    Jphi = J * phi
+    return (1 - phi0**2) / phi0**3 * Jphi**3 / (1 - Jphi**2)
 
 
 def timed(fn: Any, *args: Any) -> tuple[Any, float]:
