@@ -187,32 +187,7 @@ def _numba_kernels() -> Any:
                 out[i] = acc
         return out
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def product_mean_exp(xs, xt_t, alpha, block):
-        m, d = xs.shape
-        n = xt_t.shape[1]
-        out = np.empty(m)
-        n_blocks = (m + block - 1) // block
-        for b in numba.prange(n_blocks):
-            s = np.empty(n)
-            p = np.empty(n)
-            for i in range(b * block, min(m, (b + 1) * block)):
-                s[:] = 0.0
-                p[:] = 1.0
-                for j in range(d):
-                    xij = xs[i, j]
-                    row = xt_t[j]
-                    for k in range(n):
-                        t = abs(xij - row[k])
-                        s[k] += t
-                        p[k] *= 1.0 + t
-                acc = 0.0
-                for k in range(n):
-                    acc += alpha[k] * p[k] * np.exp(-s[k])
-                out[i] = acc
-        return out
-
-    return product_mean, single_mean, product_mean_exp
+    return product_mean, single_mean
 
 
 _KERNELS: Any = False  # not looked up yet
@@ -449,7 +424,7 @@ class GpSurrogate:
     def predict_mean(self, x: ArrayLike, fused: bool | None = None) -> NDArray[np.float64]:
         """Posterior mean of L at the rows of ``x`` (M, d) (eq. 28a), all points at once.
 
-        ``fused``: use the numba loops (default: when numba is installed) or numpy blocks.
+        ``fused``: the compiled numba loops (default) or, with ``False``, numpy blocks.
         """
         if not hasattr(self, "_alpha"):
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
@@ -461,15 +436,15 @@ class GpSurrogate:
             scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
             xt_t = np.ascontiguousarray((self._xs * scale).T)
             a = np.ascontiguousarray(xs * scale)
-            if self.ard and max(np.abs(a).max(), np.abs(xt_t).max()) < _EXP_FREE_RANGE:
+            if not self.ard:
+                raw = kernels[1](a, xt_t, self._alpha, 32)
+                return self.mean_value + self.scale * self._var * raw
+            # Scaled inputs too far out for e^a (tiny length scales): the numpy blocks below.
+            if max(np.abs(a).max(), np.abs(xt_t).max()) < _EXP_FREE_RANGE:
                 raw = kernels[0](
                     a, xt_t, np.exp(a), np.exp(-a), np.exp(xt_t), np.exp(-xt_t), self._alpha, 32
                 )
-            elif self.ard:  # scaled inputs too far out for e^a: the exp-per-pair loop
-                raw = kernels[2](a, xt_t, self._alpha, 32)
-            else:
-                raw = kernels[1](a, xt_t, self._alpha, 32)
-            return self.mean_value + self.scale * self._var * raw
+                return self.mean_value + self.scale * self._var * raw
         out = np.empty(len(xs))
         rows = max(1, _BLOCK // max(1, len(self._xs)))
         for i in range(0, len(xs), rows):
