@@ -349,6 +349,8 @@ class GpSmcIterator(IteratorBase):
                 "acceptance": post.acceptance,
                 "nfev_log_likelihood": post.nfev,
                 "final_ess": post.final_ess,
+                "rejuvenate": opts.rejuvenate,
+                "steps_with_moves": sum(bool(h.get("moved", True)) for h in post.history),
             },
             priors=[p.describe() for p in inputs],
             seconds=time.perf_counter() - t_start,
