@@ -587,14 +587,16 @@ class _Reader:
         name = self.string(spec["name"], self.where(f"[{section}]", "name"))
         self.registry.get(kind, name, where=self.where(f"[{section}]", "name"))
         options = self.table(spec.get("options", {}), self.where(f"[{section}.options]"))
-        options = self.prepare_options(kind, name, dict(options))
+        options = self.prepare_options(kind, name, dict(options), section)
         obj = self.registry.create(kind, name, options, where=self.where(f"[{section}.options]"))
         return name, obj
 
-    def prepare_options(self, kind: str, name: str, options: dict[str, Any]) -> dict[str, Any]:
+    def prepare_options(
+        self, kind: str, name: str, options: dict[str, Any], section: str = ""
+    ) -> dict[str, Any]:
         """Seed and start values that iterators take from the study, and path options
         relative to the study file's folder (see the module doc)."""
-        options = self.resolve_paths(kind, name, options)
+        options = self.resolve_paths(kind, name, options, section or kind)
         if kind != "iterator":
             return options
         fields = self.registry.get(kind, name).factory.Options.model_fields
@@ -608,8 +610,11 @@ class _Reader:
                 options["x0"] = {p.name: p.initial for p in self.parameters}
         return options
 
-    def resolve_paths(self, kind: str, name: str, options: dict[str, Any]) -> dict[str, Any]:
-        """Relative paths given for ``Path`` options, made relative to the study's folder."""
+    def resolve_paths(
+        self, kind: str, name: str, options: dict[str, Any], section: str
+    ) -> dict[str, Any]:
+        """Relative paths given for ``Path`` options, made relative to the study's folder;
+        they name input files (meshes), so a missing one is an error before any run."""
         schema = getattr(self.registry.get(kind, name).factory, "Options", None)
         fields = getattr(schema, "model_fields", {})
         for key, value in options.items():
@@ -617,7 +622,12 @@ class _Reader:
             if spec is None or not isinstance(value, str) or not _is_path_type(spec.annotation):
                 continue
             path = Path(value).expanduser()
-            options[key] = path if path.is_absolute() else (self.folder / path).resolve()
+            path = path if path.is_absolute() else (self.folder / path).resolve()
+            if not path.is_file():
+                raise ConfigError(
+                    f"file not found: {path}", self.where(f"[{section}.options]", key)
+                )
+            options[key] = path
         return options
 
     def starts(self, x0: Any, where: str) -> Any:

@@ -35,7 +35,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def from_file(cell: Path, tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+def from_file(cell: Path, tmp_path_factory: pytest.TempPathFactory):
     model = CutFemFpiForwardModel(mesh_file=cell, **COMMON)
     return model, model.solve({}, [LEVEL], tmp_path_factory.mktemp("run")).interface(LEVEL)
 
@@ -51,7 +51,7 @@ def _edit(src: Path, dst: Path, **renames: str | None) -> Path:
     return dst
 
 
-def test_mesh_file_gives_the_builders_answer_for_the_same_outline(from_file, tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_mesh_file_gives_the_builders_answer_for_the_same_outline(from_file, tmp_path) -> None:
     """File and builder (polygon of the file's interface vertices, straight P2 elements of the
     same size) share the background grid, the channel and the reference interface exactly;
     only the netgen triangulations of the solid differ (74 vs 76 triangles).  The deformed
@@ -79,7 +79,7 @@ def test_mesh_file_gives_the_builders_answer_for_the_same_outline(from_file, tmp
     assert gap < 0.015 * disp
 
 
-def test_a_moved_mesh_gives_the_moved_interface(cell, from_file, tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_a_moved_mesh_gives_the_moved_interface(cell, from_file, tmp_path) -> None:
     """The channel is the file's bounding box wherever it lies; the background grid is moved
     with it, so the answer is the same to round-off."""
     shift = np.array([0.3, -0.2])
@@ -102,7 +102,7 @@ def test_a_moved_mesh_gives_the_moved_interface(cell, from_file, tmp_path) -> No
         ({"walls": "obstacle"}, "cutfem_fpi has no rigid obstacles"),
     ],
 )
-def test_a_mesh_without_the_names_is_a_one_line_config_error(cell, tmp_path, renames, message):  # type: ignore[no-untyped-def]
+def test_a_mesh_without_the_names_is_a_one_line_config_error(cell, tmp_path, renames, message):
     bad = _edit(cell, tmp_path / "bad.msh", **renames)
     model = CutFemFpiForwardModel(mesh_file=bad, **COMMON)
     with pytest.raises(fbia.ConfigError) as info:
@@ -111,7 +111,7 @@ def test_a_mesh_without_the_names_is_a_one_line_config_error(cell, tmp_path, ren
     assert text.startswith(f"{bad}: ") and message in text and "\n" not in text
 
 
-def test_solid_subdomains_merge_into_one_skeleton(tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_solid_subdomains_merge_into_one_skeleton(tmp_path) -> None:
     """An ale_fsi file with regions solid_1, solid_2 (Paper A Fig. 9 layers): cutfem_fpi has one
     skeleton material, so the regions become one skeleton mesh, their 'internal' edges dropped."""
     from fbia.plugins.ale_fsi.geometry import build_flow_cell, mesh_arrays, write_mesh
@@ -161,7 +161,7 @@ kind = "serial"
 """
 
 
-def test_study_reads_mesh_file_relative_to_the_study_file(cell, from_file, tmp_path, monkeypatch):  # type: ignore[no-untyped-def]
+def test_study_reads_mesh_file_relative_to_the_study_file(cell, from_file, tmp_path, monkeypatch):
     """``fbia forward`` on a study whose mesh_file is relative to the study's folder, run from
     another working directory."""
     folder = tmp_path / "study"
@@ -178,3 +178,18 @@ def test_study_reads_mesh_file_relative_to_the_study_file(cell, from_file, tmp_p
         elsewhere / "f" / "interfaces" / "simulated_inflow_rate_100.csv"
     )
     np.testing.assert_allclose(simulated.vertices, from_file[1].vertices, rtol=0, atol=1e-12)
+
+
+def test_missing_or_unreadable_mesh_file_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    """Checked by `fbia validate` before any run; meshio's sys.exit on a garbage .msh is caught."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "study.toml").write_text(STUDY.format(mesh="meshes/cell.msh"))
+    assert main(["validate", "study.toml"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "[model.options] mesh_file: file not found" in err
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "cell.msh").write_text("not a mesh")
+    with pytest.raises(fbia.ConfigError, match=r"cell.msh: meshio cannot read the mesh"):
+        fbia.forward_model("cutfem_fpi", mesh_file=tmp_path / "meshes" / "cell.msh").solve(
+            {"E": 300.0}, [{"inflow_rate": 100.0}], tmp_path / "run"
+        )

@@ -21,6 +21,8 @@ NGSolve is imported inside the functions, so importing this module is cheap.
 
 from __future__ import annotations
 
+import contextlib
+import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -306,10 +308,15 @@ def _read_named_cells(
     where = str(path)
     if not path.is_file():
         raise ConfigError("mesh file not found", where)
+    said = io.StringIO()
     try:
-        data = meshio.read(path)
-    except Exception as exc:  # meshio raises many types for unreadable files
-        raise ConfigError(f"meshio cannot read the mesh: {exc}", where) from None
+        # For an extension shared by several formats (.msh: ansys, gmsh) meshio prints
+        # "Couldn't read file ..." and calls sys.exit(1) when none of them reads it.
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            data = meshio.read(path)
+    except (Exception, SystemExit) as exc:  # meshio raises many types for unreadable files
+        reason = " ".join(said.getvalue().split()) or str(exc)
+        raise ConfigError(f"meshio cannot read the mesh: {reason}", where) from None
     points = np.asarray(data.points, dtype=float)
     if points.shape[1] == 3:
         if np.any(np.abs(points[:, 2]) > 1e-12 * max(1.0, float(np.abs(points).max()))):
