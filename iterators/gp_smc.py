@@ -74,12 +74,22 @@ POSTERIOR_FORMAT = "fbia-posterior-1"
 class GpSmcState:
     """What :meth:`GpSmcIterator.steps` yields: the stage and its figures."""
 
-    stage: Literal["design", "forward_runs", "surrogate", "smc"]
+    stage: Literal["design", "forward_runs", "surrogate", "smc", "check"]
     message: str
     data: dict[str, Any] = field(default_factory=dict)
 
     def __str__(self) -> str:
         return f"[{self.stage}] {self.message}"
+
+
+def _check_note(check: Mapping[str, Any] | None) -> str:
+    """The posterior check in the result message, with a warning when it failed."""
+    if not check:
+        return ""
+    note = f"; surrogate RMSE {check['rmse']:.3g} in L at {check['n']} posterior draws"
+    if not check["rmse"] < 1.0:
+        note += " (not well below 1: the posterior is not reliable, train on more runs)"
+    return note
 
 
 # -- the likelihood (eq. 4-5) -------------------------------------------------------------------
@@ -145,6 +155,13 @@ class GpSmcIterator(IteratorBase):
             "SMC calls the forward model (only for cheap models) [-]",
         )
         n_train: int = Field(200, ge=2, description="forward runs of the training design [-]")
+        n_check: int = Field(
+            0,
+            ge=0,
+            description="forward runs at distinct posterior draws after SMC, to measure the "
+            "surrogate's error where the posterior is (its RMSE in L should be well below 1; "
+            "surrogate mode) [-]",
+        )
         n_test: int = Field(
             0,
             ge=0,
@@ -334,6 +351,17 @@ class GpSmcIterator(IteratorBase):
         self.posterior = post
         if opts.mode == "direct":
             nfev, n_failed = counter["nfev"], counter["failed"]
+        elif opts.n_check:
+            check, evs = self._posterior_check(problem, evaluator, post, gp, names, sigmas)
+            evaluations = [*evaluations, *evs]
+            nfev += len(evs)
+            n_failed += check["n_failed"]
+            info["posterior_check"] = check
+            yield GpSmcState(
+                "check",
+                f"surrogate at {check['n']} posterior draws: RMSE {check['rmse']:.3g} in L",
+                record("check", **{k: v for k, v in check.items() if k != "x"}),
+            )
         info.update(self._summaries(post, n_x, log_likelihood, inputs))
         info.update(
             particles=post.particles,
@@ -362,6 +390,7 @@ class GpSmcIterator(IteratorBase):
             message=(
                 f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
                 f"steps ({opts.mode}; {nfev} forward runs, {n_failed} failed)"
+                + _check_note(info.get("posterior_check"))
             ),
             x=x_map,
             nfev=nfev,
@@ -406,6 +435,42 @@ class GpSmcIterator(IteratorBase):
                 "reuse",
             )
         return list(prev.evaluations[:n])
+
+    def _posterior_check(
+        self,
+        problem: InverseProblem,
+        evaluator: Evaluator,
+        post: SmcResult,
+        gp: GpSurrogate,
+        names: list[str],
+        sigmas: list[float],
+    ) -> tuple[dict[str, Any], list[Evaluation]]:
+        """Forward runs at ``n_check`` distinct posterior draws: the surrogate's error there.
+
+        The held-out Sobol points measure the error over the whole box; what decides whether
+        the posterior is right is the error where the posterior mass is, in units of L (an
+        error of order 1 changes posterior ratios by a factor e).
+        """
+        rng = np.random.default_rng([self.options.seed, 2])
+        order = rng.choice(len(post.weights), size=len(post.weights), p=post.weights)
+        _, first = np.unique(order, return_index=True)
+        idx = order[np.sort(first)][: self.options.n_check]
+        x = post.particles[idx]
+        points = [dict(zip(names, map(float, row), strict=True)) for row in x]
+        evs = list(evaluator.evaluate(problem, points))
+        loglik = np.array([log_likelihood_of(ev, sigmas) for ev in evs])
+        ok = np.isfinite(loglik)
+        err = gp.predict_mean(x[ok]) - loglik[ok]
+        n_ok = int(ok.sum())
+        return {
+            "n": n_ok,
+            "n_failed": int((~ok).sum()),
+            "x": x,
+            "log_likelihood": loglik,
+            "rmse": float(np.sqrt(np.mean(err**2))) if n_ok else math.nan,
+            "max_abs": float(np.max(np.abs(err))) if n_ok else math.nan,
+            "mean_error": float(np.mean(err)) if n_ok else math.nan,
+        }, evs
 
     def _finish_failed(self, evaluations, history, info, n_failed, nfev) -> Result:
         messages = sorted({ev.message for ev in evaluations if not ev.ok})[:3]

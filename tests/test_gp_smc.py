@@ -284,7 +284,7 @@ def test_design_extends_reusing_the_earlier_runs():
 
 @pytest.mark.slow
 def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
-    """The demo's Bayes study with ale_fsi (144 FEM runs, ~1 min): Paper B Fig. 9a behaviour.
+    """The demo's Bayes study with ale_fsi (152 FEM runs, ~1 min): Paper B Fig. 9a behaviour.
 
     The ground truth lies inside the posterior bulk, the band follows the E-nu coupling and
     the failed soft runs are reported, not fatal.
@@ -295,7 +295,8 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
 
     example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
     result = fbia.load_study(example).run(output=tmp_path / "out", echo=lambda s: None)
-    assert result.success and result.nfev == 144 and 0 < result.n_failed < 20
+    assert result.success and result.nfev == 144 + 8 and 0 < result.n_failed < 20
+    assert result.info["posterior_check"]["rmse"] < 1.0  # the surrogate is right there
     assert abs(result.x["E"] - 400.0) < 60.0 and abs(result.x["nu"] - 0.3) < 0.2
     cov = np.asarray(result.info["posterior_cov"])
     assert cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]) > 0.5
@@ -319,3 +320,25 @@ def test_resample_move_gives_the_algorithm_1_posterior_with_fewer_calls(runs):
     diff = np.abs(np.asarray(result.info["posterior_mean"]) - ref.info["posterior_mean"])
     np.testing.assert_array_less(diff, 6 * sd / math.sqrt(smc["final_ess"]))
     np.testing.assert_allclose(np.sqrt(np.diag(result.info["posterior_cov"])), sd, rtol=0.15)
+
+
+def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
+    problem = _problem()
+    sigmas = [0.03]
+    good = fbia.iterator("gp_smc", n_train=256, n_check=8, **FAST)
+    result = good.run(problem)
+    check = result.info["posterior_check"]
+    assert check["n"] == 8 and check["n_failed"] == 0 and result.nfev == 256 + 8
+    x = np.asarray(check["x"])
+    assert len(np.unique(x, axis=0)) == 8  # distinct draws
+    # The figures are the GP mean against the exact L at those points (eq. 5).
+    exact = [
+        log_likelihood_of(problem.evaluate(dict(zip(problem.names, row, strict=True))), sigmas)
+        for row in x
+    ]
+    err = good.surrogate.predict_mean(x) - np.array(exact)
+    assert check["rmse"] == pytest.approx(float(np.sqrt(np.mean(err**2))), rel=1e-9)
+    assert check["rmse"] < 1.0 and "not reliable" not in result.message
+    # Eight training runs cannot resolve the posterior: the check says so.
+    poor = fbia.iterator("gp_smc", n_train=8, n_check=8, **FAST).run(problem)
+    assert poor.info["posterior_check"]["rmse"] > 1.0 and "not reliable" in poor.message
