@@ -237,13 +237,7 @@ def particles_side_by_side(params, args) -> None:
             rejuvenate=mode,
         )
         t0 = time.perf_counter()
-        gen = sampler.steps()
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                post = stop.value
-                break
+        post = sampler.run()
         print(
             f"  fbia SMC ({mode}): {post.n_steps} steps, {post.nfev} evaluations, "
             f"{time.perf_counter() - t0:.1f} s, mean " + ", ".join(f"{v:.3g}" for v in post.mean)

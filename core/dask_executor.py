@@ -217,26 +217,16 @@ class DaskEvaluator(_EvaluatorBase):
                 try:
                     outcome = fut.result()
                 except KilledWorker:
-                    outcome = RunOutcome(
-                        Evaluation(
-                            index=i,
-                            x=dict(x),
-                            status="failed",
-                            workdir=str(wd),
-                            message="the Dask worker process died during this run, on every "
-                            "worker that tried it (killed, crashed or exited)",
-                        )
+                    outcome = RunOutcome.unfinished(
+                        i,
+                        x,
+                        str(wd),
+                        "the Dask worker process died during this run, on every worker that "
+                        "tried it (killed, crashed or exited)",
                     )
                 except Exception as exc:  # raised outside problem.evaluate's guard
-                    outcome = RunOutcome(
-                        Evaluation(
-                            index=i,
-                            x=dict(x),
-                            status="error",
-                            workdir=str(wd),
-                            message=f"{type(exc).__name__}: {exc}",
-                        )
-                    )
+                    message = f"{type(exc).__name__}: {exc}"
+                    outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
                 fut.release()
                 done[i] = self._finish(outcome)
         except BaseException:  # Ctrl-C or a bug: stop the tasks instead of waiting for them

@@ -496,15 +496,8 @@ class ProcessPoolEvaluator(_EvaluatorBase):
                 lost.append(job)
                 continue
             except (Exception, SystemExit) as exc:  # raised outside problem.evaluate's guard
-                outcome = RunOutcome(
-                    Evaluation(
-                        index=i,
-                        x=dict(x),
-                        status="error",
-                        workdir=str(wd),
-                        message=f"{type(exc).__name__}: {exc}",
-                    )
-                )
+                message = f"{type(exc).__name__}: {exc}"
+                outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
             done[i] = self._finish(outcome)
         return sorted(lost)
 

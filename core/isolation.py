@@ -69,6 +69,24 @@ class RunOutcome:
     worker: str = ""
     artifacts: dict[str, str] = field(default_factory=dict)
 
+    @classmethod
+    def unfinished(
+        cls,
+        index: int,
+        x: dict[str, float],
+        workdir: str,
+        message: str,
+        status: str = "failed",
+        seconds: float = 0.0,
+        worker: str = "",
+    ) -> RunOutcome:
+        """A run that gave no record of its own (its process died, timed out, raised outside
+        ``problem.evaluate``'s guard): a record with ``status`` and ``message``."""
+        record = Evaluation(
+            index=index, x=dict(x), status=status, message=message, workdir=workdir, time=seconds
+        )
+        return cls(record, worker)
+
 
 def worker_label() -> str:
     """``host:pid`` of this process (the executors' default worker name)."""
@@ -102,12 +120,6 @@ def run_view(problem: InverseProblem) -> InverseProblem:
     view.parameters = [Parameter(p.name, unit=p.unit) for p in problem.parameters]
     view.uncertain = [Parameter(p.name, unit=p.unit) for p in problem.uncertain]
     return view
-
-
-def _failed(x: dict[str, float], workdir: str, index: int, message: str, t: float) -> Evaluation:
-    return Evaluation(
-        index=index, x=dict(x), status="failed", message=message, workdir=workdir, time=t
-    )
 
 
 # -- messages: length-prefixed pickles on raw pipes ----------------------------------------------
@@ -250,7 +262,7 @@ class IsolatedRunner:
     ) -> RunOutcome:
         error = self._load(problem)
         if error is not None:
-            return RunOutcome(Evaluation(index, x, "error", error, workdir=workdir), worker_label())
+            return RunOutcome.unfinished(index, x, workdir, error, "error", worker=worker_label())
         assert self._jobs is not None and self._answers is not None
         t0 = time.perf_counter()
         with contextlib.suppress(BrokenPipeError):  # a dead helper: its silence says so below
@@ -271,8 +283,8 @@ class IsolatedRunner:
             message = (
                 f"time-out after {timeout:g} s: the run was stopped (its process group was killed)"
             )
-            return RunOutcome(
-                _failed(x, workdir, index, message, time.perf_counter() - t0), worker_label()
+            return RunOutcome.unfinished(
+                index, x, workdir, message, seconds=time.perf_counter() - t0, worker=worker_label()
             )
         if answer is None:
             return self._lost(x, workdir, index, t0, "the helper process for isolated runs died")
@@ -281,8 +293,8 @@ class IsolatedRunner:
                 f"the process running this evaluation died ({answer[1]}: e.g. os._exit, a "
                 "segfault, the out-of-memory killer)"
             )
-            return RunOutcome(
-                _failed(x, workdir, index, message, time.perf_counter() - t0), worker_label()
+            return RunOutcome.unfinished(
+                index, x, workdir, message, seconds=time.perf_counter() - t0, worker=worker_label()
             )
         outcome: RunOutcome = pickle.loads(answer[1])
         outcome.worker = worker_label()
@@ -292,9 +304,13 @@ class IsolatedRunner:
         self, x: dict[str, float], workdir: str, index: int, t0: float, why: str
     ) -> RunOutcome:
         status = self._reap()
-        return RunOutcome(
-            _failed(x, workdir, index, f"{why} ({status})", time.perf_counter() - t0),
-            worker_label(),
+        return RunOutcome.unfinished(
+            index,
+            x,
+            workdir,
+            f"{why} ({status})",
+            seconds=time.perf_counter() - t0,
+            worker=worker_label(),
         )
 
     def _reap(self) -> str:

@@ -378,7 +378,7 @@ class GpSmcIterator(IteratorBase):
                 "nfev_log_likelihood": post.nfev,
                 "final_ess": post.final_ess,
                 "rejuvenate": opts.rejuvenate,
-                "steps_with_moves": sum(bool(h.get("moved", True)) for h in post.history),
+                "steps_with_moves": sum(h["moved"] for h in post.history),
             },
             priors=[p.describe() for p in inputs],
             seconds=time.perf_counter() - t_start,

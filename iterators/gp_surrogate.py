@@ -26,6 +26,7 @@ alpha = (K + sigma_n^2 I)^-1 (y - m) computed once after training; no variances.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import time
 import warnings
@@ -121,17 +122,15 @@ def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.
     return np.asarray(cho_solve((chol, True), b))
 
 
-def _numba_kernels() -> Any:
-    """JIT-compiled fused k(x*, X) alpha loops (optional: only if numba is installed).
+@functools.cache
+def _fused_kernels() -> Any:
+    """JIT-compiled fused k(x*, X) alpha loops, built on first use (numba imports slowly).
 
     One pass over the particles (in parallel blocks) and the training points, without the
     (M, n) cross-covariance matrix: 5-10x faster than the numpy blocks, same numbers up to
     round-off.
     """
-    try:
-        import numba
-    except ImportError:
-        return None
+    import numba
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def product_mean(xs, xt_t, ep_s, em_s, ep_t, em_t, alpha, block):
@@ -188,16 +187,6 @@ def _numba_kernels() -> Any:
         return out
 
     return product_mean, single_mean
-
-
-_KERNELS: Any = False  # not looked up yet
-
-
-def _fused_kernels() -> Any:
-    global _KERNELS
-    if _KERNELS is False:
-        _KERNELS = _numba_kernels()
-    return _KERNELS
 
 
 class GpSurrogate:
@@ -424,15 +413,14 @@ class GpSurrogate:
     def predict_mean(self, x: ArrayLike, fused: bool | None = None) -> NDArray[np.float64]:
         """Posterior mean of L at the rows of ``x`` (M, d) (eq. 28a), all points at once.
 
-        ``fused``: the compiled numba loops (default) or, with ``False``, numpy blocks.
+        ``fused``: compiled numba loops (``None``: from 64 points on; ``True``: always) or
+        numpy blocks (``False``).
         """
         if not hasattr(self, "_alpha"):
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
         xs = self._standardise(np.atleast_2d(x))
-        kernels = _fused_kernels() if fused is not False else None
-        if fused and kernels is None:
-            raise ConfigError("fused=True needs numba (pip install numba)", "gp")
-        if kernels is not None and len(xs) >= 64:
+        if fused is not False and (fused or len(xs) >= 64):
+            kernels = _fused_kernels()
             scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
             xt_t = np.ascontiguousarray((self._xs * scale).T)
             a = np.ascontiguousarray(xs * scale)

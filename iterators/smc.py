@@ -26,7 +26,7 @@ The log-evidence log p(Y) = sum_s log sum_i W_{s-1}^i exp((gamma_s - gamma_{s-1}
 by-product.
 
 :class:`SequentialMonteCarlo` is steppable (``steps()`` yields an :class:`SmcState` per
-tempering step and returns the :class:`SmcResult`); :func:`smc` drains it.
+tempering step and returns the :class:`SmcResult`); ``run()`` and :func:`smc` drain it.
 """
 
 from __future__ import annotations
@@ -361,17 +361,20 @@ class SequentialMonteCarlo:
                 log_w = np.zeros(n) - math.log(n)
                 resampled = True
             scale = SCALE_A + SCALE_B * acceptance
-            move = self.rejuvenate == "every_step" or resampled or gamma >= 1.0
+            move = self.n_rejuvenation > 0 and (
+                self.rejuvenate == "every_step" or resampled or gamma >= 1.0
+            )
             if move or resampled or gamma >= 1.0:
-                # Variance of the evidence factor of the steps since the last move: one
-                # importance-sampling estimate with the same particles (not independent steps).
+                # Variance of the evidence factor of the steps since the particles last moved
+                # or were resampled: one importance-sampling estimate with the same particles
+                # (not independent steps).
                 ratio = np.exp(seg_inc - seg_log_z)
                 w0 = np.exp(seg_start)
                 log_evidence_var += float(np.sum(w0 * (ratio - 1.0) ** 2)) / max(
                     ess(seg_start), 1.0
                 )
                 seg_start = None
-            if self.n_rejuvenation and move:
+            if move:
                 x, loglik, log_prior, acceptance = self._rejuvenate(
                     x, loglik, log_prior, log_w, gamma, scale
                 )
@@ -384,7 +387,7 @@ class SequentialMonteCarlo:
                     "gamma": gamma,
                     "ess": current_ess,
                     "resampled": resampled,
-                    "moved": bool(self.n_rejuvenation and move),
+                    "moved": move,
                     "acceptance": acceptance,
                     "scale": scale,
                     "nfev": self.nfev,
@@ -407,6 +410,16 @@ class SequentialMonteCarlo:
             names=self.names,
             history=history,
         )
+
+    def run(self) -> SmcResult:
+        """Run Algorithm 1 to gamma = 1 and return the :class:`SmcResult`."""
+        gen = self.steps()
+        while True:
+            try:
+                next(gen)
+            except StopIteration as stop:
+                result: SmcResult = stop.value
+                return result
 
     def _proposal_factor(self, x: NDArray[np.float64], log_w: NDArray[np.float64], scale: float):
         """Cholesky factor of scale^2 times the weighted particle covariance."""
@@ -489,9 +502,4 @@ def smc(
         max_steps=max_steps,
         rejuvenate=rejuvenate,
     )
-    gen = sampler.steps()
-    while True:
-        try:
-            next(gen)
-        except StopIteration as stop:
-            return stop.value
+    return sampler.run()
