@@ -9,6 +9,10 @@ steps, log-likelihood evaluations and peak memory.
     .venv/bin/python benchmarks/bench_gp_smc.py            # full size
     .venv/bin/python benchmarks/bench_gp_smc.py --quick    # small, for a smoke run
 
+The side-by-side with the SMC library ``particles`` runs only where it is installed: it is
+not a dependency, because particles 0.4 declares numpy < 2 (it runs with numpy 2):
+``.venv/bin/pip install --no-deps particles==0.4 joblib``.
+
 The synthetic L mimics the heterogeneous mound (Paper B Fig. 11): subdomain k with area share
 w_k deforms with a_k = q / E_k (lean) and a_k (1 - 2 nu_k) (flattening); L is eq. 5 with
 D^2 = sum_k w_k^2 [(a_k - a_k*)^2 + (a_k (1 - 2 nu_k) - a_k* (1 - 2 nu_k*))^2], sigma_N = 0.02.
@@ -248,8 +252,10 @@ def particles_side_by_side(params, args) -> None:
         from particles import smc_samplers as ssp
     except ImportError:
         print(
-            "  particles: not installed. particles 0.4 pins numpy < 2 but runs with numpy 2; "
-            "install it with `.venv/bin/pip install --no-deps particles joblib` to compare"
+            "  particles: not installed (optional, not a dependency of fbia). particles 0.4 "
+            "declares numpy < 2 but runs with numpy 2 (checked with numpy 2.4); install it with "
+            "`.venv/bin/pip install --no-deps particles==0.4 joblib` to compare (a plain "
+            "`pip install particles` resolves to the older 0.3 next to numpy >= 2)"
         )
         return
     law = {}

@@ -37,6 +37,8 @@ Status tags of the result (``success`` is True for the first three):
 ``converged_gradient``  err_grad < eps_grad (eq. 29a), or r ⟂ J within gtol (robust)
 ``converged_residual``  err_res < eps_res (eq. 29b), or ‖r‖² stopped decreasing (ftol, robust)
 ``converged_step``      no step larger than xtol reduces err_res (robust)
+``plateau``             robust: converged only because a column of J vanished (the residuals
+                        stopped depending on a parameter), from both first trust regions
 ``iteration_limit``     max_iter iterations (eq. 29c); x is the best iterate
 ``damping_limit``       paper: μ > μ0·mu_limit, no result; robust: the steps shrank to nothing
                         because the runs fail there, x is the best point found
@@ -68,13 +70,14 @@ from fbia.core.evaluator import Evaluator
 from fbia.core.iteration import IteratorBase
 from fbia.core.options import PluginOptions
 from fbia.core.problem import Evaluation
-from fbia.iterators.lm_core import LMChain, LMSettings, Outcome, err_res_of
+from fbia.iterators.lm_core import LMChain, LMSettings, Outcome, PaperChain, err_res_of
 from fbia.iterators.lm_result import FitStatistics, LMResult, compare_starts
+from fbia.iterators.lm_robust import RobustChain
 
 FloatArray = NDArray[np.float64]
 
 #: Options that only the robust mode knows.
-_ROBUST_ONLY = ("ftol", "xtol", "gtol", "scaling", "speculative")
+_ROBUST_ONLY = ("ftol", "xtol", "gtol", "scaling", "speculative", "final_jacobian")
 
 #: Finite-difference step of :func:`least_squares` (a function computed to machine precision).
 _SQRT_EPS = float(np.sqrt(np.finfo(float).eps))
@@ -196,6 +199,14 @@ class LevenbergMarquardtIterator(IteratorBase):
             "perturbations in one batch (n_x+1 runs per round, like the paper: fewer rounds "
             "on a pool, n_x runs wasted per declined step); default: the trial point first",
         )
+        final_jacobian: Literal["central", "forward"] = Field(
+            "central",
+            description="robust mode: Jacobian of the last iterations. 'central': once "
+            "ftol, xtol or gtol hold with forward differences, go on with central "
+            "differences (2 n_x runs per J, step δx·β^(-1/3)) until they hold again, so that "
+            "the result is as accurate as the residuals allow, not only as the forward-"
+            "difference J does; 'forward': stop at the first convergence",
+        )
         max_nfev: int | None = Field(
             None,
             ge=1,
@@ -258,7 +269,10 @@ class LevenbergMarquardtIterator(IteratorBase):
         extra = self._uncertain_inputs(problem)
         starts = self._starts(problem, names, lower, upper)
         settings = self._settings(names)
-        chains = [LMChain(i, x, lower, upper, settings, names) for i, x in enumerate(starts)]
+        kind = PaperChain if settings.mode == "paper" else RobustChain
+        chains: list[LMChain] = [
+            kind(i, x, lower, upper, settings, names) for i, x in enumerate(starts)
+        ]
         gens = {c.index: c.run() for c in chains}
         pending = {i: next(g) for i, g in gens.items()}
         evaluations: list[Evaluation] = []
@@ -439,6 +453,7 @@ class LevenbergMarquardtIterator(IteratorBase):
             gtol=o.gtol,
             scaling=o.scaling,
             speculative=o.speculative,
+            final_jacobian=o.final_jacobian,
         )
 
     # -- reporting --------------------------------------------------------------------------------

@@ -1,27 +1,12 @@
 """One Levenberg–Marquardt run from one initial guess (Paper A eq. 16-29), as a generator.
 
-A :class:`LMChain` knows nothing about forward models or evaluators: its :meth:`LMChain.run`
+A chain knows nothing about forward models or evaluators: its :meth:`LMChain.run`
 generator *yields* the batch of parameter vectors it needs evaluated and *receives* one
 :class:`Outcome` per vector (the residual vector r of eq. 19, or a failure).  The iterator in
 :mod:`fbia.iterators.levenberg_marquardt` drives several chains at once (multi-start) and sends
 their batches to the evaluator together, so the n_x + 1 runs of one Jacobian, and the runs of
-all starts, execute concurrently on a pool.
-
->>> import numpy as np
->>> from fbia.iterators.lm_core import LMChain, LMSettings, Outcome
->>> t = np.linspace(0.0, 1.0, 8)
->>> fun = lambda x: x[0] * np.exp(-x[1] * t) - 2.0 * np.exp(-0.5 * t)
->>> chain = LMChain(0, np.array([1.0, 1.0]), np.full(2, -np.inf), np.full(2, np.inf),
-...                 LMSettings.for_mode("robust", 2, alpha=1e-8, beta=1e-8), ["a", "k"])
->>> gen = chain.run()
->>> batch = next(gen)
->>> while True:
-...     try:
-...         batch = gen.send([Outcome(fun(x)) for x in batch])
-...     except StopIteration:
-...         break
->>> chain.status, np.round(chain.x, 6).tolist()
-('converged_step', [2.0, 0.5])
+all starts, execute concurrently on a pool.  Each mode is a subclass: :class:`PaperChain`
+(below) and :class:`fbia.iterators.lm_robust.RobustChain`.
 
 Two modes share the finite-difference Jacobian (eq. 21-23) and the error measures (eq. 24-25):
 
@@ -34,19 +19,7 @@ Two modes share the finite-difference Jacobian (eq. 21-23) and the error measure
     after a declined step the new step is computed from the same J, where QUEENS re-ran the
     n_x + 1 runs at the unchanged point (same iterates, fewer runs).
 ``robust``
-    The same step (eq. 18), made robust.  A step is taken only if it reduces ‖r‖ (by at least
-    1e-4 of the reduction the linear model predicts); otherwise μ grows and a new step is
-    computed from the same J, without new runs.  μ is chosen by a trust region on ‖D Δx‖
-    (Moré 1978, the strategy of MINPACK): μ = 0, a Gauss–Newton step, whenever that step is
-    short enough, which makes the last iterations converge fast even when J is badly
-    conditioned.  D is the largest Jacobian column norms seen so far, so parameters of very
-    different magnitude (E ~ 400 Pa, ν ~ 0.3, growth factors 1e4 and 1e-2) are treated alike.
-    A step that leaves the bounds is projected onto them or shortened to them (whichever the
-    linear model prefers), and a parameter stays at its bound while the gradient pushes it
-    outward.  A failed forward run is a declined step (the trust region shrinks); a failed
-    perturbed run is repeated on the other side of x, and a parameter whose column still fails
-    is held fixed for one step.  Relative criteria on the reduction of ‖r‖ (ftol), on the
-    step (xtol) and on the angle between r and the columns of J (gtol) complement eq. 29.
+    The same step, made robust: :mod:`fbia.iterators.lm_robust`.
 """
 
 from __future__ import annotations
@@ -60,15 +33,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fbia.core.errors import ConfigError
+from fbia.iterators.finite_differences import forward_steps, perturbed
 
 FloatArray = NDArray[np.float64]
-
-#: A step is taken (robust mode) when the actual reduction of ‖r‖² is at least this fraction of
-#: the reduction the linear model predicts (MINPACK's 1e-4).
-GAIN_MIN = 1e-4
-
-#: Factor on the trust region after a failed run (no residual to judge the step by).
-FAILED_SHRINK = 0.5
 
 #: Stop tags of a chain and whether they count as success.
 SUCCESS = {"converged_gradient": True, "converged_residual": True, "converged_step": True}
@@ -103,6 +70,7 @@ class LMSettings:
     gtol: float = 1e-8
     scaling: str = "adaptive"
     speculative: bool = False
+    final_jacobian: str = "central"
 
     @classmethod
     def for_mode(cls, mode: str, n: int, **kw: Any) -> LMSettings:
@@ -179,10 +147,8 @@ class LMChain:
 
     def run(self) -> Generator[list[FloatArray], list[Outcome], None]:
         """The LM iteration: yields batches of parameter vectors, receives their outcomes."""
-        if self.settings.mode == "paper":
-            yield from self._paper()
-        else:
-            yield from self._robust()
+        raise NotImplementedError  # PaperChain, RobustChain
+        yield []  # a generator
 
     def finish(self, status: str, message: str) -> None:
         """End the run from outside (evaluation budget, stop request, plugin error)."""
@@ -203,29 +169,10 @@ class LMChain:
         return outcomes
 
     def _deltas(self, x: FloatArray) -> FloatArray:
-        """Perturbations δx_i = α + β·x_i (eq. 21), turned round where they leave the bounds.
-
-        Paper mode uses x_i as written (a negative x_i shrinks or flips δx_i); robust mode uses
-        |x_i| so that δx_i never vanishes.
-        """
+        """Perturbations δx_i = α + β·x_i (eq. 21); paper mode uses x_i as written (a negative
+        x_i shrinks or flips δx_i), robust mode |x_i| so that δx_i never vanishes."""
         s = self.settings
-        d = s.alpha + s.beta * (x if s.mode == "paper" else np.abs(x))
-        d = np.where(d == 0.0, np.where(s.alpha > 0, s.alpha, s.beta), d)  # x_i = 0, α = 0
-        for i in range(len(x)):
-            if not self.lower[i] <= x[i] + d[i] <= self.upper[i]:
-                d[i] = -d[i]
-                if not self.lower[i] <= x[i] + d[i] <= self.upper[i]:
-                    room_up, room_down = self.upper[i] - x[i], x[i] - self.lower[i]
-                    d[i] = 0.5 * room_up if room_up >= room_down else -0.5 * room_down
-        return d
-
-    def _perturbed(self, x: FloatArray, d: FloatArray, cols: Sequence[int]) -> list[FloatArray]:
-        out = []
-        for i in cols:
-            xi = x.copy()
-            xi[i] += d[i]
-            out.append(xi)
-        return out
+        return forward_steps(x, s.alpha, s.beta, self.lower, self.upper, s.mode == "paper")
 
     def _check_length(self, r: FloatArray) -> FloatArray:
         r = np.asarray(r, dtype=float).ravel()
@@ -256,7 +203,7 @@ class LMChain:
             retry = [i for i in bad if self.lower[i] <= x[i] - d[i] <= self.upper[i]]
             if retry:
                 d2 = -d
-                outs = yield from self._ask(self._perturbed(x, d2, retry))
+                outs = yield from self._ask(perturbed(x, d2, retry))
                 for i, o in zip(retry, outs, strict=True):
                     if o.ok:
                         assert o.residuals is not None
@@ -292,46 +239,51 @@ class LMChain:
     def _stop(self, status: str, message: str) -> None:
         self.status, self.message = status, message
 
-    def _converged_at_point(self, g: FloatArray, free: NDArray[np.bool_]) -> bool:
-        """Eq. 29a/29b, and (robust mode) the scale-free angle criterion gtol."""
+    def _verdict(self, g: FloatArray, free: NDArray[np.bool_]) -> tuple[str, str, bool] | None:
+        """Eq. 29a/29b, and (robust mode) the scale-free angle criterion gtol, at the current
+        point: (status, message, absolute) or None.  ``absolute`` marks the user's own
+        targets eps_grad / eps_res (eq. 29a/b), which end a run outright; the relative gtol
+        depends on how accurate J is and is checked again with a central-difference J."""
         s = self.settings
         assert self.r is not None and self.J is not None
         grad = float(np.linalg.norm(g[free])) if s.mode != "paper" else self.err_grad
         if grad < s.eps_grad:
-            self._stop(
+            return (
                 "converged_gradient",
                 f"converged on the gradient: err_grad = {grad:.3e} < eps_grad = {s.eps_grad:g} "
                 "(eq. 29a)",
+                True,
             )
-            return True
         if self.err_res < s.eps_res:
-            self._stop(
+            return (
                 "converged_residual",
                 f"converged on the residual: err_res = {self.err_res:.3e} < eps_res = "
                 f"{s.eps_res:g} (eq. 29b)",
+                True,
             )
-            return True
         if s.mode == "paper":
-            return False
+            return None
         rnorm = float(np.linalg.norm(self.r))
         if rnorm == 0.0:
-            self._stop("converged_residual", "converged: the residuals are exactly zero")
-            return True
+            return "converged_residual", "converged: the residuals are exactly zero", True
         cols = np.linalg.norm(self.J, axis=0)
         with np.errstate(divide="ignore", invalid="ignore"):
             cosine = np.where(cols > 0, np.abs(g) / (cols * rnorm), 0.0)
         worst = float(np.max(cosine[free], initial=0.0))
         if worst <= s.gtol:
-            self._stop(
+            return (
                 "converged_gradient",
                 f"converged on the gradient: r is orthogonal to every column of J within "
                 f"gtol = {s.gtol:g} (largest |cos| = {worst:.2e})",
+                False,
             )
-            return True
-        return False
+        return None
 
-    # -- Paper A, as published -----------------------------------------------------------------
-    def _paper(self) -> Generator[list[FloatArray], list[Outcome], None]:
+
+class PaperChain(LMChain):
+    """Paper A's algorithm as published (mode ``paper``)."""
+
+    def run(self) -> Generator[list[FloatArray], list[Outcome], None]:
         s = self.settings
         x = self.x0.astype(float).copy()
         self.mu = s.mu0
@@ -339,7 +291,7 @@ class LMChain:
         prev: tuple[float, float] | None = None
         while True:
             d = self._deltas(x)
-            outs = yield from self._ask([x, *self._perturbed(x, d, range(len(x)))])
+            outs = yield from self._ask([x, *perturbed(x, d, range(len(x)))])
             if not all(o.ok for o in outs):
                 failed = next(o for o in outs if not o.ok)
                 self.x_last, self.x = x, None
@@ -357,7 +309,9 @@ class LMChain:
             if best is None or self.err_res < best[0]:
                 best = (self.err_res, x, r, J)
             self._record(x, r, True, "start" if prev is None else "step")
-            if self._converged_at_point(J.T @ r, np.ones(len(x), dtype=bool)):
+            verdict = self._verdict(J.T @ r, np.ones(len(x), dtype=bool))
+            if verdict is not None:
+                self._stop(*verdict[:2])
                 break
             if self.iterations >= s.max_iter:
                 self._stop(
@@ -402,230 +356,3 @@ class LMChain:
         self.err_res, x_best, r_best, J_best = best
         self.x, self.r, self.J, self.jac_x = x_best, r_best, J_best, x_best
         self.err_grad = float(np.linalg.norm(J_best.T @ r_best))
-
-    # -- robust mode -------------------------------------------------------------------------------
-    def _free(self, x: FloatArray, g: FloatArray, frozen: Sequence[int]) -> NDArray[np.bool_]:
-        """Parameters free to move: not frozen and not held at a bound by the gradient."""
-        at_lower = (x <= self.lower) & (g > 0)
-        at_upper = (x >= self.upper) & (g < 0)
-        free = ~(at_lower | at_upper)
-        free[list(frozen)] = False
-        return free
-
-    def _diag(self, J: FloatArray) -> FloatArray:
-        """D of the damping term μ‖D p‖² (eq. 18 has D² = diag(JᵀJ)): the current column norms
-        of J ('marquardt') or the largest ones seen so far ('adaptive', Moré 1978)."""
-        if self.settings.scaling == "marquardt" or self._scale is None:
-            D = np.linalg.norm(J, axis=0)
-        else:
-            D = self._scale.copy()
-        D[D == 0.0] = 1.0
-        return D
-
-    def _lm_step(
-        self,
-        J: FloatArray,
-        r: FloatArray,
-        D: FloatArray,
-        free: NDArray[np.bool_],
-        mu: float | None = None,
-        radius: float | None = None,
-    ) -> tuple[FloatArray, float]:
-        """The step of eq. 18, p = −(JᵀJ + μD²)⁻¹Jᵀr over the free parameters, for a given μ
-        or with μ ≥ 0 chosen so that ‖Dp‖ ≈ radius (Moré's trust region; μ = 0, the
-        Gauss–Newton step, when that is shorter).  Solved by an SVD of the column-scaled J."""
-        p = np.zeros(J.shape[1])
-        if not np.any(free):
-            return p, 0.0 if mu is None else mu
-        U, sv, Vt = np.linalg.svd(J[:, free] / D[free], full_matrices=False)
-        c = U.T @ r
-        rank = sv > sv.max(initial=0.0) * max(J.shape) * np.finfo(float).eps
-        sc2 = (sv * c) ** 2
-
-        def weights(lam: float) -> FloatArray:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                w = np.where(rank, sv * c / (sv**2 + lam), 0.0)
-            return w
-
-        if mu is None:
-            assert radius is not None
-            mu = 0.0
-            if np.linalg.norm(weights(0.0)) > 1.1 * radius:
-                lo, hi = 0.0, math.sqrt(float(np.sum(sc2))) / radius
-                lam = min(max(self.mu if math.isfinite(self.mu) else 0.0, 1e-3 * hi), hi)
-                for _ in range(30):  # safeguarded Newton iteration on 1/‖q(μ)‖ (Moré 1978)
-                    f = float(np.linalg.norm(weights(lam)))
-                    phi = f - radius
-                    if abs(phi) <= 0.1 * radius:
-                        break
-                    if phi > 0:
-                        lo = lam
-                    else:
-                        hi = lam
-                    df = -float(np.sum(np.where(rank, sc2 / (sv**2 + lam) ** 3, 0.0))) / f
-                    new = lam - (phi / df) * (f / radius)
-                    lam = new if lo < new < hi else (0.5 * (lo + hi) if lo > 0 else 0.1 * hi)
-                mu = lam
-        p[free] = -(Vt.T @ weights(mu)) / D[free]
-        return p, mu
-
-    def _radius_small(
-        self, radius: float, D: FloatArray, x: FloatArray, free: NDArray[np.bool_]
-    ) -> bool:
-        """Step criterion: no step in the trust region ‖D p‖ ≤ radius changes a free parameter
-        by more than xtol·(|x_i| + α_i/β), i.e. radius/D_i ≤ xtol·(|x_i| + α_i/β)."""
-        typical = np.where(self.settings.typical > 0, self.settings.typical, 1e-300)
-        reach = radius / D[free]
-        return bool(np.all(reach <= self.settings.xtol * (np.abs(x[free]) + typical[free])))
-
-    def _within_bounds(
-        self, x: FloatArray, p: FloatArray, r: FloatArray, J: FloatArray
-    ) -> FloatArray:
-        """A step that leaves the box becomes the better (by the linear model) of its
-        projection onto the box and the step shortened to the box."""
-        xt = x + p
-        if np.all(xt >= self.lower) and np.all(xt <= self.upper):
-            return p
-        projected = np.clip(xt, self.lower, self.upper) - x
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(p > 0, (self.upper - x) / p, np.where(p < 0, (self.lower - x) / p, 1.0))
-        shortened = float(np.clip(np.min(room), 0.0, 1.0)) * p
-        model = [float(np.sum((r + J @ q) ** 2)) for q in (projected, shortened)]
-        return projected if model[0] <= model[1] else shortened
-
-    def _robust(self) -> Generator[list[FloatArray], list[Outcome], None]:
-        """Levenberg–Marquardt with μ chosen by a trust region on ‖D Δx‖ (Moré 1978, the
-        strategy of MINPACK), projected steps at the bounds, failed runs as declined steps."""
-        s = self.settings
-        x = self.x0.astype(float).copy()
-        d = self._deltas(x)
-        outs = yield from self._ask([x, *self._perturbed(x, d, range(len(x)))])
-        if not outs[0].ok:
-            self.x_last = x
-            self._stop(
-                "start_failed",
-                f"the forward run at the initial guess failed ({outs[0].message}); "
-                "Levenberg-Marquardt needs a start where the model can be solved",
-            )
-            self._record(x, None, False, "run failed")
-            return
-        assert outs[0].residuals is not None
-        r = self._check_length(outs[0].residuals)
-        J, frozen = yield from self._jacobian(x, r, d, outs[1:])
-        self._set_point(x, r, J)
-        self.mu = s.mu0
-        self._record(x, r, True, "start")
-        radius = math.nan
-        while True:
-            assert self.J is not None
-            J = self.J
-            g = J.T @ r
-            free = self._free(x, g, frozen)
-            if self._converged_at_point(g, free):
-                return
-            if not np.any(free):
-                self._stop(
-                    "converged_gradient",
-                    "converged on the gradient: every parameter is held at a bound by the "
-                    "gradient (a corner of the box is the optimum)",
-                )
-                return
-            if self.iterations >= s.max_iter:
-                self._stop(
-                    "iteration_limit",
-                    f"iteration limit: {s.max_iter} iterations without convergence (eq. 29c)",
-                )
-                return
-            D = self._diag(J)
-            if not math.isfinite(radius):  # the first step is eq. 18 with μ = μ0
-                p0, _ = self._lm_step(J, r, D, free, mu=s.mu0)
-                radius = float(np.linalg.norm(D * p0)) or 1.0
-            rr = float(r @ r)
-            while True:  # find a step that reduces ‖r‖
-                full, self.mu = self._lm_step(J, r, D, free, radius=radius)
-                p = self._within_bounds(x, full, r, J)
-                pnorm = float(np.linalg.norm(D * p))
-                # a step cut by the bounds is judged by the length the model asked for
-                plen = float(np.linalg.norm(D * full))
-                Jp = J @ p
-                pred = (rr - float(np.sum((r + Jp) ** 2))) / rr  # predicted reduction
-                dirder = float(r @ Jp) / rr
-                xt = x + p
-                rt: FloatArray | None = None
-                if pred > 0.0 and pnorm > 0.0:
-                    dt = self._deltas(xt) if s.speculative else None
-                    extra = [] if dt is None else self._perturbed(xt, dt, range(len(x)))
-                    outs = yield from self._ask([xt, *extra])
-                    if outs[0].ok:
-                        assert outs[0].residuals is not None
-                        rt = self._check_length(outs[0].residuals)
-                    note = "run failed" if rt is None else "err_res increased"
-                else:
-                    note = "no descent within the bounds"
-                if rt is not None and 0.1 * math.sqrt(float(rt @ rt)) < math.sqrt(rr):
-                    actual = 1.0 - float(rt @ rt) / rr
-                else:
-                    actual = -1.0
-                ratio = actual / pred if pred > 0.0 else 0.0
-                if self.iterations == 0 and plen > 0.0:
-                    radius = min(radius, plen)
-                # trust-region update of MINPACK's lmdif
-                if ratio <= 0.25:
-                    shrink = 0.5 if actual >= 0.0 else 0.5 * dirder / (dirder + 0.5 * actual)
-                    if rt is None:
-                        shrink = FAILED_SHRINK
-                    elif 0.1 * math.sqrt(float(rt @ rt)) >= math.sqrt(rr):
-                        shrink = 0.1
-                    shrink = min(max(shrink, 0.1), 0.5)
-                    radius = shrink * (min(radius, plen / 0.1) if plen > 0 else radius)
-                elif self.mu == 0.0 or ratio >= 0.75:
-                    radius = plen / 0.5
-                if ratio >= GAIN_MIN:
-                    break
-                self._record(xt, rt, False, f"rejected: {note}")
-                collapsed = radius <= 1e-15 * float(np.linalg.norm(D * x))
-                if self._radius_small(radius, D, x, free) or collapsed:
-                    if note != "run failed":
-                        self._stop(
-                            "converged_step",
-                            f"converged on the step: no step that changes a parameter by more "
-                            f"than xtol = {s.xtol:g} (relative) reduces err_res any further",
-                        )
-                    else:
-                        self._stop(
-                            "damping_limit",
-                            f"damping limit: the steps shrank to nothing and still {note} "
-                            f"(mu = {self.mu:.3g}); the result is the best point found",
-                        )
-                    return
-            # the step is taken
-            assert rt is not None
-            self.iterations += 1
-            if abs(actual) <= s.ftol and pred <= s.ftol and ratio <= 2.0:
-                self._set_point(xt, rt, None)
-                self._record(xt, rt, True, "step")
-                self._stop(
-                    "converged_residual",
-                    f"converged on the residual: the last step reduced ‖r‖² by a fraction "
-                    f"{actual:.1e} <= ftol = {s.ftol:g}",
-                )
-                return
-            if self._radius_small(radius, D, xt, free):
-                self._set_point(xt, rt, None)
-                self._record(xt, rt, True, "step")
-                self._stop(
-                    "converged_step",
-                    f"converged on the step: the next step would change no parameter by "
-                    f"more than xtol = {s.xtol:g} (relative)",
-                )
-                return
-            if s.speculative:
-                assert dt is not None
-                J, frozen = yield from self._jacobian(xt, rt, dt, outs[1:])
-            else:
-                dt = self._deltas(xt)
-                outs = yield from self._ask(self._perturbed(xt, dt, range(len(x))))
-                J, frozen = yield from self._jacobian(xt, rt, dt, outs)
-            x, r = xt, rt
-            self._set_point(x, r, J)
-            self._record(x, r, True, "step")

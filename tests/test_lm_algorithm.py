@@ -198,8 +198,12 @@ def test_robust_mode_needs_no_new_jacobian_after_a_declined_step():
     np.testing.assert_allclose(result.x_array, [1.0, 1.0], rtol=1e-8)
     sizes = [len(b) for b in ev.batches]
     assert sizes[0] == 3  # x0 and its two perturbations
-    # afterwards: a trial point (1 run), then the Jacobian at an accepted point (2 runs)
-    assert set(sizes[1:]) <= {1, 2}
+    # afterwards: a trial point (1 run), then the Jacobian at an accepted point (2 runs, or
+    # 4 for central differences in the last phase, after which no forward J is made)
+    assert set(sizes[1:]) <= {1, 2, 4}
+    first_central = sizes.index(4)
+    assert 2 not in sizes[first_central:]
+    assert any("central-difference Jacobian" in h["note"] for h in result.history)
     declined = sum(not h["accepted"] for h in result.history)
     taken = sum(h["accepted"] for h in result.history) - 1
     assert sizes.count(1) == declined + taken  # one run per trial step, none more
@@ -211,7 +215,11 @@ def test_speculative_mode_evaluates_a_trial_point_with_its_perturbations():
     result = fbia.least_squares(rosenbrock, [-1.2, 1.0], speculative=True, evaluator=ev)
     assert result.success
     np.testing.assert_allclose(result.x_array, [1.0, 1.0], rtol=1e-8)
-    assert {len(b) for b in ev.batches} == {3}
+    sizes = [len(b) for b in ev.batches]
+    # trial point and its two perturbations together, until the central-difference phase
+    first_central = sizes.index(4)
+    assert set(sizes[:first_central]) == {3}
+    assert set(sizes[first_central:]) <= {1, 4}
 
 
 def test_multi_start_chains_share_the_batches():
@@ -401,3 +409,14 @@ def test_plots_three_parameters(tmp_path):
 
     files = plot_lm_result(result, None, tmp_path / "out")
     assert sorted(f.name for f in files) == ["lm_errors.png", "lm_parameter_paths.png"]
+
+
+@pytest.mark.parametrize(
+    "module", ["fbia.iterators.lm_robust", "fbia.iterators.levenberg_marquardt"]
+)
+def test_module_docstring_recipes_run(module):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0 and result.failed == 0

@@ -4,20 +4,18 @@ Every problem is fitted through ``fbia.least_squares`` from both NIST starts and
 log relative error LRE = −log10(|estimate − certified| / |certified|) of every parameter:
 LRE ≥ 6 for the 'lower' and 'average' difficulty problems, ≥ 4 for the 'higher' ones.  NIST
 asks for the certified values to all digits, so the tolerances are tightened to 1e-15 (the
-defaults, 1e-8 like scipy's, stop earlier).  Documented exceptions (each has its own test):
+defaults, 1e-8 like scipy's, stop earlier).
 
-* Lanczos3 (lower difficulty): LRE 4.8 / 5.7.  The sum of three exponentials is so badly
-  conditioned that in the last iterations ‖r‖² changes only in its last bits; whether a step
-  is taken is then decided by round-off (scipy's MINPACK reaches 6.4 / 6.1, its trf 5.6 / 6.5).
-* MGH17 from start 1 (average difficulty): LRE 5.96.  The path from (50, 150, −100, 1, 2)
-  needs ~3000 runs through regions where exp(−x·b5) overflows; at the end the accuracy is set
-  by the forward-difference Jacobian (step √ε·|b|) of a Jacobian conditioned ~1e8 (scipy:
-  lm 6.9, trf 6.3; from start 2 ours is 6.4).
-* BoxBOD from start 1 (b2 = 1): the first step sends b2 to a region where exp(−b2·x) ≈ 0 for
-  all data, the model is the constant b1 and ∂r/∂b2 vanishes: a stationary point at the end of
-  a plateau, where MINPACK's lmdif ends as well.  A multi-start analysis detects it.
-* MGH10 from start 1: the path crosses b1 = 0 onto a plateau where the model is nearly
-  constant; the run stops there (scipy's lm and trf happen to take another path).
+What makes these bounds hold on any IEEE-754 machine and BLAS kernel, rather than by the
+round-off of one: the last iterations use a central-difference Jacobian (accurate to
+ε^(2/3) instead of √ε), so the final Gauss–Newton steps land as close to the optimum as the
+residuals' own round-off allows.  With forward differences only, Lanczos3, MGH17 and ENSO
+stopped at LRE 4.8-6 depending on the kernel.  Checked with OPENBLAS_CORETYPE = SkylakeX,
+Haswell, Zen and Prescott: the smallest LRE over all 53 cases is above 6.3.
+
+One case has no certified solution, for fbia as for MINPACK: BoxBOD from start 1 (b2 = 1)
+goes to a region where exp(−b2·x) ≈ 0 for all data, the model is the constant b1 and
+∂r/∂b2 vanishes; the result is marked ``plateau``, not a success.
 """
 
 from __future__ import annotations
@@ -49,8 +47,7 @@ nist = _load_nist()
 
 TIGHT = {"ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15, "max_iter": 1000}
 REQUIRED = {"Lower": 6.0, "Average": 6.0, "Higher": 4.0}
-EXCEPTIONS = {("Lanczos3", 1): 4.5, ("Lanczos3", 2): 4.5, ("MGH17", 1): 5.5}
-FAILS_FROM_START = {("BoxBOD", 1), ("MGH10", 1)}
+FAILS_FROM_START = {("BoxBOD", 1)}
 CASES = [
     (name, start)
     for name in nist.names()
@@ -81,7 +78,7 @@ def test_certified_values_from_both_starts(name, start):
     problem = nist.load(name)
     result = fit(problem, start)
     assert result.success, result.message
-    required = EXCEPTIONS.get((name, start), REQUIRED[problem.difficulty])
+    required = REQUIRED[problem.difficulty]
     lre = problem.lre(result.x_array)
     assert lre.min() >= required, f"LRE {np.round(lre, 1)} < {required}"
     if name != "Lanczos1":
@@ -101,31 +98,42 @@ def test_standard_errors_match_the_certified_standard_deviations(name):
     assert result.sigma2 * (n_r - n_x) == pytest.approx(problem.rss, rel=1e-8)
 
 
-def test_lanczos3_is_limited_by_round_off_not_by_the_iteration():
+def test_lanczos3_reaches_the_certified_values_in_the_central_difference_phase():
     problem = nist.load("Lanczos3")
-    result = fit(problem, 2)
-    assert result.status == "converged_step"
-    assert problem.lre(result.x_array).min() >= 4.5
-    # the last declined steps differ from the optimum by round-off in ‖r‖²
-    last = [h for h in result.history if not h["accepted"]][-1]["err_res"]
-    assert last == pytest.approx(result.err_res, rel=1e-12)
+    for start in (1, 2):
+        result = fit(problem, start)
+        assert result.success, result.message
+        # the forward-difference phase alone ends where its Jacobian's error (√ε·cond(J))
+        # stops the Gauss-Newton steps: LRE 4.8-6.8 depending on the BLAS kernel
+        assert any("central-difference Jacobian" in h["note"] for h in result.history)
+        assert problem.lre(result.x_array).min() >= 6.0
+        assert "J from central differences" in result.message
 
 
 def test_boxbod_start1_ends_on_the_plateau_where_the_model_is_constant():
     problem = nist.load("BoxBOD")
     result = fit(problem, 1)
-    assert result.success  # a stationary point: ∂r/∂b2 = 0 there
+    # a stationary point only because ∂r/∂b2 vanished: not a success, and said so
+    assert result.status == "plateau" and not result.success
+    assert "no longer depend on x1" in result.message
     b1, b2 = result.x_array
     assert b2 > 10.0  # exp(-b2 x) ≈ 0 for every x >= 1
     assert b1 == pytest.approx(problem.y.mean(), rel=1e-6)  # the constant fit
     assert result.err_res**2 * len(problem.y) > 8 * problem.rss  # 9772 vs 1168
 
 
-def test_mgh10_start1_stops_on_a_plateau_with_negative_b1():
+def test_mgh10_start1_leaves_the_plateau_with_a_longer_first_step():
+    """From (2, 4e5, 2.5e4) the first attempt (first step from μ0) crosses b1 = 0 and ends
+    where exp(b2/(x + b3)) underflows; the second, with MINPACK's first trust region
+    100‖D x0‖, reaches the certified values (so does MINPACK)."""
     problem = nist.load("MGH10")
     result = fit(problem, 1)
-    assert result.x_array[0] < 0.0
-    assert result.err_res**2 * len(problem.y) > 1e6 * problem.rss
+    assert result.success, result.message
+    assert problem.lre(result.x_array).min() >= 6.0
+    # the first attempt's end is in the history (on every kernel tried it is the plateau
+    # with b1 < 0; which path round-off picks is not asserted)
+    plateaus = [h for h in result.history if h["note"].startswith("ended on a plateau")]
+    assert len(plateaus) <= 1
 
 
 def test_multi_start_picks_the_good_optimum_and_marks_the_plateau():
@@ -139,9 +147,10 @@ def test_multi_start_picks_the_good_optimum_and_marks_the_plateau():
     assert problem.lre(result.x_array).min() >= 6.0
     rows = {row["start"]: row for row in result.starts}
     assert rows[2]["best"] and not rows[1]["equally_good"]
+    assert rows[1]["status"] == "plateau" and not rows[1]["success"]
     assert rows[1]["err_res"] > 2.5 * rows[2]["err_res"]  # 40.4 vs 14.0
     assert result.warnings == []
-    assert "1 of 2 starts" not in result.message and "2 of 2 starts converged" in result.message
+    assert "1 of 2 starts converged" in result.message
     table = result.table().splitlines()
     assert table[0].split()[:4] == ["#", "status", "b1*", "b2*"]
     assert "best" in table[2]
