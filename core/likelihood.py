@@ -3,9 +3,12 @@
 L(x, theta) = sum_k [ -n_k/2 log(2 pi sigma_k^2) - D_k^2 / (2 sigma_k^2) ]
 
 over the observations k with discrepancy D_k (the measure's ``distance``) and noise level
-sigma_k (the observation's ``noise_std``, else the problem's).  With one sigma for all
-observations n = the total residual count; with different sigmas the residuals are taken as
-split evenly among the observations.
+sigma_k (the observation's ``noise_std``, else the problem's).  n_k is the number of single
+measurements in D_k: the residual count (Paper B: n_mp for the ray, n_in for the cpp measure),
+unless the measure declares a fixed number per observation (``measurements_per_observation``;
+rkhs: 1, D itself, whatever the length of its residual vector).  With one sigma for all
+observations n = the total count; with different sigmas it is taken as split evenly among
+the observations.
 """
 
 from __future__ import annotations
@@ -30,13 +33,25 @@ def noise_levels(problem: InverseProblem) -> list[float] | None:
     return out
 
 
-def gaussian_log_likelihood(record: Evaluation, sigmas: Sequence[float]) -> float:
-    """Paper B eq. (5) for one evaluation record; ``-inf`` for a failed run."""
+def measurement_count(problem: InverseProblem) -> int | None:
+    """n of eq. 5 over all observations when the measure fixes it per observation, else None
+    (then it is the residual count of each record)."""
+    per_observation = getattr(problem.measure, "measurements_per_observation", None)
+    if per_observation is None:
+        return None
+    return int(per_observation) * len(problem.observations)
+
+
+def gaussian_log_likelihood(
+    record: Evaluation, sigmas: Sequence[float], count: int | None = None
+) -> float:
+    """Paper B eq. (5) for one evaluation record; ``-inf`` for a failed run.  ``count``: n
+    (see :func:`measurement_count`), default the record's residual count."""
     if not record.ok or record.distances is None or record.residuals is None:
         return -math.inf
     dist = np.asarray(record.distances, dtype=float)
     sig = np.asarray(sigmas, dtype=float)
-    n = len(record.residuals)
+    n = len(record.residuals) if count is None else count
     if np.all(sig == sig[0]):
         return float(
             -0.5 * n * math.log(2 * math.pi * sig[0] ** 2) - np.sum(dist**2) / (2 * sig[0] ** 2)

@@ -58,7 +58,7 @@ import numpy as np
 
 from fbia.core.errors import ConfigError
 from fbia.core.likelihood import gaussian_log_likelihood as _log_likelihood
-from fbia.core.likelihood import noise_levels
+from fbia.core.likelihood import measurement_count, noise_levels
 from fbia.core.problem import Evaluation, InverseProblem, _jsonable
 
 __all__ = [
@@ -255,9 +255,11 @@ def _describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str
 
 
 # -- the likelihood stored with every run ------------------------------------------------------
-def gaussian_log_likelihood(record: Evaluation, sigmas: Sequence[float] | None) -> float | None:
+def gaussian_log_likelihood(
+    record: Evaluation, sigmas: Sequence[float] | None, count: int | None = None
+) -> float | None:
     """Paper B eq. (5) of one record (:mod:`fbia.core.likelihood`), None without noise levels."""
-    return None if sigmas is None else _log_likelihood(record, sigmas)
+    return None if sigmas is None else _log_likelihood(record, sigmas, count)
 
 
 # -- the store ---------------------------------------------------------------------------------
@@ -396,6 +398,7 @@ class StudyStore:
             )
         self._bound.append(problem)
         self._sigmas = noise_levels(problem)
+        self._count = measurement_count(problem)
         self._uncertain = list(problem.uncertain_names)
         return sha
 
@@ -474,7 +477,7 @@ class StudyStore:
             else np.ascontiguousarray(record.residuals, dtype="<f8").tobytes()
         )
         distance = record.distance
-        loglik = gaussian_log_likelihood(record, self._sigmas)
+        loglik = gaussian_log_likelihood(record, self._sigmas, self._count)
         row = (
             key,
             record.index,

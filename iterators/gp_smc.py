@@ -56,7 +56,7 @@ from scipy.stats import qmc
 from fbia.core.errors import ConfigError
 from fbia.core.evaluator import Evaluator
 from fbia.core.iteration import IteratorBase
-from fbia.core.likelihood import gaussian_log_likelihood
+from fbia.core.likelihood import gaussian_log_likelihood, measurement_count
 from fbia.core.likelihood import noise_levels as _noise_levels
 from fbia.core.options import PluginOptions
 from fbia.core.parameters import Parameter, Prior
@@ -239,6 +239,7 @@ class GpSmcIterator(IteratorBase):
         opts = self.options
         t_start = time.perf_counter()
         sigmas = noise_levels(problem)
+        count = measurement_count(problem)
         inputs = [*problem.parameters, *problem.uncertain]
         for p in inputs:
             if p.prior is None:
@@ -271,7 +272,7 @@ class GpSmcIterator(IteratorBase):
             reused = self._reusable(design, names)
             points = [dict(zip(names, map(float, row), strict=True)) for row in design]
             evaluations = reused + list(evaluator.evaluate(problem, points[len(reused) :]))
-            loglik = np.array([log_likelihood_of(ev, sigmas) for ev in evaluations])
+            loglik = np.array([log_likelihood_of(ev, sigmas, count) for ev in evaluations])
             ok = np.isfinite(loglik)
             n_failed = int((~ok[len(reused) :]).sum())
             train = np.arange(n_all) < opts.n_train
@@ -326,7 +327,7 @@ class GpSmcIterator(IteratorBase):
                 evs = evaluator.evaluate(problem, pts)
                 counter["nfev"] += len(evs)
                 counter["failed"] += sum(not ev.ok for ev in evs)
-                return np.array([log_likelihood_of(ev, sigmas) for ev in evs])
+                return np.array([log_likelihood_of(ev, sigmas, count) for ev in evs])
 
         sampler = SequentialMonteCarlo(
             log_likelihood,
@@ -458,7 +459,8 @@ class GpSmcIterator(IteratorBase):
         x = post.particles[idx]
         points = [dict(zip(names, map(float, row), strict=True)) for row in x]
         evs = list(evaluator.evaluate(problem, points))
-        loglik = np.array([log_likelihood_of(ev, sigmas) for ev in evs])
+        count = measurement_count(problem)
+        loglik = np.array([log_likelihood_of(ev, sigmas, count) for ev in evs])
         ok = np.isfinite(loglik)
         err = gp.predict_mean(x[ok]) - loglik[ok]
         n_ok = int(ok.sum())

@@ -21,7 +21,9 @@ True
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,6 +35,12 @@ from fbia.core.interface import Interface
 from fbia.core.observation import Observation
 from fbia.core.options import Configurable, PluginOptions
 from fbia.measures._geometry import FloatArray, IdentityCache, check_dimensions, cutoff_radius
+from fbia.measures._rkhs_field import (
+    count_test_points,
+    residual_scale,
+    smoothed_field,
+    test_points,
+)
 
 #: |D^2| below this fraction of <S1,S1> + 2|<S1,S2>| + <S2,S2> is round-off; a more negative
 #: D^2 cannot come from a positive definite kernel and is reported as a bug.
@@ -42,6 +50,16 @@ _EXP_FLOOR = -200.0
 #: Element pairs per tile of the blocked sums: 32768 pairs are 256 kB of float64, and BLAS
 #: (OpenBLAS: below 262144 multiply-adds) runs a tile's products on one thread.
 TILE_PAIRS = 32768
+
+
+@dataclass(frozen=True)
+class TestGrid:
+    """The fixed test points of an observation and its own field there (see
+    :mod:`fbia.measures._rkhs_field`): residuals ``scale · (w_sim(points) − w_obs)``."""
+
+    points: FloatArray
+    w_obs: FloatArray
+    scale: float
 
 
 @dataclass(frozen=True)
@@ -176,13 +194,22 @@ class RkhsMeasure(Configurable):
     interface flips the sign of the cross term.
 
     ``sigma_w`` sets what is compared: features smaller than it are smoothed out, and
-    interfaces farther apart than a few ``sigma_w`` no longer interact.  Paper B uses
-    0.005 mm (about 10 % of the largest displacement, Sect. "Numerical examples"), the
-    default here; elements should be no larger than about ``sigma_w`` for the sum to
-    represent the integral well.
+    interfaces farther apart than a few ``sigma_w`` no longer interact (for
+    Levenberg–Marquardt from distant starts, choose it of the order of the displacements).
+    Paper B uses 0.005 mm (about 10 % of the largest displacement, Sect. "Numerical
+    examples"), the default here; elements should be no larger than about ``sigma_w`` for
+    the sum to represent the integral well.
 
     The self-product ``<S2, S2>`` of each observed interface is computed once and cached.
-    Residuals: ``np.array([D])``; distance: ``D`` (units in the Notes).
+    Distance: ``D`` (units in the Notes).  Residuals (``residuals = "vector"``, default): a
+    vector whose squared norm is D², from the factorisation of the Gaussian kernel into two
+    of width σ_W/√2 sampled at fixed test points around the observed interface
+    (:mod:`fbia.measures._rkhs_field`), so that Levenberg–Marquardt has one residual per
+    test point and component instead of one in all; equal to D to quadrature accuracy
+    (about 1e-8 relative in D² at the default spacing) while the simulated interface stays
+    within ``reach`` of the observed one.  ``residuals = "distance"`` gives ``np.array([D])``.
+    Either way the Gaussian likelihood (Paper B eq. 5) counts D as one measurement per
+    observation (:attr:`measurements_per_observation`).
 
     Notes
     -----
@@ -218,6 +245,40 @@ class RkhsMeasure(Configurable):
                 "max(block_size, 32768 / block_size) element pairs"
             ),
         )
+        residuals: Literal["vector", "distance"] = Field(
+            "vector",
+            description=(
+                "residual vector for least squares: 'vector', the kernel-smoothed difference "
+                "of the currents at fixed test points (squared norm = D^2), or 'distance', "
+                "the single number D [-]"
+            ),
+        )
+        spacing: float = Field(
+            0.5,
+            gt=0,
+            le=2.0,
+            description=(
+                "spacing of the test points of the residual vector, relative to sigma_w [-]; "
+                "the relative error of D^2 is about 2 exp(-pi^2 / (2 spacing^2))"
+            ),
+        )
+        reach: float | None = Field(
+            None,
+            gt=0,
+            description=(
+                "test points cover the observed interface to this distance plus the kernel's "
+                "own range: the residual vector equals D while the simulated interface stays "
+                "this close to the observed one [mm]; default 2 sigma_w"
+            ),
+        )
+        max_test_points: int = Field(
+            500_000,
+            ge=1,
+            description=(
+                "refuse an observation that needs more test points than this (3-D with a "
+                "small sigma_w): use residuals = 'distance' or a larger spacing [-]"
+            ),
+        )
         truncation: float = Field(
             1e-18,
             ge=0,
@@ -231,6 +292,9 @@ class RkhsMeasure(Configurable):
 
     options: Options
     dims = (2, 3)
+    #: Paper B eq. 5 counts the currents distance D as one measurement per observation,
+    #: whatever the length of the residual vector.
+    measurements_per_observation = 1
 
     @classmethod
     def example_options(cls) -> dict[str, object]:
@@ -241,6 +305,7 @@ class RkhsMeasure(Configurable):
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: object) -> None:
         super().__init__(options, **kwargs)
         self._observed: IdentityCache[tuple[Current, float]] = IdentityCache(maxsize=64)
+        self._grids: IdentityCache[TestGrid] = IdentityCache(maxsize=64)
 
     def __getstate__(self) -> dict[str, object]:
         return {"options": self.options}
@@ -250,19 +315,21 @@ class RkhsMeasure(Configurable):
 
     # -- protocol ----------------------------------------------------------------------------
     def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray:
-        """``np.array([D])`` (eq. 11)."""
-        return np.array([self.distance(simulated, observation)])
+        """A vector with squared norm D² (eq. 11), or ``np.array([D])`` (see the class)."""
+        if self.options.residuals == "distance":
+            return np.array([self.distance(simulated, observation)])
+        check_dimensions("rkhs", simulated, observation)
+        gamma = self._observed_interface(observation)
+        grid = self._grids.get((gamma,), lambda: self._test_grid(gamma, observation))
+        w = smoothed_field(
+            grid.points, simulated.centres, self._vectors(simulated), *self._half_kernel
+        )
+        return np.asarray((grid.scale * (w - grid.w_obs)).ravel(), dtype=float)
 
     def distance(self, simulated: Interface, observation: Observation) -> float:
         """``D``, the RKHS norm of the difference of the two currents (eq. 10-11)."""
         check_dimensions("rkhs", simulated, observation)
-        gamma = observation.interface
-        if gamma is None:
-            raise ConfigError(
-                f"observation {observation.label()!r} has no observed interface "
-                "(only measurement points); use the ray measure or add an interface",
-                "rkhs measure",
-            )
+        gamma = self._observed_interface(observation)
         s2, s22 = self._observed.get((gamma,), lambda: self._with_self_product(gamma))
         s1, s11 = self._with_self_product(simulated)
         s12 = currents_product(s1, s2, self.options.sigma_w, self._cutoff)
@@ -279,6 +346,51 @@ class RkhsMeasure(Configurable):
         return Current.of(interface, self.options.unit_normals, self.options.block_size)
 
     # -- internals ---------------------------------------------------------------------------
+    @staticmethod
+    def _observed_interface(observation: Observation) -> Interface:
+        gamma = observation.interface
+        if gamma is None:
+            raise ConfigError(
+                f"observation {observation.label()!r} has no observed interface "
+                "(only measurement points); use the ray measure or add an interface",
+                "rkhs measure",
+            )
+        return gamma
+
+    def _vectors(self, interface: Interface) -> FloatArray:
+        return interface.normals if self.options.unit_normals else interface.area_vectors
+
+    @property
+    def _half_kernel(self) -> tuple[float, float]:
+        """Width s = σ_W/√2 of the kernel's square root and the distance where it drops below
+        the truncation."""
+        s = self.options.sigma_w / math.sqrt(2.0)
+        return s, cutoff_radius(s, self.options.truncation)
+
+    def _test_grid(self, gamma: Interface, observation: Observation) -> TestGrid:
+        o = self.options
+        s, cutoff = self._half_kernel
+        h = o.spacing * o.sigma_w
+        reach = 2.0 * o.sigma_w if o.reach is None else o.reach
+        # |w|² decays like exp(-d²/s²): below the truncation s·√(ln 1/truncation) away
+        tail = s * math.sqrt(math.log(1.0 / o.truncation)) if o.truncation > 0 else 10.0 * s
+        radius = reach + tail
+        # the box around the interface bounds the work of finding the points near it
+        n_box = count_test_points(gamma.centres, h, radius)
+        points = test_points(gamma.centres, h, radius) if n_box <= 100 * o.max_test_points else None
+        n = n_box if points is None else len(points)
+        if n > o.max_test_points:
+            raise ConfigError(
+                f"observation {observation.label()!r} needs {n} test points for the residual "
+                f"vector (sigma_w = {o.sigma_w:g} mm, spacing {o.spacing:g}), more than "
+                f"max_test_points = {o.max_test_points}; use residuals = 'distance', a larger "
+                "spacing or a larger max_test_points",
+                "rkhs measure",
+            )
+        assert points is not None
+        w_obs = smoothed_field(points, gamma.centres, self._vectors(gamma), s, cutoff)
+        return TestGrid(points=points, w_obs=w_obs, scale=residual_scale(h, s, points.shape[1]))
+
     @property
     def _cutoff(self) -> float:
         return cutoff_radius(self.options.sigma_w, self.options.truncation)

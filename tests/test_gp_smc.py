@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import fbia
+from fbia.core.likelihood import measurement_count
 from fbia.iterators.gp_smc import (
     GpSmcIterator,
     laplace_approximation,
@@ -333,7 +334,11 @@ def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
     assert len(np.unique(x, axis=0)) == 8  # distinct draws
     # The figures are the GP mean against the exact L at those points (eq. 5).
     exact = [
-        log_likelihood_of(problem.evaluate(dict(zip(problem.names, row, strict=True))), sigmas)
+        log_likelihood_of(
+            problem.evaluate(dict(zip(problem.names, row, strict=True))),
+            sigmas,
+            measurement_count(problem),
+        )
         for row in x
     ]
     err = good.surrogate.predict_mean(x) - np.array(exact)
@@ -342,3 +347,24 @@ def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
     # Eight training runs cannot resolve the posterior: the check says so.
     poor = fbia.iterator("gp_smc", n_train=8, n_check=8, **FAST).run(problem)
     assert poor.info["posterior_check"]["rmse"] > 1.0 and "not reliable" in poor.message
+
+
+def test_the_rkhs_residual_vector_does_not_change_the_likelihood():
+    """Paper B eq. 5 counts D as one measurement per observation (n_k = 1) whether the rkhs
+    measure returns its residual vector (for least squares) or D alone."""
+    vector, scalar = _problem(), _problem()
+    scalar.measure = fbia.measure("rkhs", sigma_w=0.05, residuals="distance")
+    ev_v = vector.evaluate({"E": 350.0, "nu": 0.2})
+    ev_s = scalar.evaluate({"E": 350.0, "nu": 0.2})
+    assert len(ev_v.residuals) > 1000 and len(ev_s.residuals) == 1
+    assert measurement_count(vector) == measurement_count(scalar) == 1
+    lv = log_likelihood_of(ev_v, [0.03], measurement_count(vector))
+    ls = log_likelihood_of(ev_s, [0.03], measurement_count(scalar))
+    assert (
+        lv
+        == ls
+        == pytest.approx(-0.5 * math.log(2 * math.pi * 0.03**2) - ev_s.distance**2 / (2 * 0.03**2))
+    )
+    post_v = fbia.iterator("gp_smc", n_train=32, **FAST).run(vector)
+    post_s = fbia.iterator("gp_smc", n_train=32, **FAST).run(scalar)
+    assert post_v.x == post_s.x
