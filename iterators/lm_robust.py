@@ -33,8 +33,8 @@ J vanished (a plateau) is tried once more with MINPACK's longer first step, then
 ...         batch = gen.send([Outcome(fun(x)) for x in batch])
 ...     except StopIteration:
 ...         break
->>> chain.status, np.round(chain.x, 6).tolist()
-('converged_residual', [2.0, 0.5])
+>>> chain.success, np.round(chain.x, 6).tolist()      # status: which criterion held first
+(True, [2.0, 0.5])
 """
 
 from __future__ import annotations
@@ -45,9 +45,9 @@ from collections.abc import Generator, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.iterators.finite_differences import central_stencil, perturbed
-from fbia.iterators.lm_core import SUCCESS, FloatArray, LMChain, Outcome
-from fbia.iterators.trust_region import lm_step, predicted_reduction, within_bounds
+from .finite_differences import central_stencil, perturbed
+from .lm_core import SUCCESS, FloatArray, LMChain, Outcome
+from .trust_region import lm_step, predicted_reduction, within_bounds
 
 #: A step is taken (robust mode) when the actual reduction of ‖r‖² is at least this fraction of
 #: the reduction the linear model predicts (MINPACK's 1e-4).
