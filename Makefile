@@ -26,13 +26,14 @@ test: lint typecheck pytest
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-# mypy sees the package as it is installed (fbia.core ...) through a tree of symlinks.
+# mypy checks every package of fbia (core, plugins, measures, iterators, testing) as it is
+# installed, through a tree of symlinks (the repository root is the package).
 typecheck: $(STAMP)
 	@rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/fbia
 	@for d in core plugins measures iterators; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
 	@ln -s ../../../__init__.py $(TYPECHECK)/fbia/__init__.py
 	@ln -s ../../../testing.py $(TYPECHECK)/fbia/testing.py
-	MYPYPATH=$(TYPECHECK) $(BIN)/mypy --follow-imports=silent -p fbia.core
+	MYPYPATH=$(TYPECHECK) $(BIN)/mypy -p fbia
 
 pytest: $(STAMP)
 	$(BIN)/pytest

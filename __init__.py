@@ -18,14 +18,9 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from fbia.core import *  # noqa: F403  (the public core types)
-from fbia.core import __all__ as _core_all
-
-# ``fbia.plugins`` is the forward-model sub-package and, called, the registry listing: the
-# package module is callable (plugins/__init__.py), so both uses work in any import order.
-plugins = importlib.import_module("fbia.plugins")
-
-__version__ = "0.1.0"
+from .core import *  # noqa: F403  (the public core types)
+from .core import __all__ as _core_all
+from .core.version import __version__
 
 # Public names that live in modules imported on first use (they pull in heavier libraries).
 _LAZY = {

@@ -4,7 +4,7 @@ fbia registers this module as a pytest plugin (entry point ``pytest11: fbia``), 
 are available in every test session of an environment where fbia is installed.  A third-party
 plugin package proves that its classes behave like fbia's own with a few lines::
 
-    from fbia.testing import check_forward_model, check_measure, check_options
+    from .testing import check_forward_model, check_measure, check_options
 
     def test_my_solver_conforms(tmp_path):
         model = MySolverForwardModel(timeout=60.0)
@@ -63,10 +63,10 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from fbia.core.interface import Interface
-    from fbia.core.observation import Observation, Solution
-    from fbia.core.problem import Evaluation, InverseProblem, Result
-    from fbia.core.registry import PluginEntry, Registry
+    from .core.interface import Interface
+    from .core.observation import Observation, Solution
+    from .core.problem import Evaluation, InverseProblem, Result
+    from .core.registry import PluginEntry, Registry
 
 __all__ = [
     "ConformanceError",
@@ -113,7 +113,7 @@ def straight_line_2d(
     """
     import numpy as np
 
-    from fbia.core.interface import Interface
+    from .core.interface import Interface
 
     x = np.linspace(0.0, length, n + 1)
     return Interface.polyline(np.c_[x, height + slope * x])
@@ -126,7 +126,7 @@ def mound_2d(length: float = 1.0, height: float = 0.2, n: int = 64) -> Interface
     """
     import numpy as np
 
-    from fbia.core.interface import Interface
+    from .core.interface import Interface
 
     x = np.linspace(0.0, length, n + 1)
     return Interface.polyline(np.c_[x, height * np.sin(np.pi * x / length) ** 2])
@@ -139,7 +139,7 @@ def circle_2d(radius: float = 0.3, n: int = 64, centre: Sequence[float] = (0.0, 
     """
     import numpy as np
 
-    from fbia.core.interface import Interface
+    from .core.interface import Interface
 
     phi = -np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)  # clockwise
     pts = np.asarray(centre, dtype=float) + radius * np.c_[np.cos(phi), np.sin(phi)]
@@ -155,7 +155,7 @@ def square_3d(
     """
     import numpy as np
 
-    from fbia.core.interface import Interface
+    from .core.interface import Interface
 
     t = np.linspace(0.0, size, n + 1)
     x, y = (a.ravel() for a in np.meshgrid(t, t, indexing="xy"))
@@ -177,7 +177,7 @@ def sphere_3d(
     import numpy as np
     import trimesh
 
-    from fbia.core.interface import Interface
+    from .core.interface import Interface
 
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     return Interface.surface(np.asarray(mesh.vertices) + np.asarray(centre), mesh.faces)
@@ -196,8 +196,8 @@ def check_options(cls: type) -> list[str]:
 
     Returns the option names.
     """
-    from fbia.core.errors import ConfigError
-    from fbia.core.options import Configurable, PluginOptions
+    from .core.errors import ConfigError
+    from .core.options import Configurable, PluginOptions
 
     options = getattr(cls, "Options", None)
     if not (isinstance(options, type) and issubclass(options, PluginOptions)):
@@ -288,9 +288,9 @@ def check_forward_model(
 
     import numpy as np
 
-    from fbia.core.errors import ForwardModelError
-    from fbia.core.interface import Interface
-    from fbia.core.observation import Solution, coordinate_key
+    from .core.errors import ForwardModelError
+    from .core.interface import Interface
+    from .core.observation import Solution, coordinate_key
 
     tmp_path = Path(tmp_path)
     names = model.parameter_names()
@@ -453,7 +453,7 @@ class MeasureCase:
 def _case(name: str, observed: Interface, simulated: Interface, farther: Interface) -> MeasureCase:
     import numpy as np
 
-    from fbia.core.observation import Observation
+    from .core.observation import Observation
 
     n = len(observed.vertices)
     interior = np.arange(n)
@@ -655,7 +655,7 @@ class CountingEvaluator:
     """Wraps an evaluator and counts the points it evaluates and the runs that failed."""
 
     def __init__(self, inner: Any = None) -> None:
-        from fbia.core.evaluator import SerialEvaluator
+        from .core.evaluator import SerialEvaluator
 
         self.inner = SerialEvaluator() if inner is None else inner
         self.points = 0
@@ -716,7 +716,7 @@ def check_iterator(
 
     import numpy as np
 
-    from fbia.core.problem import Result
+    from .core.problem import Result
 
     global_state = _global_rng_state()
     it = iterator_factory()
@@ -810,11 +810,11 @@ def tiny_problem(
     [-0.5, 0.45] (initial 0.1).  ``failure_region`` (e.g. ``{"E": (100.0, 150.0)}``) makes
     the runs there fail, as soft biofilms do in Paper B (Fig. 5).
     """
-    from fbia.core.parameters import Parameter
-    from fbia.core.problem import InverseProblem
-    from fbia.core.registry import forward_model
-    from fbia.core.registry import measure as make_measure
-    from fbia.core.synthetic import synthetic_observations
+    from .core.parameters import Parameter
+    from .core.problem import InverseProblem
+    from .core.registry import forward_model
+    from .core.registry import measure as make_measure
+    from .core.synthetic import synthetic_observations
 
     truth_model = forward_model("analytic_mound_2d", n_points=21)
     obs = synthetic_observations(
@@ -863,7 +863,7 @@ def failing_run(
 
 
 def check_registered(entry: PluginEntry, tmp_path: str | Path) -> Any:
-    """Run the checks that fit a registry entry (``fbia.plugins()`` lists them).
+    """Run the checks that fit a registry entry (``fbia.list_plugins()`` lists them).
 
     :func:`check_options` for every kind; for forward models :func:`check_forward_model` at
     ``example_parameters()``, including the failure path when the model has a
@@ -944,7 +944,7 @@ class PluginInstaller:
         ``source`` is a folder holding the plugin's modules; it goes on ``sys.path`` as an
         installed package's site folder would.  The default registry is reloaded on next use.
         """
-        from fbia.core.registry import default_registry
+        from .core.registry import default_registry
 
         if not self.roots:
             self.monkeypatch.syspath_prepend(str(self.site))
@@ -960,7 +960,7 @@ class PluginInstaller:
 
     def registry(self) -> Registry:
         """A fresh registry loaded from all entry points, including the installed ones."""
-        from fbia.core.registry import Registry
+        from .core.registry import Registry
 
         return Registry.load()
 
@@ -968,7 +968,7 @@ class PluginInstaller:
         """Forget the modules imported from the installed folders and the cached registry."""
         if not self.roots:
             return
-        from fbia.core.registry import default_registry
+        from .core.registry import default_registry
 
         roots = [str(r) for r in self.roots]
         for mod_name, module in list(sys.modules.items()):
@@ -984,8 +984,8 @@ class PluginInstaller:
 # ------------------------------------------------------------------------------------------
 @pytest.fixture
 def fbia_registry() -> Registry:
-    """The process-wide plugin registry (what ``fbia.plugins()`` lists)."""
-    from fbia.core.registry import default_registry
+    """The process-wide plugin registry (what ``fbia.list_plugins()`` lists)."""
+    from .core.registry import default_registry
 
     return default_registry()
 

@@ -1,23 +1,24 @@
 """fbia.core: data types, protocols, plugin registry, evaluators, study files and CLI."""
 
-from fbia.core import parameters as priors
-from fbia.core.errors import ConfigError, FbiaError, ForwardModelError, MeasureError, PluginError
-from fbia.core.evaluator import Evaluator, ProcessPoolEvaluator, SerialEvaluator, make_evaluator
-from fbia.core.hookspecs import hookimpl
-from fbia.core.interface import Interface
-from fbia.core.iteration import IteratorBase
-from fbia.core.observation import (
+from . import parameters as priors
+from .errors import ConfigError, FbiaError, ForwardModelError, MeasureError, PluginError
+from .evaluator import Evaluator, ProcessPoolEvaluator, SerialEvaluator
+from .executors import make_evaluator
+from .hookspecs import hookimpl
+from .interface import Interface
+from .iteration import InverseIterator, IteratorBase
+from .observation import (
     Coordinate,
     MeasurementPoints,
     Observation,
     Solution,
     coordinate_key,
 )
-from fbia.core.options import Configurable, PluginOptions
-from fbia.core.parameters import Parameter, Prior
-from fbia.core.problem import Evaluation, InverseProblem, Result
-from fbia.core.protocols import Discrepancy, ForwardModel, Iterator
-from fbia.core.registry import Registry, forward_model, iterator, measure, plugins
+from .options import Configurable, PluginOptions
+from .parameters import Parameter, Prior
+from .problem import Evaluation, InverseProblem, Result
+from .protocols import Discrepancy, ForwardModel
+from .registry import Registry, forward_model, iterator, list_plugins, measure
 
 __all__ = [
     "ConfigError",
@@ -32,7 +33,7 @@ __all__ = [
     "ForwardModelError",
     "Interface",
     "InverseProblem",
-    "Iterator",
+    "InverseIterator",
     "MeasureError",
     "MeasurementPoints",
     "Observation",
@@ -51,6 +52,6 @@ __all__ = [
     "iterator",
     "make_evaluator",
     "measure",
-    "plugins",
+    "list_plugins",
     "priors",
 ]

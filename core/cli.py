@@ -30,7 +30,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from fbia.core.errors import ConfigError
+from .errors import ConfigError
 
 PROG = "fbia"
 
@@ -48,7 +48,7 @@ class _UsageError(Exception):
 
 
 def _parser() -> argparse.ArgumentParser:
-    from fbia import __version__
+    from .version import __version__
 
     p = _Parser(
         prog=PROG,
@@ -137,7 +137,7 @@ def _fail(message: str, status: int) -> int:
 
 
 def _load(args: argparse.Namespace, build: bool = True) -> Any:
-    from fbia.core.study import load_study
+    from .study import load_study
 
     return load_study(args.study, build=build)
 
@@ -191,13 +191,13 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _plugins(args: argparse.Namespace) -> int:
-    from fbia.core.registry import plugins
+    from .registry import list_plugins
 
-    rows = [e.describe() for e in plugins()]
+    rows = [e.describe() for e in list_plugins()]
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
-    from fbia.core.report import format_table
+    from .report import format_table
 
     print(format_table(rows, ["name", "kind", "distribution", "version", "class"]))
     return 0

@@ -37,10 +37,10 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from fbia.core.errors import ConfigError
-from fbia.core.evaluator import _EvaluatorBase, _Job, _workers_ignore_sigint
-from fbia.core.isolation import RunOutcome, run_isolated_or_here, run_view
-from fbia.core.problem import Evaluation, InverseProblem
+from .errors import ConfigError
+from .evaluator import _EvaluatorBase, _Job, _workers_ignore_sigint
+from .isolation import RunOutcome, run_isolated_or_here, run_view
+from .problem import Evaluation, InverseProblem
 
 __all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator"]
 

@@ -42,30 +42,20 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
-from fbia.core.errors import ConfigError
-from fbia.core.isolation import (
+from .errors import ConfigError
+from .isolation import (
     IsolatedRunner,
     RunOutcome,
     evaluate_here,
     run_isolated_or_here,
     run_view,
 )
-from fbia.core.problem import Evaluation, InverseProblem
+from .problem import Evaluation, InverseProblem
 
 if TYPE_CHECKING:
-    from fbia.core.store import StudyStore
+    from .store import StudyStore
 
-__all__ = [
-    "EXECUTOR_KINDS",
-    "Evaluator",
-    "ProcessPoolEvaluator",
-    "RunListener",
-    "SerialEvaluator",
-    "make_evaluator",
-]
-
-#: The executors :func:`make_evaluator` knows.
-EXECUTOR_KINDS = ("serial", "processes", "dask")
+__all__ = ["Evaluator", "ProcessPoolEvaluator", "RunListener", "SerialEvaluator"]
 
 
 @runtime_checkable
@@ -523,23 +513,3 @@ class ProcessPoolEvaluator(_EvaluatorBase):
     def close(self) -> None:
         self._shutdown()
         super().close()
-
-
-def make_evaluator(kind: str = "processes", **options: Any) -> Any:
-    """An evaluator by name: ``"serial"``, ``"processes"`` or ``"dask"`` (see
-    :class:`~fbia.core.dask_executor.DaskEvaluator`), with its keyword options."""
-    if kind not in EXECUTOR_KINDS:
-        raise ConfigError(f"unknown executor {kind!r}; valid: {', '.join(EXECUTOR_KINDS)}")
-    factory: Any
-    if kind == "serial":
-        factory = SerialEvaluator
-    elif kind == "processes":
-        factory = ProcessPoolEvaluator
-    else:
-        from fbia.core.dask_executor import DaskEvaluator
-
-        factory = DaskEvaluator
-    try:
-        return factory(**options)
-    except TypeError as exc:
-        raise ConfigError(f"bad option for executor {kind!r}: {exc}") from None

@@ -8,7 +8,7 @@ array([0., 1.])
 >>> float(gamma.sizes.sum())
 1.0
 
-Orientation (ARCHITECTURE.md): a 2-D polyline is ordered so that the solid lies on its right;
+Orientation (docs/architecture.md): a 2-D polyline is ordered so that the solid lies on its right;
 its normal, the tangent turned by +90°, points into the fluid.  3-D triangles are ordered so
 that their right-hand normal points into the fluid.
 """
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fbia.core.errors import ConfigError
+from .errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -44,9 +44,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from fbia.core.errors import ConfigError
-from fbia.core.parameters import Parameter
-from fbia.core.problem import Evaluation, InverseProblem
+from .errors import ConfigError
+from .parameters import Parameter
+from .problem import Evaluation, InverseProblem
 
 __all__ = [
     "IsolatedRunner",

@@ -11,12 +11,22 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
 
 from __future__ import annotations
 
-from collections.abc import Generator
-from typing import Any
+from collections.abc import Generator, Iterator
+from typing import Any, Protocol, runtime_checkable
 
-from fbia.core.evaluator import Evaluator, SerialEvaluator
-from fbia.core.options import Configurable
-from fbia.core.problem import InverseProblem, Result
+from .evaluator import Evaluator, SerialEvaluator
+from .options import Configurable
+from .problem import InverseProblem, Result
+
+
+@runtime_checkable
+class InverseIterator(Protocol):
+    """An inverse-analysis algorithm (registry kind ``iterator``): ``steps`` yields after
+    every iteration, ``run`` drains it."""
+
+    def steps(self, problem: InverseProblem, evaluator: Evaluator) -> Iterator[Any]: ...
+
+    def run(self, problem: InverseProblem, evaluator: Evaluator | None = None) -> Result: ...
 
 
 class IteratorBase(Configurable):

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fbia.core.problem import Evaluation, InverseProblem
+from .problem import Evaluation, InverseProblem
 
 
 def noise_levels(problem: InverseProblem) -> list[float] | None:

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fbia.core.errors import ConfigError
-from fbia.core.interface import Interface, read_csv_table
+from .errors import ConfigError
+from .interface import Interface, read_csv_table
 
 Coordinate = Mapping[str, float]
 CoordinateKey = tuple[tuple[str, float], ...]

@@ -19,7 +19,7 @@ from typing import Any, Self
 import pydantic
 from pydantic import BaseModel, ConfigDict
 
-from fbia.core.errors import ConfigError
+from .errors import ConfigError
 
 
 class PluginOptions(BaseModel):

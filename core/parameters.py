@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fbia.core.errors import ConfigError
+from .errors import ConfigError
 
 
 @dataclass(frozen=True)

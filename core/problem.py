@@ -27,10 +27,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fbia.core.errors import ConfigError, ForwardModelError, MeasureError
-from fbia.core.observation import Observation, Solution, coordinate_key
-from fbia.core.parameters import Parameter
-from fbia.core.protocols import Discrepancy, ForwardModel
+from .errors import ConfigError, ForwardModelError, MeasureError
+from .observation import Observation, Solution, coordinate_key
+from .parameters import Parameter
+from .protocols import Discrepancy, ForwardModel
 
 #: Evaluation outcomes.  ``failed``: the forward model raised ForwardModelError;
 #: ``measure_failed``: the measure could not compare (MeasureError); ``error``: the plugin

@@ -1,25 +1,22 @@
-"""The three extension points of fbia, as typing protocols.
+"""Two of the three extension points of fbia, as typing protocols.
 
 A forward model turns parameters into interfaces, a measure (``Discrepancy``) compares a
-simulated interface with an observation, an iterator drives the inverse analysis.  Plugins
-implement them; nothing in fbia checks inheritance, only these methods.
+simulated interface with an observation; the third, an iterator that drives the inverse
+analysis, is :class:`fbia.core.iteration.InverseIterator` (it needs the problem and the
+evaluator, which need these two).  Plugins implement them; nothing in fbia checks
+inheritance, only these methods.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator as PyIterator
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from fbia.core.interface import Interface
-from fbia.core.observation import Coordinate, Observation, Solution
-
-if TYPE_CHECKING:
-    from fbia.core.evaluator import Evaluator
-    from fbia.core.problem import InverseProblem, Result
+from .interface import Interface
+from .observation import Coordinate, Observation, Solution
 
 
 @runtime_checkable
@@ -45,12 +42,3 @@ class Discrepancy(Protocol):
     def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray: ...
 
     def distance(self, simulated: Interface, observation: Observation) -> float: ...
-
-
-@runtime_checkable
-class Iterator(Protocol):
-    """An inverse-analysis algorithm; ``steps`` yields after every iteration, ``run`` drains it."""
-
-    def steps(self, problem: InverseProblem, evaluator: Evaluator) -> PyIterator[Any]: ...
-
-    def run(self, problem: InverseProblem, evaluator: Evaluator | None = None) -> Result: ...

@@ -1,7 +1,7 @@
 """The plugin registry: pluggy + entry points, the same path for built-ins and third parties.
 
 >>> import fbia
->>> sorted(e.name for e in fbia.plugins() if e.kind == "measure")
+>>> sorted(e.name for e in fbia.list_plugins() if e.kind == "measure")
 ['cpp', 'ray', 'rkhs']
 >>> fbia.measure("rkhs", sigma_w=0.05)                          # doctest: +ELLIPSIS
 RkhsMeasure(sigma_w=0.05, ...)
@@ -18,9 +18,9 @@ from typing import Any
 
 import pluggy
 
-from fbia.core import hookspecs
-from fbia.core.errors import PluginError
-from fbia.core.options import PluginOptions
+from . import hookspecs
+from .errors import PluginError
+from .options import PluginOptions
 
 KINDS: dict[str, str] = {
     "forward_model": "register_forward_models",
@@ -198,7 +198,7 @@ def iterator(name: str, **options: Any) -> Any:
     return default_registry().create("iterator", name, options)
 
 
-def plugins(kind: str | None = None) -> list[PluginEntry]:
+def list_plugins(kind: str | None = None) -> list[PluginEntry]:
     """What is installed: name, kind, class, providing plugin, distribution and version."""
     return default_registry().entries(kind)
 

@@ -42,10 +42,10 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from fbia.core.interface import Interface
-from fbia.core.observation import Coordinate, Observation, Solution
-from fbia.core.problem import Evaluation, InverseProblem, _jsonable
-from fbia.core.registry import plugin_versions
+from .interface import Interface
+from .observation import Coordinate, Observation, Solution
+from .problem import Evaluation, InverseProblem, _jsonable
+from .registry import plugin_versions
 
 __all__ = [
     "EvaluationLog",
@@ -158,10 +158,10 @@ def provenance(
     """
     import scipy
 
-    import fbia
+    from .version import __version__
 
     return {
-        "fbia": fbia.__version__,
+        "fbia": __version__,
         "python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,

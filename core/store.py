@@ -56,10 +56,10 @@ from typing import IO, Any
 
 import numpy as np
 
-from fbia.core.errors import ConfigError
-from fbia.core.likelihood import gaussian_log_likelihood as _log_likelihood
-from fbia.core.likelihood import measurement_count, noise_levels
-from fbia.core.problem import Evaluation, InverseProblem, _jsonable
+from .errors import ConfigError
+from .likelihood import gaussian_log_likelihood as _log_likelihood
+from .likelihood import measurement_count, noise_levels
+from .problem import Evaluation, InverseProblem, _jsonable
 
 __all__ = [
     "STORE_FORMAT",
@@ -417,7 +417,7 @@ class StudyStore:
     # -- sessions --------------------------------------------------------------------------
     def begin_session(self, executor: Mapping[str, Any], study_sha256: str | None = None) -> int:
         """Start a session (one ``fbia run``); rows written from now on carry its id."""
-        import fbia
+        from .version import __version__
 
         with self._transaction() as db:
             cur = db.execute(
@@ -427,7 +427,7 @@ class StudyStore:
                     _now(),
                     socket.gethostname(),
                     os.getpid(),
-                    fbia.__version__,
+                    __version__,
                     study_sha256,
                     _canonical(dict(executor)),
                 ),

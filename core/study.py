@@ -109,15 +109,15 @@ from typing import Any
 
 import numpy as np
 
-from fbia.core import report
-from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.evaluator import EXECUTOR_KINDS, make_evaluator
-from fbia.core.interface import Interface
-from fbia.core.observation import MeasurementPoints, Observation, check_coordinate
-from fbia.core.parameters import Parameter, Prior
-from fbia.core.problem import Evaluation, InverseProblem, Result
-from fbia.core.registry import Registry, default_registry
-from fbia.core.store import StudyStore
+from . import report
+from .errors import ConfigError, ForwardModelError
+from .executors import EXECUTOR_KINDS, make_evaluator
+from .interface import Interface
+from .observation import MeasurementPoints, Observation, check_coordinate
+from .parameters import Parameter, Prior
+from .problem import Evaluation, InverseProblem, Result
+from .registry import Registry, default_registry
+from .store import StudyStore
 
 __all__ = ["STORE_NAME", "ExecutorSpec", "Study", "SyntheticSpec", "load_study"]
 
@@ -336,7 +336,7 @@ class Study:
             raise err.located(self.file) from None
 
     def _synthetic_observations(self) -> list[Observation]:
-        from fbia.core.synthetic import synthetic_observations
+        from .synthetic import synthetic_observations
 
         spec = self.synthetic
         assert spec is not None

@@ -28,10 +28,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.interface import Interface
-from fbia.core.observation import Coordinate, Observation, check_coordinate
-from fbia.core.protocols import ForwardModel
+from .errors import ConfigError, ForwardModelError
+from .interface import Interface
+from .observation import Coordinate, Observation, check_coordinate
+from .protocols import ForwardModel
 
 FloatArray = NDArray[np.float64]
 

@@ -78,7 +78,7 @@ def _product_grad(a: Any, bt: Any, w: Any) -> Any:  # pragma: no cover - compile
     return rows.sum(axis=0)
 
 
-class Matern32Product(Kern):  # type: ignore[misc]
+class Matern32Product(Kern):
     """sigma^2 prod_j Matérn 3/2 (|a_j - b_j|; l_j): one signal variance, d length scales.
 
     Same values as GPy's product of 1-D ``Matern32`` kernels with the variances of all factors

@@ -43,7 +43,7 @@ import json
 import math
 import time
 import warnings
-from collections.abc import Generator, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -53,16 +53,16 @@ from numpy.typing import NDArray
 from pydantic import Field
 from scipy.stats import qmc
 
-from fbia.core.errors import ConfigError
-from fbia.core.evaluator import Evaluator
-from fbia.core.iteration import IteratorBase
-from fbia.core.likelihood import gaussian_log_likelihood, measurement_count
-from fbia.core.likelihood import noise_levels as _noise_levels
-from fbia.core.options import PluginOptions
-from fbia.core.parameters import Parameter, Prior
-from fbia.core.problem import Evaluation, InverseProblem, Result
-from fbia.iterators.gp_surrogate import OPTIMIZERS, GpSurrogate
-from fbia.iterators.smc import SequentialMonteCarlo, SmcResult, SmcState
+from ..core.errors import ConfigError
+from ..core.evaluator import Evaluator
+from ..core.iteration import IteratorBase
+from ..core.likelihood import gaussian_log_likelihood, measurement_count
+from ..core.likelihood import noise_levels as _noise_levels
+from ..core.options import PluginOptions
+from ..core.parameters import Parameter, Prior
+from ..core.problem import Evaluation, InverseProblem, Result
+from .gp_surrogate import OPTIMIZERS, GpSurrogate
+from .smc import SequentialMonteCarlo, SmcResult, SmcState
 
 FloatArray = NDArray[np.float64]
 
@@ -132,7 +132,7 @@ def sobol_design(
         u = sampler.random(n)
     out = np.empty_like(u)
     for j, p in enumerate(parameters):
-        if _finite_bounds(p) and not through_prior:
+        if p.bounds is not None and _finite_bounds(p) and not through_prior:
             lo, hi = p.bounds
             out[:, j] = lo + (hi - lo) * u[:, j]
         else:
@@ -224,6 +224,7 @@ class GpSmcIterator(IteratorBase):
         )
         max_smc_steps: int = Field(5000, ge=1, description="limit of tempering steps [-]")
 
+    options: Options
     surrogate: GpSurrogate | None = None
     posterior: SmcResult | None = None
 
@@ -241,9 +242,11 @@ class GpSmcIterator(IteratorBase):
         sigmas = noise_levels(problem)
         count = measurement_count(problem)
         inputs = [*problem.parameters, *problem.uncertain]
+        priors: list[Prior] = []
         for p in inputs:
             if p.prior is None:
                 raise ConfigError("needs a prior distribution", p.name)
+            priors.append(p.prior)
             if not _finite_bounds(p) and opts.design == "box" and p in problem.parameters:
                 raise ConfigError(
                     "a calibration parameter needs finite bounds for the Sobol design "
@@ -314,7 +317,7 @@ class GpSmcIterator(IteratorBase):
                 f"GP on {int(use.sum())} runs: LOO rel. error {quality['loo_relative_l2']:.3g}",
                 record("surrogate", **{k: v for k, v in gp.describe().items()}, **quality),
             )
-            log_likelihood = gp.predict_mean
+            log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean
             nfev = n_new
         else:
             n_failed = 0
@@ -331,7 +334,7 @@ class GpSmcIterator(IteratorBase):
 
         sampler = SequentialMonteCarlo(
             log_likelihood,
-            [p.prior for p in inputs],
+            priors,
             n_particles=opts.n_particles,
             zeta=opts.zeta,
             n_rejuvenation=opts.n_rejuvenation,
@@ -538,7 +541,7 @@ class GpSmcIterator(IteratorBase):
         figures: Sequence[str] | None = None,
     ) -> list[Path]:
         """Paper B's figures of a gp_smc result into ``folder`` (see :mod:`.smc_plots`)."""
-        from fbia.iterators.smc_plots import plot_gp_smc_result
+        from .smc_plots import plot_gp_smc_result
 
         return plot_gp_smc_result(result, problem, folder, figures)
 
@@ -546,6 +549,7 @@ class GpSmcIterator(IteratorBase):
 def _log_prior(inputs: Sequence[Parameter], z: FloatArray) -> FloatArray:
     out = np.zeros(len(z))
     for j, p in enumerate(inputs):
+        assert p.prior is not None  # checked at the start of steps()
         out += p.prior.logpdf(z[:, j])
     return out
 
@@ -691,7 +695,7 @@ def save_posterior(result: Result, folder: str | Path) -> tuple[Path, Path]:
         "train_mask",
         "gp_state",
     }
-    from fbia.core.problem import _jsonable
+    from ..core.problem import _jsonable
 
     meta = {
         "format": POSTERIOR_FORMAT,
@@ -729,7 +733,7 @@ def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, 
         raise ConfigError(
             "arviz is not installed (pip install arviz)", "to_inference_data"
         ) from None
-    from fbia.iterators.smc import systematic_resample
+    from .smc import systematic_resample
 
     w = np.asarray(posterior["weights"])
     rng = np.random.default_rng(seed)

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fbia.core.errors import ConfigError
+from ..core.errors import ConfigError
 
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
@@ -291,7 +291,7 @@ class GpSurrogate:
         gpy = _gpy()
         d = x.shape[1]
         if self.ard:
-            from fbia.iterators.gp_kernels import Matern32Product
+            from .gp_kernels import Matern32Product
 
             kern = Matern32Product(d)
         else:

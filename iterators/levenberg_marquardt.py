@@ -65,14 +65,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, model_validator
 
-from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.evaluator import Evaluator
-from fbia.core.iteration import IteratorBase
-from fbia.core.options import PluginOptions
-from fbia.core.problem import Evaluation
-from fbia.iterators.lm_core import LMChain, LMSettings, Outcome, PaperChain, err_res_of
-from fbia.iterators.lm_result import FitStatistics, LMResult, compare_starts
-from fbia.iterators.lm_robust import RobustChain
+from ..core.errors import ConfigError, ForwardModelError
+from ..core.evaluator import Evaluator
+from ..core.iteration import IteratorBase
+from ..core.options import PluginOptions
+from ..core.problem import Evaluation
+from .lm_core import LMChain, LMSettings, Outcome, PaperChain, err_res_of
+from .lm_result import FitStatistics, LMResult, compare_starts
+from .lm_robust import RobustChain
 
 FloatArray = NDArray[np.float64]
 
@@ -358,7 +358,7 @@ class LevenbergMarquardtIterator(IteratorBase):
 
     def write_plots(self, result: LMResult, problem: Any, folder: str | Path) -> list[Path]:
         """Search paths and error histories as PNG files (see :func:`plot_lm_result`)."""
-        from fbia.iterators.lm_plots import plot_lm_result
+        from .lm_plots import plot_lm_result
 
         return plot_lm_result(result, problem, folder)
 

@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.core.errors import ConfigError
-from fbia.iterators.finite_differences import forward_steps, perturbed
+from ..core.errors import ConfigError
+from .finite_differences import forward_steps, perturbed
 
 FloatArray = NDArray[np.float64]
 

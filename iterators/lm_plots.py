@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.iterators.lm_result import LMResult
+from .lm_result import LMResult
 
 FloatArray = NDArray[np.float64]
 

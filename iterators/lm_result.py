@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.core.problem import Result
+from ..core.problem import Result
 
 FloatArray = NDArray[np.float64]
 

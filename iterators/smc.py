@@ -41,8 +41,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 
-from fbia.core.errors import ConfigError
-from fbia.core.parameters import Prior
+from ..core.errors import ConfigError
+from ..core.parameters import Prior
 
 LogLikelihood = Callable[[NDArray[np.float64]], ArrayLike]
 

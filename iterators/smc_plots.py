@@ -36,11 +36,11 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from scipy.stats import chi2, gaussian_kde
 
-from fbia.core.errors import ConfigError
-from fbia.core.parameters import Parameter
-from fbia.core.problem import InverseProblem, Result
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.smc import systematic_resample
+from ..core.errors import ConfigError
+from ..core.parameters import Parameter
+from ..core.problem import InverseProblem, Result
+from .gp_surrogate import GpSurrogate
+from .smc import systematic_resample
 
 FloatArray = NDArray[np.float64]
 #: Probability mass inside the KDE / Gaussian percentile lines.
@@ -135,8 +135,11 @@ def _fixed_rest(info: dict[str, Any], inputs: Sequence[Parameter]) -> FloatArray
     for j, p in enumerate(inputs):
         if j < n_x:
             rest.append(float(np.asarray(info["map"])[j]))
+        elif p.prior is not None:
+            rest.append(float(p.prior.ppf(0.5)))
         else:
-            rest.append(float(p.prior.ppf(0.5)) if p.prior else float(np.mean(p.bounds)))
+            assert p.bounds is not None  # a Parameter has a prior or bounds
+            rest.append(float(np.mean(p.bounds)))
     return np.array(rest)
 
 

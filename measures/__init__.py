@@ -5,10 +5,10 @@
 ``rkhs``: RKHS norm of the difference of the interfaces as surface currents (Paper B eq. 10-11).
 """
 
-from fbia.core.hookspecs import Register, hookimpl
-from fbia.measures.cpp import CppMeasure
-from fbia.measures.ray import RayMeasure
-from fbia.measures.rkhs import RkhsMeasure
+from ..core.hookspecs import Register, hookimpl
+from .cpp import CppMeasure
+from .ray import RayMeasure
+from .rkhs import RkhsMeasure
 
 __all__ = ["CppMeasure", "RayMeasure", "RkhsMeasure"]
 

@@ -26,9 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from fbia.core.errors import ConfigError
-from fbia.core.interface import Interface
-from fbia.core.observation import Observation
+from ..core.errors import ConfigError
+from ..core.interface import Interface
+from ..core.observation import Observation
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]

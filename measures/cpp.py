@@ -15,11 +15,11 @@ import math
 import numpy as np
 from pydantic import Field, field_validator
 
-from fbia.core.errors import ConfigError
-from fbia.core.interface import Interface
-from fbia.core.observation import Observation
-from fbia.core.options import Configurable, PluginOptions
-from fbia.measures._geometry import (
+from ..core.errors import ConfigError
+from ..core.interface import Interface
+from ..core.observation import Observation
+from ..core.options import Configurable, PluginOptions
+from ._geometry import (
     ElementGeometry,
     IdentityCache,
     check_dimensions,

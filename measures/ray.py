@@ -22,11 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from fbia.core.errors import ConfigError, MeasureError
-from fbia.core.interface import Interface
-from fbia.core.observation import Observation
-from fbia.core.options import Configurable, PluginOptions
-from fbia.measures._geometry import (
+from ..core.errors import ConfigError, MeasureError
+from ..core.interface import Interface
+from ..core.observation import Observation
+from ..core.options import Configurable, PluginOptions
+from ._geometry import (
     ElementGeometry,
     FloatArray,
     IdentityCache,

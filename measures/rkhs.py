@@ -30,12 +30,12 @@ from numpy.typing import NDArray
 from pydantic import Field
 from scipy.spatial import cKDTree
 
-from fbia.core.errors import ConfigError
-from fbia.core.interface import Interface
-from fbia.core.observation import Observation
-from fbia.core.options import Configurable, PluginOptions
-from fbia.measures._geometry import FloatArray, IdentityCache, check_dimensions, cutoff_radius
-from fbia.measures._rkhs_field import (
+from ..core.errors import ConfigError
+from ..core.interface import Interface
+from ..core.observation import Observation
+from ..core.options import Configurable, PluginOptions
+from ._geometry import FloatArray, IdentityCache, check_dimensions, cutoff_radius
+from ._rkhs_field import (
     count_test_points,
     residual_scale,
     smoothed_field,

@@ -72,7 +72,7 @@ def m3():
 
 
 def test_models_are_registered_through_the_entry_point():
-    entries = {e.name: e for e in fbia.plugins("forward_model")}
+    entries = {e.name: e for e in fbia.list_plugins("forward_model")}
     assert entries["analytic_mound_2d"].factory is AnalyticMound2DForwardModel
     assert entries["analytic_mound_3d"].factory is AnalyticMound3DForwardModel
     assert entries["analytic_mound_2d"].plugin == "fbia.analytic"
@@ -419,7 +419,7 @@ def test_write_fields_puts_readable_interfaces_in_the_workdir(tmp_path):
 def test_models_pass_the_fbia_testing_conformance_checks(tmp_path):
     from fbia.testing import check_registered
 
-    for entry in fbia.plugins("forward_model"):
+    for entry in fbia.list_plugins("forward_model"):
         if entry.name.startswith("analytic_mound_"):
             solution = check_registered(entry, tmp_path / entry.name)
             assert solution.covers([{"inflow_rate": 50.0}, {"inflow_rate": 100.0}])

@@ -21,7 +21,7 @@ import fbia
 from fbia import testing as ft
 from fbia.core.registry import default_registry
 
-ENTRIES = {kind: fbia.plugins(kind) for kind in ("forward_model", "measure", "iterator")}
+ENTRIES = {kind: fbia.list_plugins(kind) for kind in ("forward_model", "measure", "iterator")}
 
 
 def _params(kind: str) -> list[Any]:
@@ -32,7 +32,7 @@ def _params(kind: str) -> list[Any]:
 # Every registered plugin
 # ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(
-    "entry", [pytest.param(e, id=f"{e.kind}:{e.name}") for e in fbia.plugins()]
+    "entry", [pytest.param(e, id=f"{e.kind}:{e.name}") for e in fbia.list_plugins()]
 )
 def test_options_schema_rejects_unknown_keys(entry):
     names = ft.check_options(entry.factory)

@@ -33,7 +33,7 @@ def make(name: str):
 
 
 def test_registry_lists_and_builds_the_three_measures():
-    entries = {e.name: e for e in fbia.plugins("measure")}
+    entries = {e.name: e for e in fbia.list_plugins("measure")}
     assert {"ray", "cpp", "rkhs"} <= set(entries)
     for name, cls in MEASURES.items():
         assert entries[name].factory is cls

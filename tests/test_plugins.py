@@ -100,7 +100,7 @@ def test_unknown_name_in_the_default_registry_lists_every_installed_one():
     with pytest.raises(fbia.PluginError) as info:
         fbia.measure("rhks")
     valid = str(info.value).split("valid: ")[1].split(", ")
-    assert valid == [e.name for e in fbia.plugins("measure")] and "rkhs" in valid
+    assert valid == [e.name for e in fbia.list_plugins("measure")] and "rkhs" in valid
 
 
 class NoOptions:
@@ -189,7 +189,7 @@ def test_every_hook_is_implemented_by_a_builtin_and_documented():
 def test_plugins_lists_builtins_with_distribution_and_version():
     version = importlib.metadata.version("fbia")
     assert version == fbia.__version__
-    entries = [e for e in fbia.plugins() if e.distribution == "fbia"]
+    entries = [e for e in fbia.list_plugins() if e.distribution == "fbia"]
     assert {e.kind for e in entries} == set(KINDS)
     for e in entries:
         row = e.describe()
@@ -239,7 +239,7 @@ def test_installed_plugin_leaves_no_trace(tmp_path):
         installer.install(
             "fbia-example-plugin", "1.2.3", {"example": "fbia_example_plugin"}, source=PLUGIN_PKG
         )
-        assert "example_bump" in [e.name for e in fbia.plugins("forward_model")]
+        assert "example_bump" in [e.name for e in fbia.list_plugins("forward_model")]
         mp.undo()
         installer.cleanup()
     assert sys.path == before_path

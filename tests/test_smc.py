@@ -202,4 +202,4 @@ def test_fbia_smc_is_the_standalone_sampler():
     from fbia.iterators import smc as smc_module
 
     assert fbia.smc is smc_module.smc
-    assert "gp_smc" in {e.name for e in fbia.plugins("iterator")}
+    assert "gp_smc" in {e.name for e in fbia.list_plugins("iterator")}

@@ -10,8 +10,8 @@ forms, Newton, continuation, checks), :mod:`.model` (the plugin class), :mod:`.o
 :mod:`.turek_hron` (benchmark geometry and evaluation).
 """
 
-from fbia.core.hookspecs import Register, hookimpl
-from fbia.plugins.ale_fsi.model import AleFsiForwardModel
+from ...core.hookspecs import Register, hookimpl
+from .model import AleFsiForwardModel
 
 __all__ = ["AleFsiForwardModel"]
 

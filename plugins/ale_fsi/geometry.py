@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fbia.core.errors import ConfigError
+from ...core.errors import ConfigError
 
 if TYPE_CHECKING:
     import ngsolve
@@ -49,7 +49,7 @@ BOUNDARY_NAMES = (
 REQUIRED_BOUNDARIES = ("inflow", "interface", "solid_fixed")
 
 #: Outline of the default biofilm mound (mm), from the upstream foot over the top to the
-#: downstream foot, i.e. with the solid on the right (ARCHITECTURE.md).  Shaped after Paper A
+#: downstream foot, i.e. with the solid on the right (docs/architecture.md).  Shaped after Paper A
 #: Fig. 2: it fills about half of the 1 mm channel height and overhangs on the downstream side,
 #: while the downstream foot meets the floor almost at a right angle (an acute fluid wedge there
 #: inverts ALE elements for soft material).

@@ -28,11 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, field_validator, model_validator
 
-from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.interface import Interface
-from fbia.core.observation import Coordinate, Solution
-from fbia.core.options import Configurable, PluginOptions
-
+from ...core.errors import ConfigError, ForwardModelError
+from ...core.interface import Interface
+from ...core.observation import Coordinate, Solution
+from ...core.options import Configurable, PluginOptions
 from .geometry import DEFAULT_OUTLINE, FLUID, SOLID
 
 Point = tuple[float, float]
@@ -173,6 +172,8 @@ class AleFsiForwardModel(Configurable):
             if self.mesh_file is not None and (self.outline is not None or self.subdomains):
                 raise ValueError("give either mesh_file or outline/subdomains, not both")
             return self
+
+    options: Options
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         super().__init__(options, **kwargs)
@@ -372,7 +373,7 @@ class AleFsiForwardModel(Configurable):
                 fluid_viscosity=o.fluid_viscosity,
                 solid_density=o.solid_density,
                 material=o.material,
-                gravity=tuple(o.gravity),
+                gravity=o.gravity,
                 outflow=o.outflow,
                 mesh_motion=o.mesh_motion,
                 mesh_stiffening=o.mesh_stiffening,

@@ -45,8 +45,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.core.errors import ForwardModelError
-
+from ...core.errors import ForwardModelError
 from .geometry import FLUID, solid_regions
 
 if TYPE_CHECKING:

@@ -21,7 +21,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from fbia.core.errors import ConfigError
+from ...core.errors import ConfigError
 
 #: Geometry in mm (Turek & Hron 2006, Fig. 1, scaled from m).
 CHANNEL = (2500.0, 410.0)

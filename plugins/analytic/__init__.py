@@ -6,9 +6,9 @@ downstream and flattens under the flow, in closed form (formulas in
 :mod:`fbia.plugins.analytic._mechanics`).
 """
 
-from fbia.core.hookspecs import Register, hookimpl
-from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
-from fbia.plugins.analytic.mound_3d import AnalyticMound3DForwardModel
+from ...core.hookspecs import Register, hookimpl
+from .mound_2d import AnalyticMound2DForwardModel
+from .mound_3d import AnalyticMound3DForwardModel
 
 __all__ = ["AnalyticMound2DForwardModel", "AnalyticMound3DForwardModel"]
 

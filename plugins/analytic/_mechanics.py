@@ -55,10 +55,10 @@ from typing import Any, Self
 import numpy as np
 from pydantic import Field, model_validator
 
-from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.interface import Interface
-from fbia.core.observation import Solution
-from fbia.core.options import Configurable, PluginOptions
+from ...core.errors import ConfigError, ForwardModelError
+from ...core.interface import Interface
+from ...core.observation import Solution
+from ...core.options import Configurable, PluginOptions
 
 #: Gain of the lean (bending) response, C_B [-].
 BENDING_GAIN = 6.0

@@ -39,8 +39,8 @@ from typing import Any, Self
 import numpy as np
 from pydantic import Field, model_validator
 
-from fbia.core.interface import Interface
-from fbia.plugins.analytic._mechanics import (
+from ...core.interface import Interface
+from ._mechanics import (
     MoundModel,
     MoundOptions,
     MoundState,

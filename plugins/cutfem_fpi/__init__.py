@@ -11,13 +11,13 @@ flow | skeleton scheme with Aitken relaxation), :mod:`.model` (the plugin class)
 :mod:`.output` (VTU).
 """
 
-from fbia.core.hookspecs import hookimpl
-from fbia.plugins.cutfem_fpi.model import CutFemFpiForwardModel
+from ...core.hookspecs import hookimpl
+from .model import CutFemFpiForwardModel
 
 __all__ = ["CutFemFpiForwardModel"]
 
 
 @hookimpl
-def register_forward_models(register):  # type: ignore[no-untyped-def]
+def register_forward_models(register):
     """Register ``cutfem_fpi``."""
     register("cutfem_fpi", CutFemFpiForwardModel)

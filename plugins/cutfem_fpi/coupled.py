@@ -34,8 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.core.errors import ConfigError, ForwardModelError
-
+from ...core.errors import ConfigError, ForwardModelError
 from .flow import CutFlow, FlowSettings
 from .skeleton import Skeleton, SkeletonSettings, kozeny_carman
 
@@ -78,7 +77,7 @@ def channel_mesh(
     import ngsolve as ngs
     from netgen.occ import OCCGeometry, Rectangle, X, Y
 
-    from fbia.plugins.ale_fsi.geometry import mesh_arrays, mesh_from_arrays
+    from ..ale_fsi.geometry import mesh_arrays, mesh_from_arrays
 
     face = Rectangle(length, height).Face()
     face.edges.Min(X).name = "inflow"
@@ -160,13 +159,13 @@ def read_flow_cell(path: str | Path) -> FlowCellFile:
     """
     import ngsolve as ngs
 
-    from fbia.plugins.ale_fsi.geometry import (
+    from ..ale_fsi.geometry import (
         mesh_arrays,
         mesh_from_arrays,
         read_mesh,
         solid_regions,
     )
-    from fbia.plugins.ale_fsi.solver import interface_chains
+    from ..ale_fsi.solver import interface_chains
 
     where = str(path)
     cell = read_mesh(path)
@@ -259,7 +258,7 @@ class InterfaceSampler:
     def __init__(self, mesh: Any, per_edge: int) -> None:
         import ngsolve as ngs
 
-        from fbia.plugins.ale_fsi.solver import interface_chains
+        from ..ale_fsi.solver import interface_chains
 
         chains = interface_chains(mesh, ngs)
         if len(chains) != 1:
@@ -278,7 +277,7 @@ class InterfaceSampler:
             local = (per_edge - np.arange(per_edge)) if first else np.arange(per_edge)
             take.append(el * len(s) + local)
         el, start = chains[0][-1]
-        take.append([el * len(s) + (0 if bnd[el].vertices[0].nr == start else per_edge)])
+        take.append(np.array([el * len(s) + (0 if bnd[el].vertices[0].nr == start else per_edge)]))
         self._mp = mapped[np.concatenate(take)]
         self.reference = np.asarray(ngs.CoefficientFunction((ngs.x, ngs.y))(self._mp)).reshape(
             -1, 2

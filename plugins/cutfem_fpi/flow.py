@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fbia.core.errors import ForwardModelError
+from ...core.errors import ForwardModelError
 
 
 @dataclass(frozen=True)

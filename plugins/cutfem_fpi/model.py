@@ -32,10 +32,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from fbia.core.errors import ConfigError, ForwardModelError
-from fbia.core.interface import Interface
-from fbia.core.observation import Coordinate, Solution
-from fbia.core.options import Configurable, PluginOptions
+from ...core.errors import ConfigError, ForwardModelError
+from ...core.interface import Interface
+from ...core.observation import Coordinate, Solution
+from ...core.options import Configurable, PluginOptions
 
 Point = tuple[float, float]
 
@@ -184,6 +184,8 @@ class CutFemFpiForwardModel(Configurable):
                     "sets the biofilm, its mesh and the channel)"
                 )
             return self
+
+    options: Options
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         super().__init__(options, **kwargs)
@@ -402,7 +404,7 @@ class CutFemFpiForwardModel(Configurable):
 
     def _outline(self) -> np.ndarray:
         """The biofilm outline option (mm), checked like the ``ale_fsi`` flow cell checks it."""
-        from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
+        from ..ale_fsi.geometry import DEFAULT_OUTLINE
 
         o = self.options
         where = "cutfem_fpi options: outline"

@@ -1,0 +1,36 @@
+"""Executors by name: the factory behind ``[executor] kind = ...`` in a study file.
+
+It sits apart from :mod:`fbia.core.evaluator` because the Dask executor builds on the
+evaluators there: evaluator <- dask_executor <- executors, with no arrow back.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .errors import ConfigError
+from .evaluator import Evaluator, ProcessPoolEvaluator, SerialEvaluator
+
+#: The executors :func:`make_evaluator` knows.
+EXECUTOR_KINDS = ("serial", "processes", "dask")
+
+
+def make_evaluator(kind: str = "processes", **options: Any) -> Evaluator:
+    """An evaluator by name: ``"serial"``, ``"processes"`` or ``"dask"`` (see
+    :class:`~fbia.core.dask_executor.DaskEvaluator`), with its keyword options."""
+    if kind not in EXECUTOR_KINDS:
+        raise ConfigError(f"unknown executor {kind!r}; valid: {', '.join(EXECUTOR_KINDS)}")
+    factory: Any
+    if kind == "serial":
+        factory = SerialEvaluator
+    elif kind == "processes":
+        factory = ProcessPoolEvaluator
+    else:
+        from .dask_executor import DaskEvaluator  # imports dask, which takes a second
+
+        factory = DaskEvaluator
+    try:
+        evaluator: Evaluator = factory(**options)
+    except TypeError as exc:
+        raise ConfigError(f"bad option for executor {kind!r}: {exc}") from None
+    return evaluator
