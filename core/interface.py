@@ -3,7 +3,7 @@
 >>> import numpy as np, fbia
 >>> x = np.linspace(0.0, 1.0, 5)
 >>> gamma = fbia.Interface.polyline(np.c_[x, np.zeros_like(x)])
->>> gamma.normals[0]          # the tangent turned by +90 degrees (thesis eq. 24b)
+>>> gamma.normals[0]          # the tangent turned by +90 degrees (Paper B eq. 24b)
 array([0., 1.])
 >>> float(gamma.sizes.sum())
 1.0

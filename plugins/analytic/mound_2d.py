@@ -18,7 +18,7 @@ is the curve, for t in [0, pi],
 
 sampled at ``n_points`` vertices evenly spaced in arc length and ordered from the upstream
 foot to the downstream foot, so that the biofilm lies on the right and the normals (tangent
-turned by +90 deg, thesis eq. 24b) point into the fluid.
+turned by +90 deg, Paper B eq. 24b) point into the fluid.
 
 Deformation of a reference point (X, Y) of the interface (lean delta [mm] and flattening eps
 [-] from :mod:`fbia.plugins.analytic._mechanics`; x_c = x0 + c is the crest)::
