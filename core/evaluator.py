@@ -235,7 +235,13 @@ class _EvaluatorBase:
             shutil.rmtree(ev.workdir, ignore_errors=True)
             ev.workdir = None
         if self.store is not None:
-            self.store.put(ev, self._keys.pop(ev.index, None), outcome.worker, outcome.artifacts)
+            self.store.put(
+                ev,
+                self._keys.pop(ev.index, None),
+                outcome.worker,
+                outcome.artifacts,
+                outcome.interfaces,
+            )
         self.history.append(ev)
         if self.listener is not None:
             self.listener.record(ev, False, outcome.worker)

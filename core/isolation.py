@@ -45,6 +45,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import ConfigError
+from .interface import Interface
+from .observation import CoordinateKey
 from .parameters import Parameter
 from .problem import Evaluation, InverseProblem
 
@@ -68,6 +70,8 @@ class RunOutcome:
     record: Evaluation
     worker: str = ""
     artifacts: dict[str, str] = field(default_factory=dict)
+    #: the interfaces the forward model gave (for the store), None if it gave none
+    interfaces: dict[CoordinateKey, Interface] | None = None
 
     @classmethod
     def unfinished(
@@ -96,14 +100,16 @@ def worker_label() -> str:
 def evaluate_here(
     problem: InverseProblem, x: dict[str, float], workdir: str, index: int
 ) -> RunOutcome:
-    """Evaluate in this process; the solution object is dropped, its field files are kept
-    as artifacts (the record travels between processes, the interfaces stay on disk)."""
+    """Evaluate in this process; the solution object is dropped, its interfaces travel with
+    the record (for the store) and its field files are kept as artifacts."""
     ev = problem.evaluate(x, workdir=workdir, index=index, keep_solution=True)
     artifacts: dict[str, str] = {}
+    interfaces = None
     if ev.solution is not None:
         artifacts = {str(k): str(v) for k, v in ev.solution.fields.items()}
+        interfaces = dict(ev.solution.interfaces)
         ev.solution = None
-    return RunOutcome(ev, worker_label(), artifacts)
+    return RunOutcome(ev, worker_label(), artifacts, interfaces)
 
 
 def run_view(problem: InverseProblem) -> InverseProblem:

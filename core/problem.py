@@ -259,11 +259,11 @@ class InverseProblem:
             if missing:
                 raise _PluginBug(f"forward model returned no interface for coordinate(s) {missing}")
             ev.diagnostics = dict(solution.diagnostics)
+            if keep_solution:  # kept when the measure fails too: the forward run succeeded
+                ev.solution = solution
             ev.residuals, ev.distances = self.discrepancy(solution)
             if not (np.all(np.isfinite(ev.residuals)) and np.all(np.isfinite(ev.distances))):
                 raise _PluginBug("the measure returned NaN or infinite values")
-            if keep_solution:
-                ev.solution = solution
         except ForwardModelError as exc:
             ev.status, ev.message = "failed", str(exc) or type(exc).__name__
         except MeasureError as exc:

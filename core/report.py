@@ -153,7 +153,7 @@ def provenance(
     fbia, Python, numpy and scipy versions; the plugins used (registry name, class,
     distribution, version); the study file's path, text and SHA-256; the study's seed and
     every seed derived from it (``seeds``); the executor and its settings; host, platform,
-    command line; start and end time (UTC); the store (path, problem hash, runs per status,
+    command line; start and end time (UTC); the store (path, model key, runs per status,
     the sessions that made them: a resumed result tells which runs came from which session).
     """
     import scipy

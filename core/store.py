@@ -1,4 +1,4 @@
-"""The persistent study store: one SQLite file that holds every evaluation of a study.
+"""The persistent study store: one SQLite file that holds every forward run of a study.
 
 >>> import fbia, tempfile, pathlib
 >>> from fbia.core.store import StudyStore
@@ -18,37 +18,37 @@
 ...     len(store), again[0].distance == first[0].distance, ev.reused
 (1, True, {0})
 
-Every evaluation is one row, written in its own transaction the moment the run finishes (WAL
-journal, ``synchronous=NORMAL``: a killed process loses nothing that was committed; only a
-power cut or an OS crash may lose the last commits, never the file's consistency).  A row is
-found again by its *key*: the SHA-256 of the problem hash and the exact input values
-(``repr`` of every float, so equal means bit-equal).  The *problem hash* covers everything that
-determines a run's outcome and nothing else (see :func:`problem_fingerprint`): the forward model
-(class, version, options), the measure (class, version, options), the observations (their
-coordinates, interface and point data, noise), the fixed inputs and the likelihood's noise.
-Bounds, priors, the iterator and the executor are left out on purpose: changing them keeps every
-stored run valid (e.g. a Sobol design extended from 200 to 400 points reuses the first 200).
+Two layers (:mod:`fbia.core.fingerprints`): a **forward run** is keyed by what it depends on
+(model class, version and options, fixed inputs, requested coordinates, input values) and
+stored with the interfaces it gave; its **comparison** with the observations (residuals and
+distances) is keyed by the measure and the observed data.  The likelihood is not stored: it is
+computed from the distances when a run is read (:mod:`fbia.core.likelihood`).  So a change of
+σ_N, bounds, priors, iterator or executor reuses every stored run, and a change of the measure
+or the observations reuses every forward run and recomputes only its comparison (from the
+stored interfaces).  A store holds the runs of one model: binding it to another model, other
+model options or other fixed inputs is an error that says what changed.
 
-Tables: ``meta`` (format, problem hash and fingerprint, creation time), ``sessions`` (one row per
-``fbia run``: start and end, host, pid, fbia version, study file hash, executor, status) and
-``evaluations`` (key, index, session, attempt, x, uncertain, status, message, residuals as
-float64 bytes, distances, distance D, log-likelihood, wall time, worker, working folder,
-artifacts, diagnostics, finish time).  Read it with any SQLite client, e.g.
-``sqlite3 output/store.sqlite "select status, count(*) from evaluations group by status"``.
+Every run is written in its own transaction the moment it finishes (WAL journal,
+``synchronous=NORMAL``: a killed process loses nothing that was committed).  Tables: ``meta``
+(format, model key and fingerprint, the last problem bound, creation time), ``sessions`` (one
+row per ``fbia run``: start and end, host, pid, fbia version, study file hash, executor,
+status), ``runs`` (key, index, session, attempt, x, uncertain, status, message, wall time,
+worker, working folder, artifacts, diagnostics, finish time, interfaces as an ``.npz``) and
+``comparisons`` (run key, comparison key, status, message, residuals as float64 bytes,
+distances).  Read it with any SQLite client, e.g.
+``sqlite3 output/store.sqlite "select status, count(*) from runs group by status"``.  Stores of
+the first format (``fbia-store-1``) are migrated when opened (:mod:`fbia.core.store_migration`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import datetime as _dt
-import hashlib
-import importlib.metadata
+import io
 import json
-import math
 import os
 import socket
 import sqlite3
-import sys
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,26 +56,29 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import ConfigError
-from .likelihood import gaussian_log_likelihood as _log_likelihood
-from .likelihood import measurement_count, noise_levels
-from .problem import Evaluation, InverseProblem, _jsonable
+from .errors import ConfigError, MeasureError
+from .fingerprints import (
+    canonical,
+    comparison_key,
+    comparison_part,
+    coordinates_of,
+    describe_change,
+    model_key,
+    model_part,
+    problem_fingerprint,
+    run_key,
+)
+from .interface import Interface
+from .observation import CoordinateKey, Solution, coordinate_key
+from .problem import Evaluation, InverseProblem
+from .store_migration import migrate
 
-__all__ = [
-    "STORE_FORMAT",
-    "StoreMismatchError",
-    "StoredRun",
-    "StudyStore",
-    "evaluation_key",
-    "gaussian_log_likelihood",
-    "problem_fingerprint",
-    "problem_hash",
-]
+__all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
 
-#: Written into ``meta``; a store of another format is refused, not misread.
-STORE_FORMAT = "fbia-store-1"
+#: Written into ``meta``; a store of an unknown format is refused, not misread.
+STORE_FORMAT = "fbia-store-2"
 
-_SCHEMA = """
+SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS sessions (
     id INTEGER PRIMARY KEY,
@@ -88,7 +91,7 @@ CREATE TABLE IF NOT EXISTS sessions (
     study_sha256 TEXT,
     executor TEXT NOT NULL
 );
-CREATE TABLE IF NOT EXISTS evaluations (
+CREATE TABLE IF NOT EXISTS runs (
     id INTEGER PRIMARY KEY,
     key TEXT NOT NULL UNIQUE,
     idx INTEGER NOT NULL,
@@ -98,21 +101,27 @@ CREATE TABLE IF NOT EXISTS evaluations (
     uncertain TEXT NOT NULL,
     status TEXT NOT NULL,
     message TEXT NOT NULL,
-    residuals BLOB,
-    distances TEXT,
-    distance REAL,
-    log_likelihood REAL,
     time REAL NOT NULL,
     worker TEXT,
     workdir TEXT,
     artifacts TEXT NOT NULL,
     diagnostics TEXT NOT NULL,
-    finished TEXT NOT NULL
+    finished TEXT NOT NULL,
+    interfaces BLOB
+);
+CREATE TABLE IF NOT EXISTS comparisons (
+    run_key TEXT NOT NULL,
+    comparison TEXT NOT NULL,
+    status TEXT NOT NULL,
+    message TEXT NOT NULL,
+    residuals BLOB,
+    distances TEXT,
+    PRIMARY KEY (run_key, comparison)
 );
 """
-_COLUMNS = (
-    "key, idx, session, attempt, x, uncertain, status, message, residuals, distances, distance, "
-    "log_likelihood, time, worker, workdir, artifacts, diagnostics, finished"
+_RUN_COLUMNS = (
+    "key, idx, session, attempt, x, uncertain, status, message, time, worker, workdir, "
+    "artifacts, diagnostics, finished"
 )
 
 
@@ -120,151 +129,39 @@ def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
-def _canonical(value: Any) -> str:
-    """JSON with sorted keys and exact floats (``repr``): equal text means equal content."""
-    return json.dumps(_jsonable(value), sort_keys=True, separators=(",", ":"), allow_nan=False)
+def _floats(array: np.ndarray | None) -> bytes | None:
+    return None if array is None else np.ascontiguousarray(array, dtype="<f8").tobytes()
 
 
-# -- what determines a run ---------------------------------------------------------------------
-def _class_version(obj: Any) -> dict[str, str]:
-    """Class path and version of a plugin object: the version of the distribution named like
-    its top-level package (``fbia``, ``fbia_mysolver``), else the module's ``__version__``."""
-    cls = type(obj)
-    top = cls.__module__.split(".")[0]
-    try:
-        version = importlib.metadata.version(top.replace("_", "-"))
-    except importlib.metadata.PackageNotFoundError:
-        mod = sys.modules.get(cls.__module__)
-        version = str(getattr(mod, "__version__", "unversioned"))
-    return {"class": f"{cls.__module__}.{cls.__qualname__}", "version": version}
+# -- interfaces as bytes ---------------------------------------------------------------------------
+def pack_interfaces(interfaces: Mapping[CoordinateKey, Interface]) -> bytes:
+    """The interfaces of a run as an ``.npz`` (no pickles): coordinate, vertices, cells."""
+    arrays: dict[str, np.ndarray] = {}
+    keys = []
+    for k, (coordinate, gamma) in enumerate(sorted(interfaces.items())):
+        keys.append([[name, value] for name, value in coordinate])
+        arrays[f"vertices_{k}"] = np.asarray(gamma.vertices, dtype="<f8")
+        arrays[f"cells_{k}"] = np.asarray(gamma.cells, dtype="<i8")
+    arrays["coordinates"] = np.array(json.dumps(keys))
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)  # type: ignore[arg-type]
+    return buffer.getvalue()
 
 
-def _options(obj: Any) -> dict[str, Any]:
-    """A plugin's options; a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
-    opts = getattr(obj, "options", None)
-    dump = getattr(opts, "model_dump", None)
-    if not callable(dump):
-        return {}
-    out = dict(_jsonable(dump(mode="json")))
-    for key, value in dump().items():
-        if isinstance(value, Path):
-            out[key] = _file_digest(value)
-    return out
-
-
-def _file_digest(path: Path) -> dict[str, Any]:
-    """File name and SHA-256 of its bytes: moving a study folder keeps a store valid, editing
-    the mesh file it names does not."""
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return {"file": str(path), "sha256": None}
-    return {"file": path.name, "sha256": hashlib.sha256(data).hexdigest()}
-
-
-def _digest(*arrays: Any) -> str | None:
-    arrays = tuple(a for a in arrays if a is not None)
-    if not arrays:
-        return None
-    h = hashlib.sha256()
-    for a in arrays:
-        a = np.ascontiguousarray(a)
-        h.update(f"{a.dtype.str}{a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
-def problem_fingerprint(problem: InverseProblem) -> dict[str, Any]:
-    """Everything that determines the outcome of one forward run and its comparison.
-
-    Parts: ``model`` and ``measure`` (class, version, options), ``observations`` (per
-    observation: coordinate, SHA-256 of the interface's vertices and cells and of the
-    measurement points and directions, noise_std), ``fixed`` inputs and the likelihood's
-    ``noise_std`` (the stored log-likelihood depends on it).  Parameter bounds and priors, the
-    iterator and the executor are not part of it: they choose *which* runs are made, not what
-    a run gives.
-    """
-    observations = []
-    for obs in problem.observations:
-        gamma = obs.interface
-        mp = obs.measurement_points
-        observations.append(
-            {
-                "coordinate": dict(obs.coordinate),
-                "interface": None if gamma is None else _digest(gamma.vertices, gamma.cells),
-                "points": None if mp is None else _digest(mp.points, mp.directions),
-                "noise_std": obs.noise_std,
-            }
-        )
-    return {
-        "model": {**_class_version(problem.model), "options": _options(problem.model)},
-        "measure": {**_class_version(problem.measure), "options": _options(problem.measure)},
-        "observations": observations,
-        "fixed": dict(problem.fixed),
-        "noise_std": problem.noise_std,
-    }
-
-
-def problem_hash(fingerprint: Mapping[str, Any]) -> str:
-    """SHA-256 of the canonical JSON of a :func:`problem_fingerprint`."""
-    return hashlib.sha256(_canonical(fingerprint).encode()).hexdigest()
-
-
-def evaluation_key(problem_sha: str, x: Mapping[str, float]) -> str:
-    """The store key of one run: SHA-256 of the problem hash and the exact input values."""
-    values = {str(k): float(v) for k, v in x.items()}
-    return hashlib.sha256(f"{problem_sha}\n{_canonical(values)}".encode()).hexdigest()
-
-
-def _describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
-    """What differs between two fingerprints, in words (at most a few items per part)."""
-
-    def values(a: Any, b: Any) -> str:
-        text = f"{json.dumps(a)} -> {json.dumps(b)}"
-        return text if len(text) <= 60 else text[:57] + "..."
-
-    changes: list[str] = []
-    for part in ("model", "measure"):
-        a, b = old.get(part, {}), new.get(part, {})
-        if a == b:
-            continue
-        if a.get("class") != b.get("class"):
-            changes.append(f"{part} {a.get('class')} -> {b.get('class')}")
-            continue
-        if a.get("version") != b.get("version"):
-            changes.append(f"{part} version {values(a.get('version'), b.get('version'))}")
-        oa, ob = a.get("options", {}), b.get("options", {})
-        keys = sorted(k for k in {*oa, *ob} if oa.get(k) != ob.get(k))
-        if keys:
-            shown = ", ".join(f"{k}: {values(oa.get(k), ob.get(k))}" for k in keys[:3])
-            more = f" and {len(keys) - 3} more" if len(keys) > 3 else ""
-            changes.append(f"{part} options ({shown}{more})")
-    oa, ob = old.get("observations", []), new.get("observations", [])
-    if len(oa) != len(ob):
-        changes.append(f"number of observations {len(oa)} -> {len(ob)}")
-    else:
-        for k, (a, b) in enumerate(zip(oa, ob, strict=True)):
-            what = [f for f in ("coordinate", "interface", "points", "noise_std") if a[f] != b[f]]
-            if what:
-                changes.append(f"observation {k + 1} ({', '.join(what)})")
-    if old.get("fixed") != new.get("fixed"):
-        changes.append(f"fixed inputs {values(old.get('fixed'), new.get('fixed'))}")
-    if old.get("noise_std") != new.get("noise_std"):
-        changes.append(f"likelihood noise_std {values(old.get('noise_std'), new.get('noise_std'))}")
-    return changes or ["the problem description"]
-
-
-# -- the likelihood stored with every run ------------------------------------------------------
-def gaussian_log_likelihood(
-    record: Evaluation, sigmas: Sequence[float] | None, count: int | None = None
-) -> float | None:
-    """Paper B eq. (5) of one record (:mod:`fbia.core.likelihood`), None without noise levels."""
-    return None if sigmas is None else _log_likelihood(record, sigmas, count)
+def unpack_interfaces(blob: bytes) -> Solution:
+    """The :class:`Solution` (interfaces only) of :func:`pack_interfaces`."""
+    with np.load(io.BytesIO(blob), allow_pickle=False) as data:
+        keys = json.loads(str(data["coordinates"]))
+        interfaces = {
+            coordinate_key(dict(pairs)): Interface(data[f"vertices_{k}"], data[f"cells_{k}"])
+            for k, pairs in enumerate(keys)
+        }
+    return Solution(interfaces)
 
 
 # -- the store ---------------------------------------------------------------------------------
 class StoreMismatchError(ConfigError):
-    """The store was made for another problem (model, measure, observations, ...)."""
+    """The store holds runs of another model (class, version, options or fixed inputs)."""
 
 
 @dataclass(frozen=True)
@@ -276,13 +173,23 @@ class StoredRun:
     session: int | None
     attempt: int
     worker: str | None
-    log_likelihood: float | None
     artifacts: dict[str, str]
     finished: str
 
 
+@dataclass(frozen=True)
+class _Binding:
+    """What :meth:`StudyStore.bind` derives from the problem."""
+
+    problem: InverseProblem
+    model: dict[str, Any]
+    coordinates: list[dict[str, Any]]
+    comparison: str
+    uncertain: list[str]
+
+
 class StudyStore:
-    """One SQLite file with every evaluation of a study (see the module docstring).
+    """One SQLite file with every forward run of a study (see the module docstring).
 
     Parameters
     ----------
@@ -307,16 +214,17 @@ class StudyStore:
             self._db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=False)
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
-            self._db.executescript(_SCHEMA)
-            self._check_format()
+            self._open_format()
         except sqlite3.DatabaseError as exc:
             self._release_lock()
             raise ConfigError(f"not a readable fbia store ({exc})", str(self.path)) from None
-        self.hash: str | None = self._meta("problem_hash")
+        except ConfigError:
+            self._release_lock()
+            raise
+        #: the model key the store is tied to (None until the first :meth:`bind`)
+        self.hash: str | None = self._meta("model_key")
         self.session: int | None = None
-        self._sigmas: list[float] | None = None
-        self._uncertain: list[str] = []
-        self._bound: list[InverseProblem] = []
+        self._binding: _Binding | None = None
 
     # -- opening ---------------------------------------------------------------------------
     def _take_lock(self) -> IO[str] | None:
@@ -348,14 +256,17 @@ class StudyStore:
             self._lock.close()  # closing the file releases the flock
             self._lock = None
 
-    def _check_format(self) -> None:
+    def _open_format(self) -> None:
+        self._db.execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT)")
         fmt = self._meta("format")
+        if fmt is not None and fmt != STORE_FORMAT:
+            migrate(self._db, self.path, fmt, STORE_FORMAT, SCHEMA)
+            return
+        self._db.executescript(SCHEMA)
         if fmt is None:
             with self._transaction() as db:
                 db.execute("INSERT OR IGNORE INTO meta VALUES ('format', ?)", (STORE_FORMAT,))
                 db.execute("INSERT OR IGNORE INTO meta VALUES ('created', ?)", (_now(),))
-        elif fmt != STORE_FORMAT:
-            raise ConfigError(f"store format {fmt!r}, this fbia reads {STORE_FORMAT!r}")
 
     @contextlib.contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:
@@ -372,47 +283,60 @@ class StudyStore:
         return None if row is None else str(row[0])
 
     def bind(self, problem: InverseProblem) -> str:
-        """Tie the store to ``problem``: the first time, record its hash; later, check it.
+        """Tie the store to ``problem``: the first time, record its model; later, check it.
 
-        Returns the problem hash.  Raises :class:`StoreMismatchError` (a ConfigError) naming
-        what changed when the store holds runs of a different problem.
+        Returns the model key.  Raises :class:`StoreMismatchError` (a ConfigError) naming
+        what changed when the store holds runs of another model.  The measure, the
+        observations and the likelihood may differ from earlier sessions.
         """
-        if any(p is problem for p in self._bound):
+        if self._binding is not None and self._binding.problem is problem:
             assert self.hash is not None
             return self.hash
         fingerprint = problem_fingerprint(problem)
-        sha = problem_hash(fingerprint)
+        model = model_part(fingerprint)
+        key = model_key(model)
         if self.hash is None:
             with self._transaction() as db:
-                db.execute("INSERT INTO meta VALUES ('problem_hash', ?)", (sha,))
-                db.execute("INSERT INTO meta VALUES ('problem', ?)", (_canonical(fingerprint),))
-            self.hash = sha
-        elif sha != self.hash:
+                db.execute("INSERT INTO meta VALUES ('model_key', ?)", (key,))
+                db.execute("INSERT INTO meta VALUES ('model', ?)", (canonical(model),))
+            self.hash = key
+        elif key != self.hash:
             old = json.loads(self._meta("problem") or "{}")
             n = len(self)
             raise StoreMismatchError(
-                f"the store holds {n} evaluation{'s' if n != 1 else ''} of a different problem "
-                f"(changed: {'; '.join(_describe_change(old, fingerprint))}); they cannot be "
+                f"the store holds {n} run{'s' if n != 1 else ''} of a different model "
+                f"(changed: {'; '.join(describe_change(old, fingerprint))}); they cannot be "
                 "reused: run with --fresh to start over, or write to another --output",
                 str(self.path),
             )
-        self._bound.append(problem)
-        self._sigmas = noise_levels(problem)
-        self._count = measurement_count(problem)
-        self._uncertain = list(problem.uncertain_names)
-        return sha
+        with self._transaction() as db:
+            db.execute(
+                "INSERT OR REPLACE INTO meta VALUES ('problem', ?)", (canonical(fingerprint),)
+            )
+        self._binding = _Binding(
+            problem=problem,
+            model=model,
+            coordinates=coordinates_of(fingerprint),
+            comparison=comparison_key(comparison_part(fingerprint)),
+            uncertain=list(problem.uncertain_names),
+        )
+        return key
 
     @property
     def fingerprint(self) -> dict[str, Any] | None:
-        """The stored problem fingerprint (None before the first :meth:`bind`)."""
+        """The fingerprint of the problem last bound (None before the first :meth:`bind`)."""
         text = self._meta("problem")
         return None if text is None else dict(json.loads(text))
 
-    def key(self, x: Mapping[str, float]) -> str:
-        """The key of a run at ``x`` (the store must be bound to a problem)."""
-        if self.hash is None:
+    def _bound(self) -> _Binding:
+        if self._binding is None:
             raise RuntimeError("bind the store to a problem first")
-        return evaluation_key(self.hash, x)
+        return self._binding
+
+    def key(self, x: Mapping[str, float]) -> str:
+        """The key of a forward run at ``x`` (the store must be bound to a problem)."""
+        b = self._bound()
+        return run_key(b.model, b.coordinates, x)
 
     # -- sessions --------------------------------------------------------------------------
     def begin_session(self, executor: Mapping[str, Any], study_sha256: str | None = None) -> int:
@@ -429,7 +353,7 @@ class StudyStore:
                     os.getpid(),
                     __version__,
                     study_sha256,
-                    _canonical(dict(executor)),
+                    canonical(dict(executor)),
                 ),
             )
         self.session = int(cur.lastrowid or 0)
@@ -455,95 +379,158 @@ class StudyStore:
             entry = dict(zip(names, row, strict=True))
             entry["executor"] = json.loads(entry["executor"])
             entry["evaluations"] = self._db.execute(
-                "SELECT count(*) FROM evaluations WHERE session = ?", (entry["id"],)
+                "SELECT count(*) FROM runs WHERE session = ?", (entry["id"],)
             ).fetchone()[0]
             out.append(entry)
         return out
 
-    # -- writing and reading ---------------------------------------------------------------
+    # -- writing ---------------------------------------------------------------------------
     def put(
         self,
         record: Evaluation,
         key: str | None = None,
         worker: str | None = None,
         artifacts: Mapping[str, str] | None = None,
+        interfaces: Mapping[CoordinateKey, Interface] | None = None,
     ) -> None:
-        """Write one finished run in its own transaction (a repeated key is a retry: the row
-        is replaced and its ``attempt`` counted up)."""
+        """Write one finished run and its comparison in one transaction (a repeated key is a
+        retry: the row is replaced and its ``attempt`` counted up).  ``interfaces``: what the
+        forward model gave, kept so that another measure can be applied later; with them the
+        run counts as solved and its status is the comparison's."""
+        b = self._bound()
         key = key if key is not None else self.key(record.x)
-        residuals = (
-            None
-            if record.residuals is None
-            else np.ascontiguousarray(record.residuals, dtype="<f8").tobytes()
-        )
-        distance = record.distance
-        loglik = gaussian_log_likelihood(record, self._sigmas, self._count)
+        solved = interfaces is not None or record.ok or record.status == "measure_failed"
         row = (
             key,
             record.index,
             self.session,
             1,
-            _canonical(record.x),
-            _canonical({n: record.x[n] for n in self._uncertain if n in record.x}),
-            record.status,
-            record.message,
-            residuals,
-            None if record.distances is None else _canonical(record.distances),
-            distance if math.isfinite(distance) else None,
-            None if loglik is None or not math.isfinite(loglik) else loglik,
+            canonical(record.x),
+            canonical({n: record.x[n] for n in b.uncertain if n in record.x}),
+            "ok" if solved else record.status,
+            "" if solved else record.message,
             float(record.time),
             worker,
             record.workdir,
-            _canonical(dict(artifacts or {})),
-            _canonical(record.diagnostics),
+            canonical(dict(artifacts or {})),
+            canonical(record.diagnostics),
             _now(),
         )
+        blob = None if interfaces is None else pack_interfaces(interfaces)
         with self._transaction() as db:
             db.execute(
-                f"INSERT INTO evaluations ({_COLUMNS}) VALUES ({', '.join('?' * len(row))}) "
-                "ON CONFLICT(key) DO UPDATE SET "
+                f"INSERT INTO runs ({_RUN_COLUMNS}, interfaces) "
+                f"VALUES ({', '.join('?' * (len(row) + 1))}) ON CONFLICT(key) DO UPDATE SET "
                 + ", ".join(
                     f"{c} = excluded.{c}"
-                    for c in _COLUMNS.split(", ")
+                    for c in [*_RUN_COLUMNS.split(", "), "interfaces"]
                     if c not in ("key", "attempt")
                 )
-                + ", attempt = evaluations.attempt + 1",
-                row,
+                + ", attempt = runs.attempt + 1",
+                (*row, blob),
             )
+            db.execute("DELETE FROM comparisons WHERE run_key = ?", (key,))
+            if solved:
+                self._put_comparison(db, key, record.status, record.message, record)
 
+    def _put_comparison(
+        self, db: sqlite3.Connection, key: str, status: str, message: str, record: Evaluation
+    ) -> None:
+        db.execute(
+            "INSERT OR REPLACE INTO comparisons VALUES (?, ?, ?, ?, ?, ?)",
+            (
+                key,
+                self._bound().comparison,
+                status,
+                message,
+                _floats(record.residuals),
+                None if record.distances is None else canonical(record.distances),
+            ),
+        )
+
+    # -- reading ---------------------------------------------------------------------------
     def lookup(self, keys: Iterable[str]) -> dict[str, StoredRun]:
-        """The stored runs among ``keys`` (missing keys are left out)."""
+        """The stored runs among ``keys`` with their comparison under the bound problem.
+
+        A solved run without that comparison is compared now, from its stored interfaces,
+        and the comparison is stored; one without interfaces (migrated from the first store
+        format) is left out, so it runs again.
+        """
         wanted = list(dict.fromkeys(keys))
         out: dict[str, StoredRun] = {}
         for start in range(0, len(wanted), 500):
             chunk = wanted[start : start + 500]
-            cur = self._db.execute(
-                f"SELECT {_COLUMNS} FROM evaluations WHERE key IN ({', '.join('?' * len(chunk))})",
-                chunk,
-            )
-            for row in cur.fetchall():
-                run = self._run(row)
+            for run in self._select(f"r.key IN ({', '.join('?' * len(chunk))})", chunk):
                 out[run.key] = run
         return out
 
     def runs(self) -> list[StoredRun]:
-        """Every stored run, in the order they were first written."""
-        cur = self._db.execute(f"SELECT {_COLUMNS} FROM evaluations ORDER BY id")
-        return [self._run(row) for row in cur.fetchall()]
+        """Every stored run with its comparison under the bound problem (unbound: the problem
+        bound last), in the order first written."""
+        return self._select("1", [])
 
-    def records(self) -> list[Evaluation]:
-        """Every stored record, in the order they were first written."""
-        return [r.record for r in self.runs()]
+    def _comparison(self) -> str | None:
+        if self._binding is not None:
+            return self._binding.comparison
+        fingerprint = self.fingerprint
+        return None if fingerprint is None else comparison_key(comparison_part(fingerprint))
+
+    def _select(self, where: str, args: Sequence[Any]) -> list[StoredRun]:
+        cur = self._db.execute(
+            f"SELECT {', '.join('r.' + c for c in _RUN_COLUMNS.split(', '))}, "
+            "r.interfaces IS NOT NULL, c.status, c.message, c.residuals, c.distances "
+            "FROM runs r LEFT JOIN comparisons c ON c.run_key = r.key AND c.comparison = ? "
+            f"WHERE {where} ORDER BY r.id",
+            [self._comparison(), *args],
+        )
+        out = []
+        for row in cur.fetchall():
+            run = self._run(row)
+            if run is None and row[6] == "ok" and row[14] and self._binding is not None:
+                run = self._compare_stored(row)
+            if run is not None:
+                out.append(run)
+        return out
+
+    def _compare_stored(self, row: Sequence[Any]) -> StoredRun | None:
+        """Compare a stored solved run with the bound problem's observations and keep it."""
+        blob = self._db.execute("SELECT interfaces FROM runs WHERE key = ?", (row[0],)).fetchone()
+        solution = unpack_interfaces(blob[0])
+        record = Evaluation(
+            index=int(row[1]), x={k: float(v) for k, v in json.loads(row[4]).items()}
+        )
+        try:
+            record.residuals, record.distances = self._bound().problem.discrepancy(solution)
+            if not (
+                np.all(np.isfinite(record.residuals)) and np.all(np.isfinite(record.distances))
+            ):
+                raise ValueError("the measure returned NaN or infinite values")
+        except MeasureError as exc:
+            record.status, record.message = "measure_failed", str(exc)
+            record.residuals = record.distances = None
+        except Exception as exc:  # a plugin bug, recorded as the evaluation would record it
+            record.status, record.message = "error", f"{type(exc).__name__}: {exc}"
+            record.residuals = record.distances = None
+        with self._transaction() as db:
+            self._put_comparison(db, str(row[0]), record.status, record.message, record)
+        row = (*row[:15], record.status, record.message, _floats(record.residuals),
+               None if record.distances is None else canonical(record.distances))  # fmt: skip
+        return self._run(row)
 
     @staticmethod
-    def _run(row: Sequence[Any]) -> StoredRun:
-        (key, idx, session, attempt, x, _unc, status, message, residuals, distances, _dist,
-         loglik, time, worker, workdir, artifacts, diagnostics, finished) = row  # fmt: skip
+    def _run(row: Sequence[Any]) -> StoredRun | None:
+        """A stored run from a joined row; None for a solved run without its comparison."""
+        (key, idx, session, attempt, x, _unc, status, message, time, worker, workdir,
+         artifacts, diagnostics, finished, _has_interfaces, c_status, c_message, residuals,
+         distances) = row  # fmt: skip
+        if status == "ok" and c_status is None:
+            return None
+        solved = status == "ok"
         record = Evaluation(
             index=int(idx),
             x={k: float(v) for k, v in json.loads(x).items()},
-            status=str(status),
-            message=str(message),
+            status=str(c_status if solved else status),
+            message=str(c_message if solved else message),
             residuals=None if residuals is None else np.frombuffer(residuals, dtype="<f8").copy(),
             distances=None if distances is None else [float(d) for d in json.loads(distances)],
             time=float(time),
@@ -556,7 +543,6 @@ class StudyStore:
             session=session,
             attempt=int(attempt),
             worker=worker,
-            log_likelihood=-math.inf if loglik is None and status != "ok" else loglik,
             artifacts=json.loads(artifacts),
             finished=str(finished),
         )
@@ -564,24 +550,24 @@ class StudyStore:
     def workdir_taken(self, workdir: str | Path) -> bool:
         """Whether a stored run owns this working folder."""
         row = self._db.execute(
-            "SELECT 1 FROM evaluations WHERE workdir = ? LIMIT 1", (str(workdir),)
+            "SELECT 1 FROM runs WHERE workdir = ? LIMIT 1", (str(workdir),)
         ).fetchone()
         return row is not None
 
     def counts(self) -> dict[str, int]:
-        """Number of stored runs per status."""
-        cur = self._db.execute("SELECT status, count(*) FROM evaluations GROUP BY status")
+        """Number of stored forward runs per status (``ok``: the model gave interfaces)."""
+        cur = self._db.execute("SELECT status, count(*) FROM runs GROUP BY status")
         return {str(s): int(n) for s, n in cur.fetchall()}
 
     def __len__(self) -> int:
-        return int(self._db.execute("SELECT count(*) FROM evaluations").fetchone()[0])
+        return int(self._db.execute("SELECT count(*) FROM runs").fetchone()[0])
 
     def describe(self) -> dict[str, Any]:
-        """For provenance: path, problem hash, counts per status, sessions."""
+        """For provenance: path, format, model key, counts per status, sessions."""
         return {
             "path": str(self.path),
             "format": STORE_FORMAT,
-            "problem_hash": self.hash,
+            "model_key": self.hash,
             "evaluations": len(self),
             "by_status": self.counts(),
             "sessions": self.sessions(),

@@ -1111,7 +1111,7 @@ def run_study(
     Raises
     ------
     ConfigError
-        The store holds runs of a different problem (the message says what changed), or is
+        The store holds runs of a different model (the message says what changed), or is
         in use by another run.
 
     On Ctrl-C or an error the evaluations finished so far are already stored; a
@@ -1276,15 +1276,15 @@ def _announce_resume(
     failed = n - store.counts().get("ok", 0)
     again = " (failed ones run again: --retry-failed)" if retry_failed and failed else ""
     echo(
-        f"resuming: {store.path} holds {n} evaluations of this problem ({failed} failed); "
+        f"resuming: {store.path} holds {n} forward runs of this model ({failed} failed); "
         f"each is reused, not run again{again}"
     )
     sessions = store.sessions()
     last = sessions[-1] if sessions else None
     if last is not None and last["study_sha256"] != study.sha256:
         echo(
-            "note: the study file changed since the last run; its model, measure and "
-            "observations did not, so the stored runs stay valid"
+            "note: the study file changed since the last run; its model did not, so the "
+            "stored forward runs stay valid (compared anew if the measure or data changed)"
         )
     if last is not None and last["status"] == "running":
         echo(f"note: the last run (started {last['started']}) was stopped without a word")

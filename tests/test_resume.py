@@ -96,7 +96,7 @@ def _rows(store: Path) -> list[tuple]:
     db = sqlite3.connect(f"file:{store}?mode=ro", uri=True)
     try:
         return db.execute(
-            "SELECT key, session, attempt, finished, worker FROM evaluations ORDER BY id"
+            "SELECT key, session, attempt, finished, worker FROM runs ORDER BY id"
         ).fetchall()
     finally:
         db.close()
@@ -173,7 +173,7 @@ def test_a_killed_study_resumes_to_the_uninterrupted_result_repeating_no_run(fol
     # resume, in this process and serially: the executor does not change the result
     assert main(["run", "toy.toml", "--workers", "1"]) == 0
     out = capsys.readouterr().out
-    assert f"resuming: output/store.sqlite holds {n1} evaluations of this problem (0 failed)" in out
+    assert f"resuming: output/store.sqlite holds {n1} forward runs of this model (0 failed)" in out
     assert "note: the last run (started " in out  # ... was stopped without a word
     after = _rows(store)
     # the runs stored before the kill are untouched, none was run again
@@ -226,8 +226,8 @@ def test_changes_that_keep_the_runs_reuse_them_others_are_refused_until_fresh(fo
     assert main(["run", "toy.toml"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == (
-        f"fbia: error: output/store.sqlite: the store holds {n + new} evaluations "
-        "of a different problem (changed: model options (delay: 0.0 -> 0.001)); they cannot "
+        f"fbia: error: output/store.sqlite: the store holds {n + new} runs "
+        "of a different model (changed: model options (delay: 0.0 -> 0.001)); they cannot "
         "be reused: run with --fresh to start over, or write to another --output"
     )
     assert _rows(folder / "output" / "store.sqlite") == rows  # nothing touched

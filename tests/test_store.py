@@ -15,13 +15,16 @@ import pytest
 from _models import toy_curve, toy_problem
 
 import fbia
-from fbia.core.store import (
-    StudyStore,
-    evaluation_key,
-    gaussian_log_likelihood,
+from fbia.core.fingerprints import (
+    comparison_key,
+    comparison_part,
+    coordinates_of,
+    model_part,
     problem_fingerprint,
-    problem_hash,
+    run_key,
 )
+from fbia.core.likelihood import gaussian_log_likelihood
+from fbia.core.store import StudyStore
 
 POINTS = [{"E": 200.0, "nu": 0.1}, {"E": 400.0, "nu": 0.3}, {"E": 700.0, "nu": 0.2}]
 
@@ -41,7 +44,7 @@ def store(tmp_path):
         yield s
 
 
-def test_records_round_trip_exactly_with_the_log_likelihood_of_eq_5(store, tmp_path):
+def test_records_round_trip_exactly_and_the_likelihood_is_computed_on_read(store, tmp_path):
     problem = _problem()
     store.bind(problem)
     with fbia.SerialEvaluator(workdir=tmp_path / "runs", store=store) as ev:
@@ -61,15 +64,16 @@ def test_records_round_trip_exactly_with_the_log_likelihood_of_eq_5(store, tmp_p
             np.testing.assert_array_equal(got.residuals, _exact_residuals(p["E"], p["nu"]))
             d = np.linalg.norm(_exact_residuals(p["E"], p["nu"]))
             expected = -10.5 * math.log(2 * math.pi * 1e-4) - d**2 / 2e-4
-            assert run.log_likelihood == pytest.approx(expected, rel=1e-14)
+            assert gaussian_log_likelihood(got, [0.01]) == pytest.approx(expected, rel=1e-14)
         else:
-            assert got.residuals is None and run.log_likelihood == -math.inf
+            assert got.residuals is None and gaussian_log_likelihood(got, [0.01]) == -math.inf
             assert got.message == "mesh distortion at E = 700.0"
     # the SQLite file is in WAL mode and readable by any client
     db = sqlite3.connect(store.path)
     assert db.execute("PRAGMA journal_mode").fetchone() == ("wal",)
-    rows = db.execute("SELECT status, count(*) FROM evaluations GROUP BY status").fetchall()
+    rows = db.execute("SELECT status, count(*) FROM runs GROUP BY status").fetchall()
     assert dict(rows) == {"ok": 2, "failed": 1}
+    assert db.execute("SELECT count(*) FROM comparisons").fetchone() == (2,)
     db.close()
 
 
@@ -80,51 +84,89 @@ def test_log_likelihood_sums_observations_with_their_own_sigmas():
         -2.5 * math.log(2 * math.pi * s**2) - d**2 / (2 * s**2) for d, s in [(0.3, 0.1), (0.4, 0.2)]
     )
     assert gaussian_log_likelihood(ev, [0.1, 0.2]) == pytest.approx(expected, rel=1e-14)
-    assert gaussian_log_likelihood(ev, None) is None
 
 
-def test_the_problem_hash_covers_what_determines_a_run_and_nothing_else():
-    base = problem_hash(problem_fingerprint(_problem()))
-    assert problem_hash(problem_fingerprint(_problem())) == base  # same content, new objects
-    # bounds and priors choose which runs are made, not what a run gives
-    p = _problem()
+def _keys(problem: fbia.InverseProblem, x) -> tuple[str, str]:
+    fp = problem_fingerprint(problem)
+    return (
+        run_key(model_part(fp), coordinates_of(fp), x),
+        comparison_key(comparison_part(fp)),
+    )
+
+
+def test_a_run_is_keyed_by_what_the_forward_model_depends_on_and_nothing_else():
+    x = POINTS[0]
+    base_run, base_cmp = _keys(_problem(), x)
+    assert _keys(_problem(), x) == (base_run, base_cmp)  # same content, new objects
+    # neither depends on sigma_N, bounds or priors
+    p = _problem(noise_std=0.02)
     p.parameters = [fbia.Parameter("E", bounds=(50.0, 900.0)), p.parameters[1]]
-    assert problem_hash(problem_fingerprint(p)) == base
-    changed = {
-        "model options": _problem(delay=0.5),
-        "noise": _problem(noise_std=0.02),
-        "fixed inputs": dataclasses.replace(_problem(), fixed={"inflow_rate": 90.0}),
-    }
+    assert _keys(p, x) == (base_run, base_cmp)
+    # the forward run depends on the model options, the fixed inputs and the coordinates
     obs = _problem().observations[0]
+    for changed in (
+        _problem(delay=0.5),
+        dataclasses.replace(_problem(), fixed={"inflow_rate": 90.0}),
+        dataclasses.replace(
+            _problem(), observations=[dataclasses.replace(obs, coordinate={"inflow_rate": 90.0})]
+        ),
+    ):
+        assert _keys(changed, x)[0] != base_run
+    # the comparison on the measure and the observed data, the run not
     moved = fbia.Interface.polyline(obs.interface.vertices + [0.0, 1e-12])
-    changed["observation data"] = dataclasses.replace(
+    other_data = dataclasses.replace(
         _problem(), observations=[dataclasses.replace(obs, interface=moved)]
     )
-    hashes = {k: problem_hash(problem_fingerprint(v)) for k, v in changed.items()}
-    assert base not in hashes.values() and len(set(hashes.values())) == len(hashes)
+    other_measure = dataclasses.replace(_problem(), measure=fbia.measure("cpp"))
+    for changed in (other_data, other_measure):
+        run, cmp = _keys(changed, x)
+        assert run == base_run and cmp != base_cmp
 
 
 def test_keys_are_exact_in_every_bit():
-    sha = "0" * 64
-    assert evaluation_key(sha, {"E": 0.3, "nu": 0.1}) == evaluation_key(sha, {"nu": 0.1, "E": 0.3})
-    assert evaluation_key(sha, {"E": 0.1 + 0.2}) != evaluation_key(sha, {"E": 0.3})
-    assert evaluation_key(sha, {"E": 1.0}) == evaluation_key(sha, {"E": 1})
-    assert evaluation_key(sha, {"E": 1.0}) != evaluation_key("1" * 64, {"E": 1.0})
+    m, c = {"model": "m"}, [{"q": 1.0}]
+    assert run_key(m, c, {"E": 0.3, "nu": 0.1}) == run_key(m, c, {"nu": 0.1, "E": 0.3})
+    assert run_key(m, c, {"E": 0.1 + 0.2}) != run_key(m, c, {"E": 0.3})
+    assert run_key(m, c, {"E": 1.0}) == run_key(m, c, {"E": 1})
+    assert run_key(m, c, {"E": 1.0}) != run_key({"model": "n"}, c, {"E": 1.0})
 
 
-def test_a_store_of_another_problem_says_what_changed(tmp_path):
+def test_a_store_of_another_model_says_what_changed(tmp_path):
     with StudyStore(tmp_path / "s.sqlite") as store:
         store.bind(_problem())
         with fbia.SerialEvaluator(store=store) as ev:
             ev.evaluate(_problem(), POINTS[:2])
     with StudyStore(tmp_path / "s.sqlite") as store:
         store.bind(_problem())  # the same problem, built again: fine
+        store.bind(_problem(noise_std=0.02))  # another likelihood: fine
         with pytest.raises(fbia.ConfigError) as info:
-            store.bind(_problem(delay=0.25, noise_std=0.02))
+            store.bind(_problem(delay=0.25, noise_std=0.03))
     message = str(info.value)
-    assert message.startswith(f"{tmp_path / 's.sqlite'}: the store holds 2 evaluations of a ")
-    assert "model options (delay: 0.0 -> 0.25); likelihood noise_std 0.01 -> 0.02" in message
+    assert message.startswith(f"{tmp_path / 's.sqlite'}: the store holds 2 runs of a different ")
+    assert "model options (delay: 0.0 -> 0.25); likelihood noise_std 0.02 -> 0.03" in message
     assert message.endswith("run with --fresh to start over, or write to another --output")
+
+
+def test_a_new_sigma_or_measure_reuses_every_forward_run(tmp_path):
+    """Changing sigma_N reuses the runs as they are; another measure or other observed data
+    recompares the stored interfaces, without running the model."""
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        with fbia.SerialEvaluator(store=store) as ev:
+            first = ev.evaluate(_problem(), POINTS)
+    for changed in (
+        _problem(noise_std=0.5),
+        dataclasses.replace(_problem(), measure=fbia.measure("cpp")),
+    ):
+        with StudyStore(tmp_path / "s.sqlite") as store:
+            with fbia.SerialEvaluator(store=store) as ev:
+                again = ev.evaluate(changed, POINTS)
+            assert ev.reused == {0, 1, 2} and len(store) == 3
+            fresh = [changed.evaluate(p) for p in POINTS]
+        assert [r.status for r in again] == [r.status for r in first]
+        for got, want in zip(again, fresh, strict=True):
+            assert got.distances == want.distances
+            if want.ok:
+                np.testing.assert_array_equal(got.residuals, want.residuals)
 
 
 def test_stored_runs_are_reused_and_a_point_asked_twice_in_a_batch_runs_once(tmp_path):
@@ -209,8 +251,8 @@ def test_a_file_option_counts_by_its_content_not_its_folder(tmp_path):
     """A mesh file named by a study: moving the study keeps its store, editing the file not."""
     from pathlib import Path
 
+    from fbia.core.fingerprints import _options
     from fbia.core.options import PluginOptions
-    from fbia.core.store import _options
 
     class Options(PluginOptions):
         mesh_file: Path | None = None

@@ -1,0 +1,216 @@
+"""What a forward run and its comparison depend on: fingerprints and store keys.
+
+Two layers, because they change for different reasons:
+
+* a **forward run** depends on the model (class, version, options), the fixed inputs, the
+  coordinates it is asked for (the distinct coordinates of the observations) and the input
+  values x; its key is :func:`run_key`;
+* its **comparison** with the observations depends on the measure (class, version, options)
+  and the observed data (coordinates, interfaces, measurement points); its key is
+  :func:`comparison_key`.
+
+Neither depends on the likelihood's σ_N (the likelihood is computed when a run is read), on
+bounds, priors, the iterator or the executor: changing those reuses every stored run, and
+changing the measure or the observations reuses every stored forward run whose interfaces the
+store holds (the comparison is recomputed, which is cheap).
+
+Keys are SHA-256 digests of canonical JSON (sorted keys, floats by ``repr``: equal text means
+bit-equal values).  The functions work on fingerprint *dicts*, so a stored fingerprint gives
+the same keys as the live problem it was made from (the store's migration relies on it).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import json
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .observation import coordinate_key
+from .problem import InverseProblem, _jsonable
+
+__all__ = [
+    "canonical",
+    "comparison_key",
+    "comparison_part",
+    "coordinates_of",
+    "describe_change",
+    "model_part",
+    "problem_fingerprint",
+    "run_key",
+]
+
+
+def canonical(value: Any) -> str:
+    """JSON with sorted keys and exact floats (``repr``): equal text means equal content."""
+    return json.dumps(_jsonable(value), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def _sha(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+# -- plugins and data ----------------------------------------------------------------------------
+def _class_version(obj: Any) -> dict[str, str]:
+    """Class path and version of a plugin object: the version of the distribution named like
+    its top-level package (``fbia``, ``fbia_mysolver``), else the module's ``__version__``."""
+    cls = type(obj)
+    top = cls.__module__.split(".")[0]
+    try:
+        version = importlib.metadata.version(top.replace("_", "-"))
+    except importlib.metadata.PackageNotFoundError:
+        mod = sys.modules.get(cls.__module__)
+        version = str(getattr(mod, "__version__", "unversioned"))
+    return {"class": f"{cls.__module__}.{cls.__qualname__}", "version": version}
+
+
+def _options(obj: Any) -> dict[str, Any]:
+    """A plugin's options; a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
+    opts = getattr(obj, "options", None)
+    dump = getattr(opts, "model_dump", None)
+    if not callable(dump):
+        return {}
+    out = dict(_jsonable(dump(mode="json")))
+    for key, value in dump().items():
+        if isinstance(value, Path):
+            out[key] = _file_digest(value)
+    return out
+
+
+def _file_digest(path: Path) -> dict[str, Any]:
+    """File name and SHA-256 of its bytes: moving a study folder keeps a store valid, editing
+    the mesh file it names does not."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return {"file": str(path), "sha256": None}
+    return {"file": path.name, "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def _digest(*arrays: Any) -> str | None:
+    arrays = tuple(a for a in arrays if a is not None)
+    if not arrays:
+        return None
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+# -- fingerprints --------------------------------------------------------------------------------
+def problem_fingerprint(problem: InverseProblem) -> dict[str, Any]:
+    """Everything that determines a run, its comparison and its likelihood, as one dict.
+
+    Parts: ``model`` and ``measure`` (class, version, options), ``observations`` (per
+    observation: coordinate, SHA-256 of the interface's vertices and cells and of the
+    measurement points and directions, noise_std), ``fixed`` inputs and the likelihood's
+    ``noise_std``.  :func:`model_part` and :func:`comparison_part` take out what runs and
+    comparisons depend on.
+    """
+    observations = []
+    for obs in problem.observations:
+        gamma = obs.interface
+        mp = obs.measurement_points
+        observations.append(
+            {
+                "coordinate": dict(obs.coordinate),
+                "interface": None if gamma is None else _digest(gamma.vertices, gamma.cells),
+                "points": None if mp is None else _digest(mp.points, mp.directions),
+                "noise_std": obs.noise_std,
+            }
+        )
+    return {
+        "model": {**_class_version(problem.model), "options": _options(problem.model)},
+        "measure": {**_class_version(problem.measure), "options": _options(problem.measure)},
+        "observations": observations,
+        "fixed": dict(problem.fixed),
+        "noise_std": problem.noise_std,
+    }
+
+
+def model_part(fingerprint: Mapping[str, Any]) -> dict[str, Any]:
+    """What every forward run of the problem depends on besides x: model and fixed inputs."""
+    return {"model": fingerprint["model"], "fixed": fingerprint["fixed"]}
+
+
+def comparison_part(fingerprint: Mapping[str, Any]) -> dict[str, Any]:
+    """What the comparison of a run with the observations depends on."""
+    keep = ("coordinate", "interface", "points")
+    return {
+        "measure": fingerprint["measure"],
+        "observations": [{k: o[k] for k in keep} for o in fingerprint["observations"]],
+    }
+
+
+def coordinates_of(fingerprint: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The distinct observation coordinates in order of first appearance (what a forward run
+    is asked for, :meth:`InverseProblem.coordinates`)."""
+    seen: dict[Any, dict[str, Any]] = {}
+    for o in fingerprint["observations"]:
+        seen.setdefault(coordinate_key(o["coordinate"]), dict(o["coordinate"]))
+    return list(seen.values())
+
+
+# -- keys ----------------------------------------------------------------------------------------
+def run_key(
+    model: Mapping[str, Any], coordinates: list[dict[str, Any]], x: Mapping[str, float]
+) -> str:
+    """The store key of one forward run: model part, coordinates and exact input values."""
+    values = {str(k): float(v) for k, v in x.items()}
+    return _sha(canonical({"model": model, "coordinates": coordinates, "x": values}))
+
+
+def comparison_key(comparison: Mapping[str, Any]) -> str:
+    """The key of a comparison (measure and observed data) of stored runs."""
+    return _sha(canonical(comparison))
+
+
+def model_key(model: Mapping[str, Any]) -> str:
+    """The digest of a model part (a store holds runs of one model)."""
+    return _sha(canonical(model))
+
+
+# -- explaining a change -------------------------------------------------------------------------
+def describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
+    """What differs between two fingerprints, in words (at most a few items per part)."""
+
+    def values(a: Any, b: Any) -> str:
+        text = f"{json.dumps(a)} -> {json.dumps(b)}"
+        return text if len(text) <= 60 else text[:57] + "..."
+
+    changes: list[str] = []
+    for part in ("model", "measure"):
+        a, b = old.get(part, {}), new.get(part, {})
+        if a == b:
+            continue
+        if a.get("class") != b.get("class"):
+            changes.append(f"{part} {a.get('class')} -> {b.get('class')}")
+            continue
+        if a.get("version") != b.get("version"):
+            changes.append(f"{part} version {values(a.get('version'), b.get('version'))}")
+        oa, ob = a.get("options", {}), b.get("options", {})
+        keys = sorted(k for k in {*oa, *ob} if oa.get(k) != ob.get(k))
+        if keys:
+            shown = ", ".join(f"{k}: {values(oa.get(k), ob.get(k))}" for k in keys[:3])
+            more = f" and {len(keys) - 3} more" if len(keys) > 3 else ""
+            changes.append(f"{part} options ({shown}{more})")
+    oa, ob = old.get("observations", []), new.get("observations", [])
+    if len(oa) != len(ob):
+        changes.append(f"number of observations {len(oa)} -> {len(ob)}")
+    else:
+        for k, (a, b) in enumerate(zip(oa, ob, strict=True)):
+            what = [f for f in ("coordinate", "interface", "points", "noise_std") if a[f] != b[f]]
+            if what:
+                changes.append(f"observation {k + 1} ({', '.join(what)})")
+    if old.get("fixed") != new.get("fixed"):
+        changes.append(f"fixed inputs {values(old.get('fixed'), new.get('fixed'))}")
+    if old.get("noise_std") != new.get("noise_std"):
+        changes.append(f"likelihood noise_std {values(old.get('noise_std'), new.get('noise_std'))}")
+    return changes or ["the problem description"]
