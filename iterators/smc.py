@@ -300,13 +300,14 @@ class SequentialMonteCarlo:
         # Particles with L = -inf get weight 0 at any gamma > current gamma.
         lw, ll = log_w[finite], loglik[finite]
 
-        shift = lw.max()
-
         def excess(g: float) -> float:
             # ESS of the reweighted particles: (sum w)^2 / sum w^2, one exp pass (this runs
-            # ~20 times per tempering step, thousands of steps with zeta close to 1).
+            # ~20 times per tempering step, thousands of steps with zeta close to 1).  The
+            # ESS does not depend on a common factor of the weights: shifting by the largest
+            # new log-weight keeps the largest weight at 1, however small every likelihood
+            # is (shifting by the previous weights underflowed to 0/0 below L = -700).
             z = lw + (g - gamma) * ll
-            w = np.exp(z - max(shift, float(z.max())))
+            w = np.exp(z - float(z.max()))
             return float(w.sum() ** 2 / np.dot(w, w)) - target
 
         if excess(1.0) >= 0.0:

@@ -203,3 +203,21 @@ def test_fbia_smc_is_the_standalone_sampler():
 
     assert fbia.smc is smc_module.smc
     assert "gp_smc" in {e.name for e in fbia.list_plugins("iterator")}
+
+
+def test_a_likelihood_below_minus_700_everywhere_does_not_underflow_the_weights():
+    """Issue 14, defect 1: L = -800 - 1000 (x - 0.3)^2 on U(0, 1).  The posterior is
+    N(0.3, 1/2000) (the box cuts nothing), the evidence exp(-800) sqrt(pi/1000)."""
+    post = fbia.smc(
+        lambda x: -800.0 - 1e3 * (x[:, 0] - 0.3) ** 2,
+        [fbia.priors.uniform(0.0, 1.0)],
+        n_particles=400,
+        seed=0,
+    )
+    mean = post.weights @ post.particles[:, 0]
+    std = np.sqrt(post.weights @ (post.particles[:, 0] - mean) ** 2)
+    exact_std = np.sqrt(1 / 2000)
+    assert abs(mean - 0.3) < 4 * exact_std / np.sqrt(100)
+    assert std == pytest.approx(exact_std, rel=0.25)
+    exact_log_z = -800.0 + 0.5 * np.log(np.pi / 1000.0)
+    assert abs(post.log_evidence - exact_log_z) < 4 * post.log_evidence_se + 0.05
