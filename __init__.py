@@ -26,7 +26,9 @@ from .core.version import __version__
 _LAZY = {
     "synthetic_observations": "fbia.core.synthetic:synthetic_observations",
     "Study": "fbia.core.study:Study",
-    "load_study": "fbia.core.study:load_study",
+    "load_study": "fbia.core.study_file:load_study",
+    "run_study": "fbia.core.runner:run_study",
+    "forward_study": "fbia.core.runner:forward_study",
     "least_squares": "fbia.iterators.levenberg_marquardt:least_squares",
     "smc": "fbia.iterators.smc:smc",
     "DaskEvaluator": "fbia.core.dask_executor:DaskEvaluator",

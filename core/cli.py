@@ -137,7 +137,7 @@ def _fail(message: str, status: int) -> int:
 
 
 def _load(args: argparse.Namespace, build: bool = True) -> Any:
-    from .study import load_study
+    from .study_file import load_study
 
     return load_study(args.study, build=build)
 
@@ -170,7 +170,9 @@ def _forward(args: argparse.Namespace) -> int:
     values = _parse_values(args.values)
     study = _load(args)
     study.start_point(values)  # unknown names are user errors before anything runs
-    result = study.forward(values, args.output)
+    from .runner import forward_study
+
+    result = forward_study(study, values, args.output)
     if not result.success:
         return _fail(result.message, 1)
     return 0
@@ -178,7 +180,10 @@ def _forward(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     study = _load(args)
-    result = study.run(
+    from .runner import run_study
+
+    result = run_study(
+        study,
         args.output,
         args.workers,
         fresh=args.fresh,

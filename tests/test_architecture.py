@@ -19,7 +19,7 @@ PACKAGES = ("core", "plugins", "measures", "iterators")
 MAX_LINES = 600
 #: Modules still above MAX_LINES, with the size they may not exceed (shrink, never grow).
 OVERSIZE = {
-    "core/study.py": 1431,
+    "core/study_file.py": 718,  # the hand-written validator, until pydantic section models
     "plugins/ale_fsi/solver.py": 1269,
     "testing.py": 1016,
     "iterators/gp_smc.py": 748,

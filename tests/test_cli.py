@@ -19,7 +19,7 @@ from _models import PLUGIN
 from _studies import BAD_CASES, STUDY, TRUTH, edit, write_study
 
 import fbia
-from fbia.core import study as study_module
+from fbia.core import study_file as study_module
 from fbia.core.cli import main
 from fbia.core.registry import Registry
 
@@ -267,7 +267,7 @@ _DRIVER = """
 import sys
 sys.path.insert(0, {tests!r})
 from _models import PLUGIN
-from fbia.core import study
+from fbia.core import study_file as study
 from fbia.core.cli import main
 from fbia.core.registry import Registry
 registry = Registry.load(extra=[PLUGIN])

@@ -16,11 +16,12 @@ import pytest
 from _models import FAULT_BOUNDS, PLUGIN, check_injected_faults, toy_problem
 
 import fbia
-from fbia.core import study as study_module
+from fbia.core import study_file as study_module
 from fbia.core.cli import main
 from fbia.core.dask_executor import DaskEvaluator, _jobqueue_cluster
 from fbia.core.registry import Registry
 from fbia.core.store import StudyStore
+from fbia.core.study import ExecutorSpec
 
 
 @pytest.fixture(scope="module")
@@ -208,7 +209,7 @@ def test_a_dask_executor_section_reads_into_the_spec(tmp_path):
         tmp_path / "ok.toml", registry=Registry.load(extra=[PLUGIN]), build=False
     )
     spec = study.executor
-    assert spec == study_module.ExecutorSpec(
+    assert spec == ExecutorSpec(
         "dask", 4, False, 60.0, None, None, "pbs", {"cores": 8, "memory": "16GB"}
     )
     assert spec.label() == "dask, pbs cluster, 4 workers, time-out 60 s"

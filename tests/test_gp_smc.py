@@ -295,7 +295,7 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
     from fbia.iterators.gp_smc import hpd_mass
 
     example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
-    result = fbia.load_study(example).run(output=tmp_path / "out", echo=lambda s: None)
+    result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
     assert result.success and result.nfev == 144 + 8 and 0 < result.n_failed < 20
     assert result.info["posterior_check"]["rmse"] < 1.0  # the surrogate is right there
     assert abs(result.x["E"] - 400.0) < 60.0 and abs(result.x["nu"] - 0.3) < 0.2

@@ -20,11 +20,11 @@ import pytest
 from _models import PLUGIN
 
 import fbia
-from fbia.core import study as study_module
+from fbia.core import study_file as study_module
 from fbia.core.cli import main
 from fbia.core.registry import Registry
 from fbia.core.store import StudyStore
-from fbia.core.study import load_study
+from fbia.core.study_file import load_study
 
 TESTS = Path(__file__).parent
 
@@ -68,7 +68,7 @@ DRIVER = """
 import sys
 sys.path.insert(0, {tests!r})
 from _models import PLUGIN
-from fbia.core import study
+from fbia.core import study_file as study
 from fbia.core.cli import main
 from fbia.core.registry import Registry
 registry = Registry.load(extra=[PLUGIN])

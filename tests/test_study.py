@@ -13,7 +13,8 @@ from _studies import BAD_CASES, STUDY, TRUTH, write_study
 
 import fbia
 from fbia.core.registry import Registry
-from fbia.core.study import ExecutorSpec, derived_seed, load_study
+from fbia.core.study import ExecutorSpec, derived_seed
+from fbia.core.study_file import load_study
 
 
 @pytest.fixture
@@ -170,7 +171,7 @@ def test_study_run_through_the_api_writes_the_output_folder(registry, tmp_path):
     (tmp_path / "toy.toml").write_text(TOY_STUDY.format(model_options=""))
     study = load_study(tmp_path / "toy.toml", registry=registry)
     lines: list[str] = []
-    result = study.run(echo=lines.append)
+    result = fbia.run_study(study, echo=lines.append)
     out = tmp_path / "output"
     # the 3 x 3 grid over the bounds; the best point is the one of smallest D, computed here
     # from the closed form of the toy model

@@ -1,0 +1,718 @@
+"""Study files: one TOML file describes an inverse analysis; :func:`load_study` reads it.
+
+>>> import fbia
+>>> study = fbia.load_study("examples/flow_cell/study.toml")      # doctest: +SKIP
+>>> result = fbia.run_study(study)                                  # doctest: +SKIP
+>>> print(result.summary())                                         # doctest: +SKIP
+
+The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and one of
+``[[observations]]``/``[synthetic]`` is optional)::
+
+    [study]
+    name = "flow_cell"          # default: the file's stem
+    seed = 1                    # every random choice derives from it (default 0)
+    output = "output"           # output folder, relative to the study file (default "output")
+
+    [model]                     # a forward model from the registry (`fbia plugins`)
+    name = "analytic_mound_2d"
+    options = { n_points = 81 } # or a [model.options] table; unknown keys are errors
+
+    [[parameters]]              # the calibration parameters x, one table each
+    name = "E"                  # a name the forward model knows
+    unit = "Pa"                 # for reports and plots
+    bounds = [100.0, 800.0]     # lower < upper (optional if the prior has finite support)
+    initial = 200.0             # optional initial guess, inside the bounds
+    prior = { distribution = "uniform" }   # optional; default uniform on the bounds
+                                # uniform | normal | truncated_normal | lognormal | beta
+
+    [[uncertain]]               # uncertain inputs theta with a prior (Paper B eq. 3)
+    name = "inflow_rate"
+    prior = { distribution = "beta", a = 2.6, b = 1.4, lower = 0.0, upper = 110.0 }
+
+    [fixed]                     # model inputs held at a value in every run
+    inflow_rate = 100.0
+
+    [[observations]]            # observed states from files, relative to the study file ...
+    coordinate = { inflow_rate = 100.0 }     # which state (model-defined names)
+    interface = "data/observed_100.csv"      # CSV x, y[, curve] (2-D); STL/PLY/VTU/... (3-D)
+    points = "data/points_100.csv"           # optional: x, y[, z][, dx, dy[, dz]]
+    noise_std = 0.01                         # optional, mm
+    name = "Q100"                            # optional label
+
+    [synthetic]                 # ... or made here: the model at `truth` plus Gaussian noise
+    truth = { E = 400.0, nu = 0.3 }
+    coordinates = [ { inflow_rate = 100.0 } ]
+    noise_std = 0.005           # mm (0: exact data)
+    noise = "normal"            # along the normals (Paper A) | "isotropic" (Paper B eq. 16)
+    points = 12                 # optional number of measurement points (for "ray")
+    seed = 7                    # optional; default: derived from [study] seed
+
+    [measure]                   # ray | cpp | rkhs (or a plugin's)
+    name = "cpp"
+    options = {}
+
+    [likelihood]
+    noise_std = 0.01            # sigma_N in mm (Paper B eq. 5)
+
+    [iterator]                  # optional; without it `fbia run` does one forward run
+    name = "levenberg_marquardt"
+    options = { x0 = [ { E = 200.0, nu = 0.4 }, { E = 700.0, nu = -0.5 } ] }
+
+    [executor]
+    kind = "processes"          # serial | processes | dask (default processes)
+    workers = 2                 # default: the number of cores
+    keep_runs = false           # keep every successful run's folder in <output>/runs too
+                                # (failed runs' folders are always kept)
+    timeout = 3600.0            # optional wall-time limit of one run [s]; a run past it is
+                                # killed and recorded as failed ("time-out after 3600 s")
+    isolate = true              # each run in a child process of its own (default: with a
+                                # timeout, and always for dask); a crash costs that child only
+    address = "tcp://10.0.0.5:8786"   # dask: a running scheduler ...
+    cluster = "slurm"           # ... or "local" (default) | slurm | pbs | sge | lsf | htcondor
+                                # | moab | oar (dask-jobqueue) with `workers` workers
+    cluster_options = { cores = 8, memory = "16GB", walltime = "04:00:00" }  # passed through
+
+Resume: every finished run is stored in ``<output>/store.sqlite`` the moment it ends.  Running
+the study again on the same output folder reuses every stored forward run of the same model
+(options, fixed inputs) at the same inputs and runs only the others; a new likelihood noise
+reuses them as they are, a new measure or other observations compare the stored interfaces
+anew (:mod:`fbia.core.store`).  Since the iterators are deterministic given the seed, the result
+is the one an uninterrupted run gives.  A store made for another model is an error that says
+what changed; ``fresh=True`` (``fbia run --fresh``) starts over, ``retry_failed=True`` runs
+stored failures again.
+
+Seeds: the synthetic noise uses ``numpy.random.SeedSequence(seed, spawn_key=(0,))`` and an
+iterator whose options have a ``seed`` the file does not set gets the state of
+``SeedSequence(seed, spawn_key=(1,))``; nothing else draws random numbers.  An iterator with an
+``x0`` option that the file does not set starts from the parameters' ``initial`` values when
+all of them have one.
+
+Every mistake in a study file raises :class:`~fbia.core.errors.ConfigError` with one line that
+names the file and the key, e.g. ``study.toml: [model.options]: unknown option 'mesh_sise';
+valid options: ...``.  Paths in the file are relative to the file's folder, plugin options
+declared as paths (``Path`` fields of a plugin's ``Options``, e.g. a forward model's
+``mesh_file``) included.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+import typing
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from .errors import ConfigError
+from .executors import EXECUTOR_KINDS
+from .interface import Interface
+from .observation import MeasurementPoints, Observation, check_coordinate
+from .parameters import Parameter, Prior
+from .registry import Registry, default_registry
+from .study import (
+    ITERATOR_STREAM,
+    SYNTHETIC_STREAM,
+    ExecutorSpec,
+    Study,
+    SyntheticSpec,
+    derived_seed,
+)
+
+__all__ = ["SECTIONS", "load_study"]
+
+#: ``cluster`` values of [executor] (kept in step with fbia.core.dask_executor.CLUSTERS,
+#: which is not imported here so that reading a study file never imports Dask)
+CLUSTERS = ("local", "slurm", "pbs", "sge", "lsf", "htcondor", "moab", "oar")
+
+#: Top-level sections of a study file and what each holds.
+SECTIONS: dict[str, str] = {
+    "study": "name, seed, output folder",
+    "model": "forward model name and options",
+    "parameters": "calibration parameters (array of tables)",
+    "uncertain": "uncertain inputs with priors (array of tables)",
+    "fixed": "inputs held fixed",
+    "observations": "observed states from files (array of tables)",
+    "synthetic": "observations made from the model at a ground truth",
+    "measure": "discrepancy measure name and options",
+    "likelihood": "noise_std",
+    "iterator": "iterator name and options",
+    "executor": "serial, processes or dask; workers, time-out, cluster",
+}
+_KEYS: dict[str, tuple[str, ...]] = {
+    "study": ("name", "seed", "output"),
+    "model": ("name", "options"),
+    "measure": ("name", "options"),
+    "iterator": ("name", "options"),
+    "parameters": ("name", "unit", "bounds", "initial", "prior"),
+    "uncertain": ("name", "unit", "bounds", "prior"),
+    "observations": ("coordinate", "interface", "points", "noise_std", "name"),
+    "synthetic": ("truth", "coordinates", "noise_std", "noise", "points", "seed"),
+    "likelihood": ("noise_std",),
+    "executor": (
+        "kind",
+        "workers",
+        "keep_runs",
+        "timeout",
+        "isolate",
+        "address",
+        "cluster",
+        "cluster_options",
+    ),
+}
+#: how [synthetic] noise is added (fbia.synthetic_observations): along the normals (Paper A)
+#: or on every coordinate (Paper B eq. 16)
+NOISE_KINDS = ("normal", "isotropic")
+
+
+# -- reading -----------------------------------------------------------------------------------
+def load_study(path: str | Path, registry: Registry | None = None, build: bool = True) -> Study:
+    """Read and check a study file.
+
+    Parameters
+    ----------
+    path
+        The TOML file.
+    registry
+        Where plugin names are looked up (default: the installed plugins).
+    build
+        Also build :attr:`Study.problem` now (runs the model for ``[synthetic]`` data).
+        ``False`` checks everything that needs no forward run.
+
+    Raises
+    ------
+    ConfigError
+        For any mistake, with one line naming the file and the key.
+    """
+    path = Path(path)
+    file = str(path)
+    if not path.is_file():
+        raise ConfigError("study file not found" if not path.exists() else "not a file", file)
+    raw_bytes = path.read_bytes()
+    try:
+        text = raw_bytes.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", file) from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"TOML syntax error: {exc}", file) from None
+    study = _Reader(path, raw, registry or default_registry()).read(text, raw_bytes)
+    if build:
+        _ = study.problem
+    return study
+
+
+class _Reader:
+    """Turns the parsed TOML into a :class:`Study`, one precise error per rule."""
+
+    def __init__(self, path: Path, raw: dict[str, Any], registry: Registry) -> None:
+        self.path = path
+        self.file = str(path)
+        self.folder = path.parent
+        self.raw = raw
+        self.registry = registry
+
+    # -- small checks --------------------------------------------------------------------
+    def where(self, section: str, key: str = "") -> str:
+        return f"{self.file}: {section}" + (f" {key}" if key else "")
+
+    def keys(self, table: Mapping[str, Any], valid: Sequence[str], where: str) -> None:
+        unknown = [k for k in table if k not in valid]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"unknown key{plural} {', '.join(map(repr, unknown))}; "
+                f"valid keys: {', '.join(valid)}",
+                where,
+            )
+
+    def table(self, value: Any, where: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise ConfigError(f"expected a table, got {_kind(value)}", where)
+        return value
+
+    def tables(self, value: Any, where: str) -> list[dict[str, Any]]:
+        if isinstance(value, dict):
+            return [value]
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise ConfigError(f"expected an array of tables, got {_kind(value)}", where)
+        return value
+
+    def number(self, value: Any, where: str, positive: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"expected a number, got {_kind(value)} {value!r}", where)
+        v = float(value)
+        if not math.isfinite(v):
+            raise ConfigError(f"expected a finite number, got {value!r}", where)
+        if positive and v <= 0:
+            raise ConfigError(f"must be positive, got {value!r}", where)
+        return v
+
+    def integer(self, value: Any, where: str, minimum: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"expected an integer, got {_kind(value)} {value!r}", where)
+        if minimum is not None and value < minimum:
+            raise ConfigError(f"must be at least {minimum}, got {value}", where)
+        return value
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f"expected a non-empty string, got {_kind(value)} {value!r}", where)
+        return value
+
+    def numbers(self, value: Any, where: str) -> dict[str, float]:
+        table = self.table(value, where)
+        return {str(k): self.number(v, f"{where}.{k}") for k, v in table.items()}
+
+    def known(self, names: Sequence[str], where: str, what: str = "parameter") -> None:
+        unknown = [n for n in names if n not in self.model_names]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"the forward model {self.model_name!r} has no {what}{plural} "
+                f"{', '.join(map(repr, unknown))}; it knows: {', '.join(self.model_names)}",
+                where,
+            )
+
+    def plugin(self, kind: str, section: str) -> tuple[str, Any]:
+        spec = self.table(self.raw[section], f"{self.file}: [{section}]")
+        self.keys(spec, _KEYS[section], f"{self.file}: [{section}]")
+        if "name" not in spec:
+            raise ConfigError("missing key 'name'", f"{self.file}: [{section}]")
+        name = self.string(spec["name"], self.where(f"[{section}]", "name"))
+        self.registry.get(kind, name, where=self.where(f"[{section}]", "name"))
+        options = self.table(spec.get("options", {}), self.where(f"[{section}.options]"))
+        options = self.prepare_options(kind, name, dict(options), section)
+        obj = self.registry.create(kind, name, options, where=self.where(f"[{section}.options]"))
+        return name, obj
+
+    def prepare_options(
+        self, kind: str, name: str, options: dict[str, Any], section: str = ""
+    ) -> dict[str, Any]:
+        """Seed and start values that iterators take from the study, and path options
+        relative to the study file's folder (see the module doc)."""
+        options = self.resolve_paths(kind, name, options, section or kind)
+        if kind != "iterator":
+            return options
+        fields = self.registry.get(kind, name).factory.Options.model_fields
+        where = self.where("[iterator.options]")
+        if "seed" in fields and "seed" not in options:
+            options["seed"] = derived_seed(self.seed, ITERATOR_STREAM)
+        if "x0" in fields:
+            if "x0" in options:
+                options["x0"] = self.starts(options["x0"], f"{where} x0")
+            elif all(p.initial is not None for p in self.parameters):
+                options["x0"] = {p.name: p.initial for p in self.parameters}
+        return options
+
+    def resolve_paths(
+        self, kind: str, name: str, options: dict[str, Any], section: str
+    ) -> dict[str, Any]:
+        """Relative paths given for ``Path`` options, made relative to the study's folder;
+        they name input files (meshes), so a missing one is an error before any run."""
+        schema = getattr(self.registry.get(kind, name).factory, "Options", None)
+        fields = getattr(schema, "model_fields", {})
+        for key, value in options.items():
+            spec = fields.get(key)
+            if spec is None or not isinstance(value, str) or not _is_path_type(spec.annotation):
+                continue
+            path = Path(value).expanduser()
+            path = path if path.is_absolute() else (self.folder / path).resolve()
+            if not path.is_file():
+                raise ConfigError(
+                    f"file not found: {path}", self.where(f"[{section}.options]", key)
+                )
+            options[key] = path
+        return options
+
+    def starts(self, x0: Any, where: str) -> Any:
+        """Check initial guesses (a table or an array of tables): names and bounds."""
+        if isinstance(x0, dict):
+            return self.start(x0, where)
+        if isinstance(x0, list) and x0 and all(isinstance(s, dict) for s in x0):
+            return [self.start(s, f"{where}[{k}]") for k, s in enumerate(x0)]
+        return x0  # other forms (a plain vector, ...) are the iterator's to check
+
+    def start(self, x0: dict[str, Any], where: str) -> dict[str, float]:
+        by_name = {p.name: p for p in self.parameters}
+        unknown = [k for k in x0 if k not in by_name]
+        if unknown:
+            raise ConfigError(
+                f"unknown parameter(s) {', '.join(map(repr, unknown))}; "
+                f"valid: {', '.join(by_name)}",
+                where,
+            )
+        out: dict[str, float] = {}
+        for p in self.parameters:
+            if p.name in x0:
+                v = self.number(x0[p.name], f"{where}.{p.name}")
+                if p.bounds is not None and not p.bounds[0] <= v <= p.bounds[1]:
+                    raise ConfigError(
+                        f"initial guess {v:g} lies outside bounds "
+                        f"[{p.bounds[0]:g}, {p.bounds[1]:g}]",
+                        f"{where}.{p.name}",
+                    )
+                out[p.name] = v
+            elif p.initial is not None:
+                out[p.name] = p.initial
+            else:
+                raise ConfigError(
+                    f"no value for parameter {p.name!r} (and it has no 'initial')", where
+                )
+        return out
+
+    # -- sections ------------------------------------------------------------------------
+    def read(self, text: str, raw_bytes: bytes) -> Study:
+        raw = self.raw
+        unknown = [k for k in raw if k not in SECTIONS]
+        if unknown:
+            plural = "s" if len(unknown) > 1 else ""
+            raise ConfigError(
+                f"unknown section{plural} {', '.join(f'[{k}]' for k in unknown)}; "
+                f"valid sections: {', '.join(f'[{k}]' for k in SECTIONS)}",
+                self.file,
+            )
+        for required in ("model", "parameters", "measure"):
+            if required not in raw:
+                brackets = "[[parameters]]" if required == "parameters" else f"[{required}]"
+                raise ConfigError(f"missing section {brackets}", self.file)
+        if "observations" not in raw and "synthetic" not in raw:
+            raise ConfigError(
+                "no observations: give [[observations]] (data files) or [synthetic]", self.file
+            )
+
+        meta = self.table(raw.get("study", {}), self.where("[study]"))
+        self.keys(meta, _KEYS["study"], self.where("[study]"))
+        name = self.string(meta.get("name", self.path.stem), self.where("[study]", "name"))
+        self.seed = self.integer(meta.get("seed", 0), self.where("[study]", "seed"), minimum=0)
+        out_name = self.string(meta.get("output", "output"), self.where("[study]", "output"))
+        output = self.folder / out_name
+
+        self.model_name, model = self.plugin("forward_model", "model")
+        try:
+            self.model_names = [str(n) for n in model.parameter_names()]
+        except Exception as exc:  # a plugin bug, reported where it shows
+            raise ConfigError(
+                f"forward model {self.model_name!r} failed to list its parameters: "
+                f"{type(exc).__name__}: {exc}",
+                self.where("[model]"),
+            ) from None
+        self.model_dim = _model_dim(model)
+
+        self.parameters = self.read_parameters("parameters")
+        uncertain = self.read_parameters("uncertain") if "uncertain" in raw else []
+        fixed = self.numbers(raw.get("fixed", {}), self.where("[fixed]"))
+        self.known(list(fixed), self.where("[fixed]"), "input")
+        taken = {p.name: "[[parameters]]" for p in self.parameters}
+        for p in uncertain:
+            if p.name in taken:
+                raise ConfigError(
+                    f"{p.name!r} is both a calibration parameter and uncertain",
+                    self.where("[[uncertain]]", repr(p.name)),
+                )
+            taken[p.name] = "[[uncertain]]"
+        for k in fixed:
+            if k in taken:
+                raise ConfigError(
+                    f"{k!r} is fixed here and also listed in {taken[k]}",
+                    self.where("[fixed]", k),
+                )
+
+        observations = self.read_observations() if "observations" in raw else []
+        synthetic = self.read_synthetic() if "synthetic" in raw else None
+
+        measure_name, measure = self.plugin("measure", "measure")
+
+        likelihood = self.table(raw.get("likelihood", {}), self.where("[likelihood]"))
+        self.keys(likelihood, _KEYS["likelihood"], self.where("[likelihood]"))
+        noise_std = (
+            self.number(likelihood["noise_std"], self.where("[likelihood]", "noise_std"), True)
+            if "noise_std" in likelihood
+            else None
+        )
+
+        iterator_name, iterator = (
+            self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
+        )
+        executor = self.read_executor()
+
+        study = Study(
+            path=self.path,
+            name=name,
+            seed=self.seed,
+            output=output,
+            model=model,
+            model_name=self.model_name,
+            measure=measure,
+            measure_name=measure_name,
+            parameters=self.parameters,
+            uncertain=uncertain,
+            fixed=fixed,
+            observations=observations,
+            synthetic=synthetic,
+            noise_std=noise_std,
+            iterator=iterator,
+            iterator_name=iterator_name,
+            executor=executor,
+            raw=raw,
+            text=text,
+            sha256=hashlib.sha256(raw_bytes).hexdigest(),
+        )
+        if synthetic is None:
+            _ = study.problem  # no forward run needed: check the whole problem now
+        return study
+
+    def read_parameters(self, section: str) -> list[Parameter]:
+        out: list[Parameter] = []
+        for k, spec in enumerate(self.tables(self.raw[section], self.where(f"[[{section}]]"))):
+            label = repr(spec["name"]) if isinstance(spec.get("name"), str) else f"#{k + 1}"
+            where = self.where(f"[[{section}]]", label)
+            self.keys(spec, _KEYS[section], where)
+            if "name" not in spec:
+                raise ConfigError("missing key 'name'", where)
+            name = self.string(spec["name"], f"{where} name")
+            self.known([name], f"{where} name")
+            if any(p.name == name for p in out):
+                raise ConfigError(f"parameter {name!r} is listed twice", where)
+            unit = spec.get("unit", "")
+            if not isinstance(unit, str):
+                raise ConfigError(f"expected a string, got {_kind(unit)}", f"{where} unit")
+            bounds: tuple[float, float] | None = None
+            if "bounds" in spec:
+                b = spec["bounds"]
+                if not isinstance(b, list) or len(b) != 2:
+                    raise ConfigError(f"expected [lower, upper], got {b!r}", f"{where} bounds")
+                bounds = (
+                    self.number(b[0], f"{where} bounds"),
+                    self.number(b[1], f"{where} bounds"),
+                )
+                if not bounds[0] < bounds[1]:
+                    raise ConfigError(
+                        f"lower bound {bounds[0]:g} is not below upper bound {bounds[1]:g}",
+                        f"{where} bounds",
+                    )
+            prior: Prior | None = None
+            if "prior" in spec:
+                pspec = self.table(spec["prior"], f"{where} prior")
+                try:
+                    prior = Prior.from_spec(pspec, bounds)
+                except ConfigError as err:
+                    raise err.located(f"{where} prior") from None
+            elif section == "uncertain":
+                raise ConfigError("an uncertain input needs a prior", where)
+            if bounds is None and (prior is None or not all(map(math.isfinite, prior.support))):
+                raise ConfigError(
+                    "needs bounds = [lower, upper] (or a prior with finite support)", where
+                )
+            initial = None
+            if "initial" in spec:
+                initial = self.number(spec["initial"], f"{where} initial")
+                lo, hi = bounds if bounds is not None else prior.support  # type: ignore[union-attr]
+                if not lo <= initial <= hi:
+                    raise ConfigError(
+                        f"initial guess {initial:g} lies outside bounds [{lo:g}, {hi:g}]",
+                        f"{where} initial",
+                    )
+            try:
+                out.append(Parameter(name, bounds, prior, unit, initial))
+            except ConfigError as err:
+                raise ConfigError(err.reason, where) from None
+        if not out:
+            raise ConfigError("no parameters", self.where(f"[[{section}]]"))
+        return out
+
+    def read_observations(self) -> list[Observation]:
+        out: list[Observation] = []
+        specs = self.tables(self.raw["observations"], self.where("[[observations]]"))
+        for k, spec in enumerate(specs):
+            where = self.where("[[observations]]", f"#{k + 1}")
+            self.keys(spec, _KEYS["observations"], where)
+            coordinate = check_coordinate(
+                self.table(spec.get("coordinate", {}), f"{where} coordinate"),
+                f"{where} coordinate",
+            )
+            if "interface" not in spec and "points" not in spec:
+                raise ConfigError("needs 'interface' (a file), 'points' (a file) or both", where)
+            gamma = None
+            if "interface" in spec:
+                file = self.folder / self.string(spec["interface"], f"{where} interface")
+                try:
+                    gamma = Interface.read(file)
+                except ConfigError as err:
+                    raise err.located(f"{where} interface") from None
+                self.dimension(gamma.dim, f"{where} interface")
+            points = None
+            if "points" in spec:
+                file = self.folder / self.string(spec["points"], f"{where} points")
+                try:
+                    points = MeasurementPoints.read(file)
+                except ConfigError as err:
+                    raise err.located(f"{where} points") from None
+                self.dimension(points.dim, f"{where} points")
+            noise = spec.get("noise_std")
+            name = spec.get("name", "")
+            if not isinstance(name, str):
+                raise ConfigError(f"expected a string, got {_kind(name)}", f"{where} name")
+            try:
+                out.append(
+                    Observation(
+                        gamma,
+                        coordinate,
+                        points,
+                        noise_std=(
+                            None
+                            if noise is None
+                            else self.number(noise, f"{where} noise_std", positive=True)
+                        ),
+                        name=name,
+                    )
+                )
+            except ConfigError as err:
+                raise ConfigError(err.reason, where) from None
+        dims = {o.dim for o in out}
+        if len(dims) > 1:
+            raise ConfigError(
+                f"observations mix dimensions {sorted(dims)}", self.where("[[observations]]")
+            )
+        return out
+
+    def dimension(self, dim: int, where: str) -> None:
+        if isinstance(self.model_dim, int) and dim != self.model_dim:
+            raise ConfigError(
+                f"{dim}-D data for the {self.model_dim}-D forward model {self.model_name!r}",
+                where,
+            )
+
+    def read_synthetic(self) -> SyntheticSpec:
+        where = self.where("[synthetic]")
+        spec = self.table(self.raw["synthetic"], where)
+        self.keys(spec, _KEYS["synthetic"], where)
+        for key in ("truth", "coordinates"):
+            if key not in spec:
+                raise ConfigError(f"missing key {key!r}", where)
+        truth = self.numbers(spec["truth"], f"{where} truth")
+        self.known(list(truth), f"{where} truth")
+        missing = [p.name for p in self.parameters if p.name not in truth]
+        if missing:
+            raise ConfigError(
+                f"no true value for parameter(s) {', '.join(map(repr, missing))}",
+                f"{where} truth",
+            )
+        coords = [
+            check_coordinate(c, f"{where} coordinates[{k}]")
+            for k, c in enumerate(self.tables(spec["coordinates"], f"{where} coordinates"))
+        ]
+        if not coords:
+            raise ConfigError("needs at least one coordinate", f"{where} coordinates")
+        noise = self.number(spec["noise_std"], f"{where} noise_std") if "noise_std" in spec else 0.0
+        if noise < 0:
+            raise ConfigError(f"must not be negative, got {noise:g}", f"{where} noise_std")
+        points = (
+            self.integer(spec["points"], f"{where} points", minimum=1) if "points" in spec else None
+        )
+        seed = (
+            self.integer(spec["seed"], f"{where} seed", minimum=0)
+            if "seed" in spec
+            else derived_seed(self.seed, SYNTHETIC_STREAM)
+        )
+        kind = self.string(spec.get("noise", "normal"), f"{where} noise")
+        if kind not in NOISE_KINDS:
+            raise ConfigError(
+                f"unknown noise {kind!r}; valid: {', '.join(NOISE_KINDS)}", f"{where} noise"
+            )
+        return SyntheticSpec(truth, coords, noise, points, seed, kind)
+
+    def read_executor(self) -> ExecutorSpec:
+        where = self.where("[executor]")
+        spec = self.table(self.raw.get("executor", {}), where)
+        self.keys(spec, _KEYS["executor"], where)
+        kind = self.string(spec.get("kind", "processes"), f"{where} kind")
+        if kind not in EXECUTOR_KINDS:
+            raise ConfigError(
+                f"unknown executor {kind!r}; valid: {', '.join(EXECUTOR_KINDS)}", f"{where} kind"
+            )
+        workers = (
+            self.integer(spec["workers"], f"{where} workers", minimum=1)
+            if "workers" in spec
+            else None
+        )
+        flags: dict[str, bool | None] = {}
+        for key in ("keep_runs", "isolate"):
+            value = spec.get(key)
+            if value is not None and not isinstance(value, bool):
+                raise ConfigError(f"expected true or false, got {value!r}", f"{where} {key}")
+            flags[key] = value
+        timeout = (
+            self.number(spec["timeout"], f"{where} timeout", positive=True)
+            if "timeout" in spec
+            else None
+        )
+        if timeout is not None and flags["isolate"] is False:
+            raise ConfigError(
+                "a time-out needs isolated runs (only a run in its own process can be "
+                "stopped): drop isolate = false or the timeout",
+                f"{where} isolate",
+            )
+        dask_only = [k for k in ("address", "cluster", "cluster_options") if k in spec]
+        if dask_only and kind != "dask":
+            raise ConfigError(
+                f'{", ".join(dask_only)} only for kind = "dask" (kind is {kind!r})',
+                f"{where} {dask_only[0]}",
+            )
+        address = self.string(spec["address"], f"{where} address") if "address" in spec else None
+        cluster = self.string(spec.get("cluster", "local"), f"{where} cluster")
+        if cluster not in CLUSTERS:
+            raise ConfigError(
+                f"unknown cluster {cluster!r}; valid: {', '.join(CLUSTERS)}", f"{where} cluster"
+            )
+        options = self.table(spec.get("cluster_options", {}), f"{where} cluster_options")
+        if address is not None and (workers is not None or "cluster" in spec or options):
+            raise ConfigError(
+                "a scheduler address names a running cluster: workers, cluster and "
+                "cluster_options do not apply",
+                f"{where} address",
+            )
+        return ExecutorSpec(
+            kind,
+            workers,
+            bool(flags["keep_runs"]),
+            timeout,
+            flags["isolate"],
+            address,
+            cluster,
+            dict(options),
+        )
+
+
+def _is_path_type(annotation: Any) -> bool:
+    """Whether an option's type is ``Path`` or a union with it (``Path | None``)."""
+    return annotation is Path or Path in typing.get_args(annotation)
+
+
+def _model_dim(model: Any) -> int | None:
+    """The spatial dimension of a model's interfaces, when it tells (a ``dim`` attribute, or
+    an ``undeformed()`` interface); None otherwise (then checked on the first run)."""
+    dim = getattr(model, "dim", None)
+    if isinstance(dim, int) and not isinstance(dim, bool):
+        return dim
+    undeformed = getattr(model, "undeformed", None)
+    if callable(undeformed):
+        try:
+            gamma = undeformed()
+        except Exception:  # an optional extra that failed: the first run will tell
+            return None
+        if isinstance(gamma, Interface):
+            return gamma.dim
+    return None
+
+
+def _kind(value: Any) -> str:
+    return {
+        dict: "a table",
+        list: "an array",
+        str: "a string",
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+    }.get(type(value), type(value).__name__)
