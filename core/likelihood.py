@@ -18,17 +18,23 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .errors import ConfigError
 from .problem import Evaluation, InverseProblem
 
 
-def noise_levels(problem: InverseProblem) -> list[float] | None:
-    """sigma_N [mm] of every observation (its own ``noise_std``, else the problem's), or None
-    when one has none (then there is no likelihood)."""
+def noise_levels(problem: InverseProblem) -> list[float]:
+    """sigma_N [mm] of every observation: its own ``noise_std``, else the problem's.
+
+    Raises ConfigError when one has neither: there is no likelihood then."""
     out = []
     for obs in problem.observations:
         sigma = obs.noise_std if obs.noise_std is not None else problem.noise_std
         if sigma is None:
-            return None
+            raise ConfigError(
+                "an observation has no noise_std and the problem has none: the Gaussian "
+                "likelihood (Paper B eq. 5) needs sigma_N [mm]",
+                "likelihood",
+            )
         out.append(float(sigma))
     return out
 

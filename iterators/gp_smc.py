@@ -8,9 +8,11 @@
     result = it.run(problem)                  # problem.noise_std = sigma_N [mm] (eq. 5)
     print(result.summary())                   # MAP, posterior mean, std
     it.write_plots(result, problem, "output")     # Paper B Figs. 5-9, 13-15
-    fbia.iterators.gp_smc.save_posterior(result, "output")   # posterior.npz + posterior.json
+    fbia.iterators.posterior.save_posterior(result, "output")  # posterior.npz + .json
 
-The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the :class:`Result`):
+The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
+:class:`~fbia.iterators.gp_smc_result.GpSmcResult`; posterior statistics and files are in
+:mod:`fbia.iterators.posterior`):
 
 1. **Design**: the first ``n_train`` (+ ``n_test`` held-out) points of a scrambled, seeded
    Sobol sequence in the box of the calibration parameters x and the uncertain parameters
@@ -19,7 +21,7 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the :class:`R
    seed extends the design by the next points of the same sequence, and
    :meth:`GpSmcIterator.reuse` keeps an earlier result's runs so only the new points run.
    All forward runs go to the evaluator as one batch; failed runs are excluded from training
-   and kept in the result (``Result.evaluations``, ``info["design_status"]``).
+   and kept in the result (``Result.evaluations``, ``result.design.status``).
 2. **Likelihood** (eq. 4-5): per observation k with noise sigma_k (``Observation.noise_std``,
    else ``problem.noise_std``), L = sum_k [-n_k/2 log(2 pi sigma_k^2) - D_k^2 / (2 sigma_k^2)],
    n_k the number of individual measurements (the residual count of the measure; 1 for rkhs).
@@ -39,12 +41,11 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the :class:`R
 
 from __future__ import annotations
 
-import json
 import math
 import time
 import warnings
-from collections.abc import Callable, Generator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Generator, Sequence
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -56,18 +57,22 @@ from scipy.stats import qmc
 from ..core.errors import ConfigError
 from ..core.evaluator import Evaluator
 from ..core.iteration import IteratorBase
-from ..core.likelihood import gaussian_log_likelihood, measurement_count
-from ..core.likelihood import noise_levels as _noise_levels
+from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter, Prior
 from ..core.problem import Evaluation, InverseProblem, Result
+from .gp_smc_result import (
+    DesignRuns,
+    GpSmcResult,
+    PosteriorCheck,
+    SmcSummary,
+    SurrogateFit,
+)
 from .gp_surrogate import OPTIMIZERS, GpSurrogate
+from .posterior import summarise
 from .smc import SequentialMonteCarlo, SmcResult, SmcState
 
 FloatArray = NDArray[np.float64]
-
-#: Version tag of the posterior files written by :func:`save_posterior`.
-POSTERIOR_FORMAT = "fbia-posterior-1"
 
 
 @dataclass
@@ -80,33 +85,6 @@ class GpSmcState:
 
     def __str__(self) -> str:
         return f"[{self.stage}] {self.message}"
-
-
-def _check_note(check: Mapping[str, Any] | None) -> str:
-    """The posterior check in the result message, with a warning when it failed."""
-    if not check:
-        return ""
-    note = f"; surrogate RMSE {check['rmse']:.3g} in L at {check['n']} posterior draws"
-    if not check["rmse"] < 1.0:
-        note += " (not well below 1: the posterior is not reliable, train on more runs)"
-    return note
-
-
-# -- the likelihood (eq. 4-5) -------------------------------------------------------------------
-def noise_levels(problem: InverseProblem) -> list[float]:
-    """sigma_N of every observation: its own ``noise_std``, else ``problem.noise_std``."""
-    sigmas = _noise_levels(problem)
-    if sigmas is None:
-        raise ConfigError(
-            "an observation has no noise_std and the problem has none: the Gaussian "
-            "likelihood (Paper B eq. 5) needs sigma_N [mm]",
-            "gp_smc",
-        )
-    return sigmas
-
-
-#: Gaussian static log-likelihood (eq. 5) of one evaluation record; -inf if it failed.
-log_likelihood_of = gaussian_log_likelihood
 
 
 # -- the design ---------------------------------------------------------------------------------
@@ -236,111 +214,156 @@ class GpSmcIterator(IteratorBase):
     # -- the algorithm ----------------------------------------------------------------------
     def steps(
         self, problem: InverseProblem, evaluator: Evaluator
-    ) -> Generator[GpSmcState, None, Result]:
+    ) -> Generator[GpSmcState, None, GpSmcResult]:
         opts = self.options
-        t_start = time.perf_counter()
-        sigmas = noise_levels(problem)
-        count = measurement_count(problem)
+        run = _Run(problem, evaluator, self._inputs(problem), time.perf_counter())
+        if opts.mode == "surrogate":
+            design = yield from self._design_stage(run)
+            if int((design.train_mask & design.ok).sum()) < 2:
+                return self._finish_failed(run, design)
+            fit, gp = yield from self._surrogate_stage(run, design)
+            log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean
+        else:
+            design, fit, gp = None, None, None
+            log_likelihood = run.forward_log_likelihood
+        post = yield from self._smc_stage(run, log_likelihood)
+        check = None
+        if opts.mode == "surrogate" and opts.n_check:
+            assert gp is not None
+            check = yield from self._check_stage(run, post, gp)
+        laplace = opts.laplace and opts.mode == "surrogate"
+        posterior = summarise(
+            post,
+            run.n_x,
+            run.inputs,
+            opts.map_bins,
+            (lambda z: log_likelihood(z) + _log_prior(run.inputs, z)) if laplace else None,
+        )
+        return GpSmcResult(
+            status="completed",
+            success=True,
+            message=(
+                f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
+                f"steps ({opts.mode}; {run.nfev} forward runs, {run.n_failed} failed)"
+                + ("" if check is None else check.note())
+            ),
+            x=dict(zip(problem.names, map(float, posterior.map), strict=True)),
+            nfev=run.nfev,
+            n_failed=run.n_failed,
+            iterator="gp_smc",
+            history=run.history,
+            evaluations=run.evaluations,
+            names=run.names,
+            n_x=run.n_x,
+            mode=opts.mode,
+            priors=[p.describe() for p in run.inputs],
+            design=design,
+            surrogate=fit,
+            check=check,
+            posterior=posterior,
+            smc=SmcSummary(
+                n_steps=post.n_steps,
+                gammas=list(post.gammas),
+                ess=list(post.ess),
+                acceptance=list(post.acceptance),
+                nfev_log_likelihood=post.nfev,
+                final_ess=float(post.final_ess),
+                rejuvenate=opts.rejuvenate,
+                steps_with_moves=sum(h["moved"] for h in post.history),
+            ),
+            seconds=time.perf_counter() - run.t_start,
+        )
+
+    def _inputs(self, problem: InverseProblem) -> list[Parameter]:
+        """x then theta; each needs a prior, and x finite bounds for the box design."""
         inputs = [*problem.parameters, *problem.uncertain]
-        priors: list[Prior] = []
         for p in inputs:
             if p.prior is None:
                 raise ConfigError("needs a prior distribution", p.name)
-            priors.append(p.prior)
-            if not _finite_bounds(p) and opts.design == "box" and p in problem.parameters:
+            if not _finite_bounds(p) and self.options.design == "box" and p in problem.parameters:
                 raise ConfigError(
                     "a calibration parameter needs finite bounds for the Sobol design "
                     "(or design = 'prior')",
                     p.name,
                 )
-        names = [p.name for p in inputs]
-        n_x = len(problem.parameters)
-        history: list[dict[str, Any]] = []
+        return inputs
 
-        def record(stage: str, **data: Any) -> dict[str, Any]:
-            entry = {"stage": stage, "seconds": time.perf_counter() - t_start, **data}
-            history.append(entry)
-            return entry
+    def _design_stage(self, run: _Run) -> Generator[GpSmcState, None, DesignRuns]:
+        """Stages 1-2: the Sobol design (reusing an earlier result's runs) and its runs."""
+        opts = self.options
+        n_all = opts.n_train + opts.n_test
+        points = sobol_design(run.inputs, n_all, opts.seed, through_prior=opts.design == "prior")
+        yield GpSmcState(
+            "design",
+            f"{opts.n_train} training + {opts.n_test} test points (Sobol, seed {opts.seed})",
+            run.record("design", n_train=opts.n_train, n_test=opts.n_test),
+        )
+        reused = self._reusable(points, run.names)
+        new = run.evaluate(points[len(reused) :])
+        run.evaluations = reused + new
+        loglik = run.log_likelihoods(run.evaluations)
+        n_failed = int((~np.isfinite(loglik[len(reused) :])).sum())
+        run.nfev, run.n_failed = len(new), n_failed
+        yield GpSmcState(
+            "forward_runs",
+            f"{len(new)} forward runs ({len(reused)} reused), {n_failed} failed",
+            run.record("forward_runs", nfev=len(new), n_failed=n_failed, reused=len(reused)),
+        )
+        return DesignRuns(
+            points=points,
+            log_likelihood=loglik,
+            status=[ev.status for ev in run.evaluations],
+            train_mask=np.arange(n_all) < opts.n_train,
+        )
 
-        evaluations: list[Evaluation] = []
-        info: dict[str, Any] = {"names": names, "n_x": n_x, "mode": opts.mode}
-        if opts.mode == "surrogate":
-            n_all = opts.n_train + opts.n_test
-            design = sobol_design(inputs, n_all, opts.seed, through_prior=opts.design == "prior")
-            yield GpSmcState(
-                "design",
-                f"{opts.n_train} training + {opts.n_test} test points (Sobol, seed {opts.seed})",
-                record("design", n_train=opts.n_train, n_test=opts.n_test),
-            )
-            reused = self._reusable(design, names)
-            points = [dict(zip(names, map(float, row), strict=True)) for row in design]
-            evaluations = reused + list(evaluator.evaluate(problem, points[len(reused) :]))
-            loglik = np.array([log_likelihood_of(ev, sigmas, count) for ev in evaluations])
-            ok = np.isfinite(loglik)
-            n_failed = int((~ok[len(reused) :]).sum())
-            train = np.arange(n_all) < opts.n_train
-            n_new = n_all - len(reused)
-            yield GpSmcState(
-                "forward_runs",
-                f"{n_new} forward runs ({len(reused)} reused), {n_failed} failed",
-                record("forward_runs", nfev=n_new, n_failed=n_failed, reused=len(reused)),
-            )
-            info.update(
-                design=design,
-                design_log_likelihood=loglik,
-                design_status=[ev.status for ev in evaluations],
-                train_mask=train,
-            )
-            use = train & ok
-            if use.sum() < 2:
-                return self._finish_failed(evaluations, history, info, n_failed, n_new)
-            gp = GpSurrogate(
-                ard=opts.ard,
-                optimizer=opts.gp_optimizer,
-                restarts=opts.gp_restarts,
-                nugget_factor=opts.nugget_factor,
-                mean_offset=opts.mean_offset,
-                subset=opts.gp_subset,
-                polish_iters=opts.gp_polish_iters,
-            ).fit(design[use], loglik[use], rng=np.random.default_rng(opts.seed))
-            self.surrogate = gp
-            quality: dict[str, Any] = dict(gp.loo())
-            test = ~train & ok
-            if test.any():
-                quality.update(gp.test_error(design[test], loglik[test]))
-            info["gp"] = {**gp.describe(), **quality}
-            best = int(np.argmax(np.where(use, loglik, -np.inf)))
-            info["best_run"] = {"x": design[best], "log_likelihood": float(loglik[best])}
-            info["gp_state"] = gp.state()
-            yield GpSmcState(
-                "surrogate",
-                f"GP on {int(use.sum())} runs: LOO rel. error {quality['loo_relative_l2']:.3g}",
-                record("surrogate", **{k: v for k, v in gp.describe().items()}, **quality),
-            )
-            log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean
-            nfev = n_new
-        else:
-            n_failed = 0
-            counter = {"nfev": 0, "failed": 0}
+    def _surrogate_stage(
+        self, run: _Run, design: DesignRuns
+    ) -> Generator[GpSmcState, None, tuple[SurrogateFit, GpSurrogate]]:
+        """Stage 3: the GP on the successful training runs, its LOO and held-out errors."""
+        opts = self.options
+        use = design.train_mask & design.ok
+        gp = GpSurrogate(
+            ard=opts.ard,
+            optimizer=opts.gp_optimizer,
+            restarts=opts.gp_restarts,
+            nugget_factor=opts.nugget_factor,
+            mean_offset=opts.mean_offset,
+            subset=opts.gp_subset,
+            polish_iters=opts.gp_polish_iters,
+        ).fit(design.points[use], design.log_likelihood[use], rng=np.random.default_rng(opts.seed))
+        self.surrogate = gp
+        quality: dict[str, Any] = dict(gp.loo())
+        test = ~design.train_mask & design.ok
+        if test.any():
+            quality.update(gp.test_error(design.points[test], design.log_likelihood[test]))
+        best = int(np.argmax(np.where(use, design.log_likelihood, -np.inf)))
+        fit = SurrogateFit(
+            summary={**gp.describe(), **quality},
+            state=gp.state(),
+            best_x=design.points[best],
+            best_log_likelihood=float(design.log_likelihood[best]),
+        )
+        yield GpSmcState(
+            "surrogate",
+            f"GP on {int(use.sum())} runs: LOO rel. error {quality['loo_relative_l2']:.3g}",
+            run.record("surrogate", **{k: v for k, v in gp.describe().items()}, **quality),
+        )
+        return fit, gp
 
-            def log_likelihood(x: FloatArray) -> FloatArray:
-                # The forward model inside SMC: one batch per SMC call; failed runs have
-                # zero likelihood (L = -inf) and are counted.
-                pts = [dict(zip(names, map(float, row), strict=True)) for row in x]
-                evs = evaluator.evaluate(problem, pts)
-                counter["nfev"] += len(evs)
-                counter["failed"] += sum(not ev.ok for ev in evs)
-                return np.array([log_likelihood_of(ev, sigmas, count) for ev in evs])
-
+    def _smc_stage(
+        self, run: _Run, log_likelihood: Callable[[FloatArray], FloatArray]
+    ) -> Generator[GpSmcState, None, SmcResult]:
+        """Stage 4: adaptive tempered SMC (Algorithm 1) on exp(gamma L) p."""
+        opts = self.options
         sampler = SequentialMonteCarlo(
             log_likelihood,
-            priors,
+            run.priors,
             n_particles=opts.n_particles,
             zeta=opts.zeta,
             n_rejuvenation=opts.n_rejuvenation,
             ess_min=opts.ess_min,
             rng=np.random.default_rng([opts.seed, 1]),
-            names=names,
+            names=run.names,
             max_steps=opts.max_smc_steps,
             rejuvenate=opts.rejuvenate,
         )
@@ -351,60 +374,72 @@ class GpSmcIterator(IteratorBase):
             except StopIteration as stop:
                 post: SmcResult = stop.value
                 break
-            yield GpSmcState("smc", str(state), record("smc", **state.__dict__))
+            yield GpSmcState("smc", str(state), run.record("smc", **state.__dict__))
         self.posterior = post
-        if opts.mode == "direct":
-            nfev, n_failed = counter["nfev"], counter["failed"]
-        elif opts.n_check:
-            check, evs = self._posterior_check(problem, evaluator, post, gp, names, sigmas)
-            evaluations = [*evaluations, *evs]
-            nfev += len(evs)
-            n_failed += check["n_failed"]
-            info["posterior_check"] = check
-            yield GpSmcState(
-                "check",
-                f"surrogate at {check['n']} posterior draws: RMSE {check['rmse']:.3g} in L",
-                record("check", **{k: v for k, v in check.items() if k != "x"}),
-            )
-        info.update(self._summaries(post, n_x, log_likelihood, inputs))
-        info.update(
-            particles=post.particles,
-            weights=post.weights,
-            log_likelihood=post.log_likelihood,
-            log_prior=post.log_prior,
-            log_evidence=post.log_evidence,
-            log_evidence_se=post.log_evidence_se,
-            smc={
-                "n_steps": post.n_steps,
-                "gammas": post.gammas,
-                "ess": post.ess,
-                "acceptance": post.acceptance,
-                "nfev_log_likelihood": post.nfev,
-                "final_ess": post.final_ess,
-                "rejuvenate": opts.rejuvenate,
-                "steps_with_moves": sum(h["moved"] for h in post.history),
-            },
-            priors=[p.describe() for p in inputs],
-            seconds=time.perf_counter() - t_start,
+        return post
+
+    def _check_stage(
+        self, run: _Run, post: SmcResult, gp: GpSurrogate
+    ) -> Generator[GpSmcState, None, PosteriorCheck]:
+        """Forward runs at ``n_check`` distinct posterior draws: the surrogate's error there.
+
+        The held-out Sobol points measure the error over the whole box; what decides whether
+        the posterior is right is the error where the posterior mass is, in units of L (an
+        error of order 1 changes posterior ratios by a factor e).
+        """
+        rng = np.random.default_rng([self.options.seed, 2])
+        order = rng.choice(len(post.weights), size=len(post.weights), p=post.weights)
+        _, first = np.unique(order, return_index=True)
+        x = post.particles[order[np.sort(first)][: self.options.n_check]]
+        evs = run.evaluate(x)
+        loglik = run.log_likelihoods(evs)
+        ok = np.isfinite(loglik)
+        err = gp.predict_mean(x[ok]) - loglik[ok]
+        n_ok = int(ok.sum())
+        check = PosteriorCheck(
+            n=n_ok,
+            n_failed=int((~ok).sum()),
+            x=x,
+            log_likelihood=loglik,
+            rmse=float(np.sqrt(np.mean(err**2))) if n_ok else math.nan,
+            max_abs=float(np.max(np.abs(err))) if n_ok else math.nan,
+            mean_error=float(np.mean(err)) if n_ok else math.nan,
         )
-        x_map = dict(zip(problem.names, map(float, info["map"]), strict=True))
-        return Result(
-            status="completed",
-            success=True,
+        run.evaluations = [*run.evaluations, *evs]
+        run.nfev += len(evs)
+        run.n_failed += check.n_failed
+        yield GpSmcState(
+            "check",
+            f"surrogate at {check.n} posterior draws: RMSE {check.rmse:.3g} in L",
+            run.record("check", **{k: v for k, v in asdict(check).items() if k != "x"}),
+        )
+        return check
+
+    def _finish_failed(self, run: _Run, design: DesignRuns) -> GpSmcResult:
+        evaluations = run.evaluations
+        messages = sorted({ev.message for ev in evaluations if not ev.ok})[:3]
+        n_bad = sum(not ev.ok for ev in evaluations)
+        return GpSmcResult(
+            status="all_failed",
+            success=False,
             message=(
-                f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
-                f"steps ({opts.mode}; {nfev} forward runs, {n_failed} failed)"
-                + _check_note(info.get("posterior_check"))
+                f"{n_bad} of {len(evaluations)} forward runs failed: fewer than 2 training "
+                f"points for the GP (e.g. {'; '.join(messages)})"
             ),
-            x=x_map,
-            nfev=nfev,
-            n_failed=n_failed,
+            nfev=run.nfev,
+            n_failed=run.n_failed,
             iterator="gp_smc",
-            history=history,
+            history=run.history,
             evaluations=evaluations,
-            info=info,
+            names=run.names,
+            n_x=run.n_x,
+            mode=self.options.mode,
+            priors=[p.describe() for p in run.inputs],
+            design=design,
+            seconds=time.perf_counter() - run.t_start,
         )
 
+    # -- extending an earlier study ------------------------------------------------------------
     def reuse(self, result: Result) -> GpSmcIterator:
         """Extend an earlier study: reuse the forward runs of ``result`` (same seed, design and
         inputs) and run only the new points of the same Sobol sequence (Paper B's n_train study).
@@ -412,22 +447,23 @@ class GpSmcIterator(IteratorBase):
         >>> # r200 = fbia.iterator("gp_smc", n_train=200).run(problem)
         >>> # r500 = fbia.iterator("gp_smc", n_train=500).reuse(r200).run(problem)  # 300 runs
         """
-        if result.iterator != "gp_smc" or "design" not in result.info:
+        if not isinstance(result, GpSmcResult) or result.design is None:
             raise ConfigError("can only reuse the result of a surrogate-mode gp_smc run", "reuse")
         self._previous = result
         return self
 
-    _previous: Result | None = None
+    _previous: GpSmcResult | None = None
 
     def _reusable(self, design: FloatArray, names: list[str]) -> list[Evaluation]:
         """The leading evaluations of the reused result that match the new design's prefix."""
         prev = self._previous
         if prev is None:
             return []
-        old = np.asarray(prev.info["design"])
-        if list(prev.info["names"]) != names:
+        assert prev.design is not None
+        old = prev.design.points
+        if list(prev.names) != names:
             raise ConfigError(
-                f"the reused result has inputs {prev.info['names']}, this problem {names}", "reuse"
+                f"the reused result has inputs {prev.names}, this problem {names}", "reuse"
             )
         k = min(len(old), len(design))
         same = np.all(np.isclose(old[:k], design[:k], rtol=1e-12, atol=0.0), axis=1)
@@ -440,98 +476,6 @@ class GpSmcIterator(IteratorBase):
             )
         return list(prev.evaluations[:n])
 
-    def _posterior_check(
-        self,
-        problem: InverseProblem,
-        evaluator: Evaluator,
-        post: SmcResult,
-        gp: GpSurrogate,
-        names: list[str],
-        sigmas: list[float],
-    ) -> tuple[dict[str, Any], list[Evaluation]]:
-        """Forward runs at ``n_check`` distinct posterior draws: the surrogate's error there.
-
-        The held-out Sobol points measure the error over the whole box; what decides whether
-        the posterior is right is the error where the posterior mass is, in units of L (an
-        error of order 1 changes posterior ratios by a factor e).
-        """
-        rng = np.random.default_rng([self.options.seed, 2])
-        order = rng.choice(len(post.weights), size=len(post.weights), p=post.weights)
-        _, first = np.unique(order, return_index=True)
-        idx = order[np.sort(first)][: self.options.n_check]
-        x = post.particles[idx]
-        points = [dict(zip(names, map(float, row), strict=True)) for row in x]
-        evs = list(evaluator.evaluate(problem, points))
-        count = measurement_count(problem)
-        loglik = np.array([log_likelihood_of(ev, sigmas, count) for ev in evs])
-        ok = np.isfinite(loglik)
-        err = gp.predict_mean(x[ok]) - loglik[ok]
-        n_ok = int(ok.sum())
-        return {
-            "n": n_ok,
-            "n_failed": int((~ok).sum()),
-            "x": x,
-            "log_likelihood": loglik,
-            "rmse": float(np.sqrt(np.mean(err**2))) if n_ok else math.nan,
-            "max_abs": float(np.max(np.abs(err))) if n_ok else math.nan,
-            "mean_error": float(np.mean(err)) if n_ok else math.nan,
-        }, evs
-
-    def _finish_failed(self, evaluations, history, info, n_failed, nfev) -> Result:
-        messages = sorted({ev.message for ev in evaluations if not ev.ok})[:3]
-        n_bad = sum(not ev.ok for ev in evaluations)
-        return Result(
-            status="all_failed",
-            success=False,
-            message=(
-                f"{n_bad} of {len(evaluations)} forward runs failed: fewer than 2 training "
-                f"points for the GP (e.g. {'; '.join(messages)})"
-            ),
-            nfev=nfev,
-            n_failed=n_failed,
-            iterator="gp_smc",
-            history=history,
-            evaluations=evaluations,
-            info=info,
-        )
-
-    # -- point estimates and summaries --------------------------------------------------------
-    def _summaries(
-        self, post: SmcResult, n_x: int, log_likelihood: Any, inputs: Sequence[Parameter]
-    ) -> dict[str, Any]:
-        opts = self.options
-        x = post.particles[:, :n_x]
-        w = post.weights
-        mean = w @ x
-        dx = x - mean
-        cov = (dx * w[:, None]).T @ dx
-        has_theta = post.particles.shape[1] > n_x
-        out: dict[str, Any] = {
-            "posterior_mean": mean,
-            "posterior_cov": cov,
-            "posterior_std": np.sqrt(np.diag(cov)),
-            "posterior_mean_all": post.mean,
-            "posterior_cov_all": post.cov,
-            "max_likelihood": post.max_likelihood,
-            "credible_intervals": {
-                name: _weighted_quantiles(post.particles[:, j], w, [0.025, 0.5, 0.975])
-                for j, name in enumerate(post.names)
-            },
-        }
-        best = post.map[:n_x]
-        if has_theta:
-            out["map"] = map_by_binning(x, w, [inputs[j] for j in range(n_x)], opts.map_bins)
-            out["map_method"] = f"histogram, {opts.map_bins} bins per parameter (Remark 8)"
-            out["best_particle"] = post.map
-        else:
-            out["map"] = best
-            out["map_method"] = "particle of highest posterior in the last SMC step"
-            if opts.laplace and opts.mode == "surrogate":
-                out["laplace"] = laplace_approximation(
-                    lambda z: log_likelihood(z) + _log_prior(inputs, z), best, cov
-                )
-        return out
-
     # -- output ---------------------------------------------------------------------------------
     @staticmethod
     def write_plots(
@@ -543,7 +487,61 @@ class GpSmcIterator(IteratorBase):
         """Paper B's figures of a gp_smc result into ``folder`` (see :mod:`.smc_plots`)."""
         from .smc_plots import plot_gp_smc_result
 
+        assert isinstance(result, GpSmcResult)
         return plot_gp_smc_result(result, problem, folder, figures)
+
+
+@dataclass
+class _Run:
+    """What the stages of one :meth:`GpSmcIterator.steps` share."""
+
+    problem: InverseProblem
+    evaluator: Evaluator
+    inputs: list[Parameter]
+    t_start: float
+    history: list[dict[str, Any]] = field(default_factory=list)
+    evaluations: list[Evaluation] = field(default_factory=list)
+    nfev: int = 0
+    n_failed: int = 0
+
+    def __post_init__(self) -> None:
+        self.sigmas = noise_levels(self.problem)
+        self.count = measurement_count(self.problem)
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.inputs]
+
+    @property
+    def n_x(self) -> int:
+        return len(self.problem.parameters)
+
+    @property
+    def priors(self) -> list[Prior]:
+        return [p.prior for p in self.inputs if p.prior is not None]
+
+    def record(self, stage: str, **data: Any) -> dict[str, Any]:
+        entry = {"stage": stage, "seconds": time.perf_counter() - self.t_start, **data}
+        self.history.append(entry)
+        return entry
+
+    def evaluate(self, x: FloatArray) -> list[Evaluation]:
+        points = [dict(zip(self.names, map(float, row), strict=True)) for row in x]
+        return list(self.evaluator.evaluate(self.problem, points))
+
+    def log_likelihoods(self, evaluations: Sequence[Evaluation]) -> FloatArray:
+        """Paper B eq. 5 of each record (-inf where the run failed)."""
+        return np.array(
+            [gaussian_log_likelihood(ev, self.sigmas, self.count) for ev in evaluations]
+        )
+
+    def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
+        """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have
+        zero likelihood (L = -inf) and are counted; the records stay in the evaluator."""
+        evs = self.evaluate(x)
+        self.nfev += len(evs)
+        self.n_failed += sum(not ev.ok for ev in evs)
+        return self.log_likelihoods(evs)
 
 
 def _log_prior(inputs: Sequence[Parameter], z: FloatArray) -> FloatArray:
@@ -552,197 +550,3 @@ def _log_prior(inputs: Sequence[Parameter], z: FloatArray) -> FloatArray:
         assert p.prior is not None  # checked at the start of steps()
         out += p.prior.logpdf(z[:, j])
     return out
-
-
-def _weighted_quantiles(values: FloatArray, weights: FloatArray, q: Sequence[float]) -> list[float]:
-    order = np.argsort(values)
-    cdf = np.cumsum(weights[order])
-    cdf /= cdf[-1]
-    return [float(values[order][min(int(np.searchsorted(cdf, qi)), len(cdf) - 1)]) for qi in q]
-
-
-def map_by_binning(
-    x: FloatArray, weights: FloatArray, parameters: Sequence[Parameter], bins: int
-) -> FloatArray:
-    """MAP of the theta-marginal: centre of the heaviest of ``bins`` intervals per parameter
-    (Paper B Remark 8). The box is the parameters' bounds, else the particles' range; only
-    occupied bins are counted, so any dimension works."""
-    lo = np.array(
-        [p.lower if math.isfinite(p.lower) else x[:, j].min() for j, p in enumerate(parameters)]
-    )
-    hi = np.array(
-        [p.upper if math.isfinite(p.upper) else x[:, j].max() for j, p in enumerate(parameters)]
-    )
-    width = np.where(hi > lo, (hi - lo) / bins, 1.0)
-    idx = np.clip(np.floor((x - lo) / width).astype(np.int64), 0, bins - 1)
-    cells, inverse = np.unique(idx, axis=0, return_inverse=True)
-    mass = np.zeros(len(cells))
-    np.add.at(mass, inverse.ravel(), weights)
-    return np.asarray(lo + (cells[int(np.argmax(mass))] + 0.5) * width)
-
-
-def laplace_approximation(
-    log_posterior: Any, x_map: FloatArray, scale: FloatArray
-) -> dict[str, Any]:
-    """Gaussian N(x_MAP, (-H)^-1) from a central finite-difference Hessian H of the
-    log-posterior at the MAP (Paper B, Fig. 9a/c), steps 1e-3 of the posterior std."""
-    d = len(x_map)
-    h = 1e-3 * np.sqrt(np.maximum(np.diag(np.atleast_2d(scale)), 1e-300))
-    pts = [x_map]
-    for i in range(d):
-        for j in range(d):
-            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                z = x_map.copy()
-                z[i] += si * h[i]
-                z[j] += sj * h[j]
-                pts.append(z)
-    vals = log_posterior(np.array(pts))
-    hess = np.empty((d, d))
-    k = 1
-    for i in range(d):
-        for j in range(d):
-            fpp, fpm, fmp, fmm = vals[k : k + 4]
-            hess[i, j] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
-            k += 4
-    hess = 0.5 * (hess + hess.T)
-    eig = np.linalg.eigvalsh(-hess)
-    ok = bool(np.all(eig > 0) and np.all(np.isfinite(vals)))
-    return {
-        "mean": x_map,
-        "hessian": hess,
-        "cov": np.linalg.inv(-hess) if ok else None,
-        "negative_definite": ok,
-    }
-
-
-def hpd_mass(result: Result, point: Mapping[str, float]) -> float:
-    """Posterior mass of the highest-posterior-density region whose boundary passes through
-    ``point`` (0: the point is the mode; near 1: it lies outside the bulk of the posterior).
-
-    The log-posterior at ``point`` comes from the GP surrogate and the priors; the region's
-    mass from the weighted particles. Defined for results without uncertain parameters.
-    """
-    info = result.info
-    if "gp_state" not in info or len(info["names"]) != int(info["n_x"]):
-        raise ConfigError(
-            "hpd_mass needs a surrogate-mode result without uncertain parameters", "hpd_mass"
-        )
-    names = list(info["names"])
-    missing = [n for n in names if n not in point]
-    if missing:
-        raise ConfigError(f"no value for {', '.join(missing)}", "hpd_mass")
-    z = np.array([[float(point[n]) for n in names]])
-    gp = GpSurrogate.from_state(info["gp_state"])
-    log_prior = sum(
-        float(Prior.from_spec(p["prior"]).logpdf(z[0, j])) for j, p in enumerate(info["priors"])
-    )
-    level = float(gp.predict_mean(z)[0]) + log_prior
-    log_post = np.asarray(info["log_likelihood"]) + np.asarray(info["log_prior"])
-    return float(np.sum(np.asarray(info["weights"])[log_post > level]))
-
-
-# -- files that other tools read ------------------------------------------------------------------
-def save_posterior(result: Result, folder: str | Path) -> tuple[Path, Path]:
-    """Write ``posterior.npz`` (arrays) and ``posterior.json`` (description) into ``folder``.
-
-    posterior.npz (format ``fbia-posterior-1``):
-
-    ``names`` (d,) str: x names then theta names; ``n_x``: number of calibration parameters;
-    ``particles`` (N, d) float; ``weights`` (N,) normalised; ``log_likelihood`` (N,) the
-    (surrogate) L of eq. 5; ``log_prior`` (N,); ``log_posterior`` (N,) = L + log p
-    (unnormalised); ``theta`` (N, d - n_x) the uncertain parameters; ``design`` (n, d) the
-    Sobol design; ``design_log_likelihood`` (n,) L of each run (-inf: failed);
-    ``design_ok`` (n,) bool; ``train_mask`` (n,) bool (False: held-out test point).
-
-    posterior.json: format, names, units, priors, point estimates, log-evidence, GP
-    hyperparameters and errors, SMC history. :func:`load_posterior` reads both back;
-    :func:`to_inference_data` turns them into an ``arviz.InferenceData`` if arviz is installed.
-    """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    info = result.info
-    names = list(info["names"])
-    n_x = int(info["n_x"])
-    particles = np.asarray(info["particles"])
-    arrays: dict[str, Any] = {
-        "format": np.array(POSTERIOR_FORMAT),
-        "names": np.array(names),
-        "n_x": np.array(n_x),
-        "particles": particles,
-        "weights": np.asarray(info["weights"]),
-        "log_likelihood": np.asarray(info["log_likelihood"]),
-        "log_prior": np.asarray(info["log_prior"]),
-        "log_posterior": np.asarray(info["log_likelihood"]) + np.asarray(info["log_prior"]),
-        "theta": particles[:, n_x:],
-    }
-    if "design" in info:
-        arrays.update(
-            design=np.asarray(info["design"]),
-            design_log_likelihood=np.asarray(info["design_log_likelihood"]),
-            design_ok=np.isfinite(np.asarray(info["design_log_likelihood"])),
-            train_mask=np.asarray(info["train_mask"]),
-        )
-    npz = folder / "posterior.npz"
-    np.savez_compressed(npz, **arrays)
-    skip = {
-        "particles",
-        "weights",
-        "log_likelihood",
-        "log_prior",
-        "design",
-        "design_log_likelihood",
-        "design_status",
-        "train_mask",
-        "gp_state",
-    }
-    from ..core.problem import _jsonable
-
-    meta = {
-        "format": POSTERIOR_FORMAT,
-        "arrays": "posterior.npz",
-        "status": result.status,
-        "message": result.message,
-        "x_map": result.x,
-        **{k: v for k, v in info.items() if k not in skip},
-    }
-    js = folder / "posterior.json"
-    js.write_text(json.dumps(_jsonable(meta), indent=1, default=str))
-    return npz, js
-
-
-def load_posterior(folder: str | Path) -> dict[str, Any]:
-    """Read :func:`save_posterior`'s files: the npz arrays plus ``"meta"`` (the JSON)."""
-    folder = Path(folder)
-    with np.load(folder / "posterior.npz") as data:
-        out: dict[str, Any] = {k: data[k] for k in data.files}
-    if str(out.get("format")) != POSTERIOR_FORMAT:
-        raise ConfigError(f"not an {POSTERIOR_FORMAT} file", str(folder / "posterior.npz"))
-    out["names"] = [str(n) for n in out["names"]]
-    out["meta"] = json.loads((folder / "posterior.json").read_text())
-    return out
-
-
-def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, seed: int = 0):
-    """An ``arviz.InferenceData`` of equally weighted draws (systematic resampling) of a
-    :func:`load_posterior` result, with log_likelihood and log_prior groups."""
-    try:
-        with warnings.catch_warnings():  # arviz 0.2x announces its refactor on import
-            warnings.simplefilter("ignore", FutureWarning)
-            import arviz
-    except ImportError:
-        raise ConfigError(
-            "arviz is not installed (pip install arviz)", "to_inference_data"
-        ) from None
-    from .smc import systematic_resample
-
-    w = np.asarray(posterior["weights"])
-    rng = np.random.default_rng(seed)
-    idx = systematic_resample(w, rng)
-    if n_draws is not None:
-        idx = idx[rng.permutation(len(idx))[:n_draws]]
-    parts = np.asarray(posterior["particles"])[idx]
-    return arviz.from_dict(
-        posterior={n: parts[None, :, j] for j, n in enumerate(posterior["names"])},
-        log_likelihood={"L": np.asarray(posterior["log_likelihood"])[idx][None]},
-        prior={"log_prior": np.asarray(posterior["log_prior"])[idx][None]},
-    )

@@ -38,7 +38,8 @@ from scipy.stats import chi2, gaussian_kde
 
 from ..core.errors import ConfigError
 from ..core.parameters import Parameter
-from ..core.problem import InverseProblem, Result
+from ..core.problem import InverseProblem
+from .gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
 from .gp_surrogate import GpSurrogate
 from .smc import systematic_resample
 
@@ -61,7 +62,7 @@ FIGURES = (
 
 
 def plot_gp_smc_result(
-    result: Result,
+    result: GpSmcResult,
     problem: InverseProblem,
     folder: str | Path,
     figures: Sequence[str] | None = None,
@@ -78,38 +79,53 @@ def plot_gp_smc_result(
         )
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    info = result.info
+    r = result
     inputs = [*problem.parameters, *problem.uncertain]
     out: list[Path] = []
-    if result.status == "all_failed" or "particles" not in info:
-        if "design" in info and np.asarray(info["design"]).shape[1] >= 2:
-            out.append(_design_only(info, inputs, folder))
+    if result.status == "all_failed" or r.posterior is None:
+        if r.design is not None and r.design.points.shape[1] >= 2:
+            out.append(_design_only(r, inputs, folder))
         return out
     labels = [_label(p) for p in inputs]
-    n_x = int(info["n_x"])
+    n_x = int(_post(r).n_x)
     refits: dict[int, GpSurrogate | None] = {}
-    surrogate = "gp_state" in info
+    surrogate = r.surrogate is not None
     if surrogate and n_x >= 2 and "surrogate_fields" in wanted:
-        gp = GpSurrogate.from_state(info["gp_state"])
-        out.append(_surrogate_fields(gp, info, inputs, labels, folder))
+        gp = GpSurrogate.from_state(_fit(r).state)
+        out.append(_surrogate_fields(gp, r, inputs, labels, folder))
     if surrogate and len(inputs) == 2 and "gp_convergence" in wanted:
-        out.append(_gp_convergence(info, inputs, labels, folder, refits))
+        out.append(_gp_convergence(r, inputs, labels, folder, refits))
     if surrogate and "gp_error" in wanted:
-        out.append(_gp_error(info, folder, refits))
+        out.append(_gp_error(r, folder, refits))
     if n_x >= 2 and "posterior" in wanted:
-        out.append(_posterior_2d(info, inputs, labels, folder))
+        out.append(_posterior_2d(r, inputs, labels, folder))
     if n_x >= 2 and "particles" in wanted:
-        out.append(_particles(info, labels, folder))
+        out.append(_particles(r, labels, folder))
     if n_x >= 2 and "marginals_2d" in wanted:
-        out.append(_pairwise(info, inputs, labels, folder))
+        out.append(_pairwise(r, inputs, labels, folder))
     if "marginals_1d" in wanted:
-        out.append(_marginals(info, inputs, labels, folder))
+        out.append(_marginals(r, inputs, labels, folder))
     if "parallel_axes" in wanted:
-        out.append(_parallel_axes(info, labels, folder))
+        out.append(_parallel_axes(r, labels, folder))
     return out
 
 
 # -- helpers ------------------------------------------------------------------------------------
+def _post(r: GpSmcResult) -> ParticlePosterior:
+    assert r.posterior is not None  # plots of the posterior only run with one
+    return r.posterior
+
+
+def _design(r: GpSmcResult) -> DesignRuns:
+    assert r.design is not None  # surrogate-mode plots only
+    return r.design
+
+
+def _fit(r: GpSmcResult) -> SurrogateFit:
+    assert r.surrogate is not None  # surrogate-mode plots only
+    return r.surrogate
+
+
 def _label(p: Parameter) -> str:
     return f"{p.name} [{p.unit}]" if p.unit else p.name
 
@@ -128,13 +144,13 @@ def _box(p: Parameter, values: FloatArray) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
-def _fixed_rest(info: dict[str, Any], inputs: Sequence[Parameter]) -> FloatArray:
+def _fixed_rest(r: GpSmcResult, inputs: Sequence[Parameter]) -> FloatArray:
     """Values of inputs 3.. in the 2-D sections: x at the MAP, theta at its prior median."""
-    n_x = int(info["n_x"])
+    n_x = int(_post(r).n_x)
     rest = []
     for j, p in enumerate(inputs):
         if j < n_x:
-            rest.append(float(np.asarray(info["map"])[j]))
+            rest.append(float(np.asarray(_post(r).map)[j]))
         elif p.prior is not None:
             rest.append(float(p.prior.ppf(0.5)))
         else:
@@ -143,20 +159,20 @@ def _fixed_rest(info: dict[str, Any], inputs: Sequence[Parameter]) -> FloatArray
     return np.array(rest)
 
 
-def _grid(inputs, info, n=80):
-    particles = np.asarray(info["particles"])
+def _grid(inputs, r, n=80):
+    particles = np.asarray(_post(r).particles)
     (a0, a1), (b0, b1) = _box(inputs[0], particles[:, 0]), _box(inputs[1], particles[:, 1])
     ga, gb = np.linspace(a0, a1, n), np.linspace(b0, b1, n)
     mesh_a, mesh_b = np.meshgrid(ga, gb)
-    pts = np.tile(_fixed_rest(info, inputs), (mesh_a.size, 1))
+    pts = np.tile(_fixed_rest(r, inputs), (mesh_a.size, 1))
     pts[:, 0], pts[:, 1] = mesh_a.ravel(), mesh_b.ravel()
     return mesh_a, mesh_b, pts
 
 
-def _design_points(ax, info: dict[str, Any], train_only: bool = True) -> None:
-    design = np.asarray(info["design"])
-    ok = np.isfinite(np.asarray(info["design_log_likelihood"]))
-    mask = np.asarray(info["train_mask"]) if train_only else np.ones(len(ok), bool)
+def _design_points(ax, r: GpSmcResult, train_only: bool = True) -> None:
+    design = np.asarray(_design(r).points)
+    ok = np.isfinite(np.asarray(_design(r).log_likelihood))
+    mask = np.asarray(_design(r).train_mask) if train_only else np.ones(len(ok), bool)
     ax.scatter(
         design[mask & ok, 0],
         design[mask & ok, 1],
@@ -178,17 +194,17 @@ def _design_points(ax, info: dict[str, Any], train_only: bool = True) -> None:
         )
 
 
-def _section_note(inputs: Sequence[Parameter], info: dict[str, Any]) -> str:
+def _section_note(inputs: Sequence[Parameter], r: GpSmcResult) -> str:
     if len(inputs) <= 2:
         return ""
-    rest = _fixed_rest(info, inputs)
+    rest = _fixed_rest(r, inputs)
     pairs = zip(inputs[2:], rest[2:], strict=True)
     return "section at " + ", ".join(f"{p.name}={v:.3g}" for p, v in pairs)
 
 
 # -- Figs. 5-7 ----------------------------------------------------------------------------------
-def _surrogate_fields(gp, info, inputs, labels, folder) -> Path:
-    mesh_a, mesh_b, pts = _grid(inputs, info)
+def _surrogate_fields(gp, r, inputs, labels, folder) -> Path:
+    mesh_a, mesh_b, pts = _grid(inputs, r)
     mean, var = gp.predict(pts)
     fields = [
         (mean, "GP mean of log-likelihood L (Fig. 6)", "viridis"),
@@ -199,10 +215,10 @@ def _surrogate_fields(gp, info, inputs, labels, folder) -> Path:
     for ax, (values, title, cmap) in zip(fig.subplots(1, 3), fields, strict=True):
         cs = ax.contourf(mesh_a, mesh_b, values.reshape(mesh_a.shape), 30, cmap=cmap)
         fig.colorbar(cs, ax=ax)
-        _design_points(ax, info)
+        _design_points(ax, r)
         ax.set(xlabel=labels[0], ylabel=labels[1], title=title)
     fig.axes[0].legend(loc="lower right", fontsize=7)
-    note = _section_note(inputs, info)
+    note = _section_note(inputs, r)
     fig.suptitle(f"GP surrogate on {gp.info.get('n_train', len(gp.y_train))} runs  {note}")
     fig.tight_layout()
     return _save(fig, folder / "surrogate_fields.png")
@@ -214,34 +230,34 @@ def _prefix_sizes(n: int) -> list[int]:
     return [*sizes, n][-6:]
 
 
-def _refit(info: dict[str, Any], n: int, cache: dict[int, GpSurrogate | None]) -> Any:
+def _refit(r: GpSmcResult, n: int, cache: dict[int, GpSurrogate | None]) -> Any:
     if n not in cache:
-        cache[n] = _fit_prefix(info, n)
+        cache[n] = _fit_prefix(r, n)
     return cache[n]
 
 
-def _fit_prefix(info: dict[str, Any], n: int) -> GpSurrogate | None:
+def _fit_prefix(r: GpSmcResult, n: int) -> GpSurrogate | None:
     """The GP on the first ``n`` design points (one training, no restarts)."""
-    design = np.asarray(info["design"])
-    loglik = np.asarray(info["design_log_likelihood"])
-    train = np.asarray(info["train_mask"])
+    design = np.asarray(_design(r).points)
+    loglik = np.asarray(_design(r).log_likelihood)
+    train = np.asarray(_design(r).train_mask)
     use = train & np.isfinite(loglik) & (np.arange(len(train)) < n)
     if use.sum() < 3:
         return None
-    state = info["gp_state"]
+    state = _fit(r).state
     return GpSurrogate(ard=bool(state["ard"]), restarts=0).fit(design[use], loglik[use], rng=0)
 
 
-def _gp_convergence(info, inputs, labels, folder, refits) -> Path:
-    n_train = int(np.sum(info["train_mask"]))
+def _gp_convergence(r, inputs, labels, folder, refits) -> Path:
+    n_train = int(np.sum(_design(r).train_mask))
     sizes = _prefix_sizes(n_train)
     fig = Figure(figsize=(13, 8))
     axes = fig.subplots(2, 3).ravel()
-    mesh_a, mesh_b, pts = _grid(inputs, info, n=60)
-    design = np.asarray(info["design"])
-    ok = np.isfinite(np.asarray(info["design_log_likelihood"]))
+    mesh_a, mesh_b, pts = _grid(inputs, r, n=60)
+    design = np.asarray(_design(r).points)
+    ok = np.isfinite(np.asarray(_design(r).log_likelihood))
     for ax, n in zip(axes, sizes, strict=False):
-        gp = _refit(info, n, refits)
+        gp = _refit(r, n, refits)
         if gp is not None:
             mean = gp.predict_mean(pts)
             ax.contourf(
@@ -265,15 +281,15 @@ def _gp_convergence(info, inputs, labels, folder, refits) -> Path:
     return _save(fig, folder / "gp_convergence.png")
 
 
-def _gp_error(info, folder, refits) -> Path:
-    design = np.asarray(info["design"])
-    loglik = np.asarray(info["design_log_likelihood"])
-    train = np.asarray(info["train_mask"])
+def _gp_error(r, folder, refits) -> Path:
+    design = np.asarray(_design(r).points)
+    loglik = np.asarray(_design(r).log_likelihood)
+    train = np.asarray(_design(r).train_mask)
     test = ~train & np.isfinite(loglik)
     sizes = _prefix_sizes(int(train.sum()))
     errors, kind = [], "held-out" if test.any() else "leave-one-out"
     for n in sizes:
-        gp = _refit(info, n, refits)
+        gp = _refit(r, n, refits)
         if gp is None:
             errors.append(math.nan)
         elif test.any():
@@ -302,17 +318,17 @@ def _kde_levels(density: FloatArray, levels: Sequence[float]) -> list[float]:
     return sorted(float(flat[min(int(np.searchsorted(cum, q)), len(flat) - 1)]) for q in levels)
 
 
-def _subsample(info: dict[str, Any], n: int = 2000) -> tuple[FloatArray, FloatArray]:
-    particles = np.asarray(info["particles"])
-    w = np.asarray(info["weights"])
+def _subsample(r: GpSmcResult, n: int = 2000) -> tuple[FloatArray, FloatArray]:
+    particles = np.asarray(_post(r).particles)
+    w = np.asarray(_post(r).weights)
     if len(w) <= n:
         return particles, w
     idx = np.argsort(w)[::-1][:n]
     return particles[idx], w[idx] / w[idx].sum()
 
 
-def _kde_contours(ax, info, i: int, j: int, lim_a, lim_b) -> None:
-    sub, w = _subsample(info)
+def _kde_contours(ax, r, i: int, j: int, lim_a, lim_b) -> None:
+    sub, w = _subsample(r)
     data = sub[:, [i, j]].T
     if np.any(np.std(data, axis=1) == 0):
         return
@@ -373,9 +389,9 @@ def _hist_kde(ax, values, w, lim, vertical: bool = False) -> None:
             ax.plot(g, kde(g), "k", lw=1.0)
 
 
-def _posterior_2d(info, inputs, labels, folder) -> Path:
-    particles = np.asarray(info["particles"])
-    w = np.asarray(info["weights"])
+def _posterior_2d(r, inputs, labels, folder) -> Path:
+    particles = np.asarray(_post(r).particles)
+    w = np.asarray(_post(r).weights)
     lim_a, lim_b = _box(inputs[0], particles[:, 0]), _box(inputs[1], particles[:, 1])
     fig = Figure(figsize=(8, 8))
     grid = fig.add_gridspec(
@@ -394,19 +410,19 @@ def _posterior_2d(info, inputs, labels, folder) -> Path:
         extent=(*lim_a, *lim_b),
         mincnt=1,
     )
-    _kde_contours(ax, info, 0, 1, lim_a, lim_b)
-    pm = np.asarray(info["posterior_mean"])[:2]
+    _kde_contours(ax, r, 0, 1, lim_a, lim_b)
+    pm = np.asarray(_post(r).mean)[:2]
     _ellipses(
         ax,
         pm,
-        np.asarray(info["posterior_cov"])[:2, :2],
+        np.asarray(_post(r).cov)[:2, :2],
         _PM_COLOUR,
         "global Gaussian approximation",
     )
-    lap = info.get("laplace")
-    x_map = np.asarray(info["map"])[:2]
-    if lap and lap.get("cov") is not None:
-        _ellipses(ax, x_map, np.asarray(lap["cov"])[:2, :2], _MAP_COLOUR, "Laplace approximation")
+    lap = _post(r).laplace
+    x_map = np.asarray(_post(r).map)[:2]
+    if lap is not None and lap.cov is not None:
+        _ellipses(ax, x_map, np.asarray(lap.cov)[:2, :2], _MAP_COLOUR, "Laplace approximation")
     ax.plot(*x_map, "x", color=_MAP_COLOUR, ms=10, mew=2, label="MAP")
     ax.plot(*pm, "x", color=_PM_COLOUR, ms=10, mew=2, label="posterior mean")
     ax.set(xlim=lim_a, ylim=lim_b, xlabel=labels[0], ylabel=labels[1])
@@ -417,15 +433,15 @@ def _posterior_2d(info, inputs, labels, folder) -> Path:
     _prior_line(right, inputs[1], lim_b, vertical=True)
     top.tick_params(labelbottom=False)
     right.tick_params(labelleft=False)
-    theta = info["names"][int(info["n_x"]) :]
+    theta = _post(r).names[int(_post(r).n_x) :]
     title = "posterior" + (f" under uncertain {', '.join(theta)} (marginal)" if theta else "")
     top.set_title(f"{title} (Paper B Fig. 9)")
     return _save(fig, folder / "posterior.png")
 
 
-def _particles(info, labels, folder) -> Path:
-    particles = np.asarray(info["particles"])
-    w = np.asarray(info["weights"])
+def _particles(r, labels, folder) -> Path:
+    particles = np.asarray(_post(r).particles)
+    w = np.asarray(_post(r).weights)
     order = np.argsort(w)
     fig = Figure(figsize=(6.5, 5))
     ax = fig.subplots()
@@ -444,9 +460,9 @@ def _particles(info, labels, folder) -> Path:
 
 
 # -- Figs. 13-15 --------------------------------------------------------------------------------
-def _marginals(info, inputs, labels, folder) -> Path:
-    particles = np.asarray(info["particles"])
-    w = np.asarray(info["weights"])
+def _marginals(r, inputs, labels, folder) -> Path:
+    particles = np.asarray(_post(r).particles)
+    w = np.asarray(_post(r).weights)
     d = particles.shape[1]
     cols = min(d, 3)
     rows = math.ceil(d / cols)
@@ -465,10 +481,10 @@ def _marginals(info, inputs, labels, folder) -> Path:
     return _save(fig, folder / "marginals_1d.png")
 
 
-def _pairwise(info, inputs, labels, folder) -> Path:
-    particles = np.asarray(info["particles"])
-    w = np.asarray(info["weights"])
-    n_x = int(info["n_x"])
+def _pairwise(r, inputs, labels, folder) -> Path:
+    particles = np.asarray(_post(r).particles)
+    w = np.asarray(_post(r).weights)
+    n_x = int(_post(r).n_x)
     pairs = [(i, j) for i in range(n_x) for j in range(i + 1, n_x)][:15]
     cols = min(len(pairs), 3)
     rows = math.ceil(len(pairs) / cols)
@@ -486,7 +502,7 @@ def _pairwise(info, inputs, labels, folder) -> Path:
             extent=(*lim_a, *lim_b),
             mincnt=1,
         )
-        _kde_contours(ax, info, i, j, lim_a, lim_b)
+        _kde_contours(ax, r, i, j, lim_a, lim_b)
         ax.set(xlim=lim_a, ylim=lim_b, xlabel=labels[i], ylabel=labels[j])
     for ax in axes[len(pairs) :]:
         ax.set_visible(False)
@@ -495,10 +511,10 @@ def _pairwise(info, inputs, labels, folder) -> Path:
     return _save(fig, folder / "marginals_2d.png")
 
 
-def _parallel_axes(info, labels, folder, n_lines: int = 300) -> Path:
-    particles = np.asarray(info["particles"])
-    w = np.asarray(info["weights"])
-    log_post = np.asarray(info["log_likelihood"]) + np.asarray(info["log_prior"])
+def _parallel_axes(r, labels, folder, n_lines: int = 300) -> Path:
+    particles = np.asarray(_post(r).particles)
+    w = np.asarray(_post(r).weights)
+    log_post = np.asarray(_post(r).log_likelihood) + np.asarray(_post(r).log_prior)
     idx = np.unique(systematic_resample(w, np.random.default_rng(0)))
     if len(idx) > n_lines:
         idx = idx[np.argsort(log_post[idx])[-n_lines:]]
@@ -521,17 +537,17 @@ def _parallel_axes(info, labels, folder, n_lines: int = 300) -> Path:
         ax.text(j, -0.06, f"{lo[j]:.3g}", ha="center", va="top", fontsize=7)
         ax.text(j, 1.02, f"{hi[j]:.3g}", ha="center", va="bottom", fontsize=7)
     ax.set(ylim=(-0.12, 1.1), yticks=[], title="parallel axes: resampled particles (Fig. 15)")
-    n_x = int(info["n_x"])
-    if len(info["names"]) > n_x:
-        ax.axvspan(n_x - 0.5, len(info["names"]) - 0.5, color="0.9", zorder=0)
+    n_x = int(_post(r).n_x)
+    if len(_post(r).names) > n_x:
+        ax.axvspan(n_x - 0.5, len(_post(r).names) - 0.5, color="0.9", zorder=0)
     fig.tight_layout()
     return _save(fig, folder / "parallel_axes.png")
 
 
-def _design_only(info, inputs, folder) -> Path:
+def _design_only(r, inputs, folder) -> Path:
     fig = Figure(figsize=(6, 5))
     ax = fig.subplots()
-    _design_points(ax, info, train_only=False)
+    _design_points(ax, r, train_only=False)
     ax.set(
         xlabel=_label(inputs[0]),
         ylabel=_label(inputs[1]) if len(inputs) > 1 else "",

@@ -6,15 +6,14 @@ import numpy as np
 import pytest
 
 import fbia
+from fbia.core.likelihood import gaussian_log_likelihood as log_likelihood_of
 from fbia.core.likelihood import measurement_count
-from fbia.iterators.gp_smc import (
-    GpSmcIterator,
+from fbia.iterators.gp_smc import GpSmcIterator, sobol_design
+from fbia.iterators.posterior import (
     laplace_approximation,
     load_posterior,
-    log_likelihood_of,
     map_by_binning,
     save_posterior,
-    sobol_design,
 )
 
 TRUTH = {"E": 400.0, "nu": 0.3}
@@ -114,8 +113,8 @@ def test_laplace_approximation_of_a_gaussian_is_exact():
         return -0.5 * np.einsum("ni,ij,nj->n", d, prec, d)
 
     lap = laplace_approximation(log_post, mu.copy(), cov)
-    assert lap["negative_definite"]
-    np.testing.assert_allclose(lap["cov"], cov, rtol=1e-6)
+    assert lap.negative_definite
+    np.testing.assert_allclose(lap.cov, cov, rtol=1e-6)
 
 
 # -- the analytic mound (Paper B Fig. 9a and 9d behaviour) ----------------------------------------
@@ -124,16 +123,16 @@ def test_map_near_ground_truth_and_surrogate_accurate(runs):
     assert result.success and result.status == "completed"
     assert result.nfev == 256 + 32 and result.n_failed == 0
     assert abs(result.x["E"] - 400.0) < 20.0 and abs(result.x["nu"] - 0.3) < 0.03
-    gp = result.info["gp"]
+    gp = result.surrogate.summary
     assert gp["loo_relative_l2"] < 0.05 and gp["test_relative_l2"] < 0.05
     assert gp["test_n"] == 32
     # The Laplace approximation exists at the MAP and is a proper Gaussian.
-    assert result.info["laplace"]["negative_definite"]
+    assert result.posterior.laplace.negative_definite
 
 
 def test_posterior_band_follows_the_e_nu_coupling(runs):
     problem, result, _ = runs[False]
-    cov = result.info["posterior_cov"]
+    cov = result.posterior.cov
     corr = cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])
     assert abs(corr) > 0.5
     # Along the posterior's long axis the forward model changes much less than across it:
@@ -153,31 +152,31 @@ def test_posterior_band_follows_the_e_nu_coupling(runs):
 def test_uncertain_inflow_widens_the_posterior(runs):
     _, plain, _ = runs[False]
     problem, under, _ = runs[True]
-    assert under.success and under.info["names"] == ["E", "nu", "inflow_rate"]
-    assert under.info["particles"].shape == (1000, 3)
-    det_plain = np.linalg.det(plain.info["posterior_cov"])
-    det_under = np.linalg.det(under.info["posterior_cov"])
+    assert under.success and under.names == ["E", "nu", "inflow_rate"]
+    assert under.posterior.particles.shape == (1000, 3)
+    det_plain = np.linalg.det(plain.posterior.cov)
+    det_under = np.linalg.det(under.posterior.cov)
     assert math.sqrt(det_under) > 1.2 * math.sqrt(det_plain)
-    assert under.info["posterior_std"][0] > plain.info["posterior_std"][0]
+    assert under.posterior.std[0] > plain.posterior.std[0]
     # Less inflow on average than in the data (mean 71.5 mm^2/s < 100): a softer biofilm
     # explains the deformation, so MAP and mean move to lower E (Paper B Fig. 9d).
     assert under.x["E"] < plain.x["E"] - 50.0
-    assert under.info["posterior_mean"][0] < plain.info["posterior_mean"][0] - 50.0
-    assert "histogram" in under.info["map_method"] and "laplace" not in under.info
+    assert under.posterior.mean[0] < plain.posterior.mean[0] - 50.0
+    assert "histogram" in under.posterior.map_method and under.posterior.laplace is None
 
 
 def test_failed_runs_are_excluded_from_training_and_reported():
     # Soft biofilms fail (mesh distortion in the FSI model, Paper B Fig. 5-8).
     problem = _problem(failure_region={"E": (100.0, 200.0)})
     result = fbia.iterator("gp_smc", n_train=64, **FAST).run(problem)
-    design = result.info["design"]
+    design = result.design.points
     expected_failed = int(np.sum(design[:, 0] <= 200.0))
     assert expected_failed > 0
     assert result.success and result.n_failed == expected_failed
     failed = [ev for ev in result.evaluations if not ev.ok]
     assert len(failed) == expected_failed and all(ev.status == "failed" for ev in failed)
     assert all("mesh distortion" in ev.message for ev in failed)
-    assert result.info["gp"]["n_train"] == 64 - expected_failed
+    assert result.surrogate.summary["n_train"] == 64 - expected_failed
     assert abs(result.x["E"] - 400.0) < 40.0
 
 
@@ -194,11 +193,11 @@ def test_direct_mode_agrees_with_the_surrogate():
     direct = fbia.iterator("gp_smc", mode="direct", **opts).run(problem)
     assert direct.success and direct.nfev >= 100 and direct.evaluations == []
     # Every forward run SMC asked for is counted; the prior draws with E <= 120 Pa failed.
-    assert direct.nfev == direct.info["smc"]["nfev_log_likelihood"] and direct.n_failed > 0
+    assert direct.nfev == direct.smc.nfev_log_likelihood and direct.n_failed > 0
     surrogate = fbia.iterator("gp_smc", n_train=128, **{**opts, "n_particles": 1000}).run(problem)
     for j in range(2):
-        std = surrogate.info["posterior_std"][j]
-        diff = direct.info["posterior_mean"][j] - surrogate.info["posterior_mean"][j]
+        std = surrogate.posterior.std[j]
+        diff = direct.posterior.mean[j] - surrogate.posterior.mean[j]
         assert abs(diff) < 0.6 * std
 
 
@@ -207,11 +206,11 @@ def test_posterior_files_round_trip(runs, tmp_path):
     npz, js = save_posterior(result, tmp_path)
     data = load_posterior(tmp_path)
     assert data["names"] == ["E", "nu", "inflow_rate"] and int(data["n_x"]) == 2
-    np.testing.assert_array_equal(data["particles"], result.info["particles"])
+    np.testing.assert_array_equal(data["particles"], result.posterior.particles)
     np.testing.assert_allclose(data["weights"].sum(), 1.0)
-    np.testing.assert_array_equal(data["theta"], result.info["particles"][:, 2:])
+    np.testing.assert_array_equal(data["theta"], result.posterior.particles[:, 2:])
     np.testing.assert_allclose(
-        data["log_posterior"], result.info["log_likelihood"] + result.info["log_prior"]
+        data["log_posterior"], result.posterior.log_posterior
     )
     assert data["design"].shape == (288, 3) and data["train_mask"].sum() == 256
     meta = data["meta"]
@@ -244,19 +243,19 @@ def test_arviz_reads_the_posterior(runs, tmp_path):
     arviz = pytest.importorskip("arviz")
     _, result, _ = runs[True]
     save_posterior(result, tmp_path)
-    from fbia.iterators.gp_smc import to_inference_data
+    from fbia.iterators.posterior import to_inference_data
 
     idata = to_inference_data(load_posterior(tmp_path))
     assert isinstance(idata, arviz.InferenceData)
     assert set(idata.posterior.data_vars) == {"E", "nu", "inflow_rate"}
     # Equally weighted draws from the particles keep the weighted mean.
     assert float(idata.posterior["E"].mean()) == pytest.approx(
-        result.info["posterior_mean"][0], rel=0.02
+        result.posterior.mean[0], rel=0.02
     )
 
 
 def test_hpd_mass_of_map_truth_and_a_far_point(runs):
-    from fbia.iterators.gp_smc import hpd_mass
+    from fbia.iterators.posterior import hpd_mass
 
     _, result, _ = runs[False]
     assert hpd_mass(result, result.x) < 0.05
@@ -273,11 +272,11 @@ def test_design_extends_reusing_the_earlier_runs():
     more = fbia.iterator("gp_smc", n_train=64, n_test=8, **FAST).reuse(first).run(problem)
     # Only the 32 + 8 new points of the same Sobol sequence ran.
     assert more.nfev == 40 and len(more.evaluations) == 72
-    np.testing.assert_array_equal(more.info["design"][:32], first.info["design"])
+    np.testing.assert_array_equal(more.design.points[:32], first.design.points)
     assert more.evaluations[:32] == first.evaluations
     new_failed = sum(not ev.ok for ev in more.evaluations[32:])
     assert more.n_failed == new_failed
-    assert more.info["gp"]["n_train"] == 64 - sum(not ev.ok for ev in more.evaluations[:64])
+    assert more.surrogate.summary["n_train"] == 64 - sum(not ev.ok for ev in more.evaluations[:64])
     other = fbia.iterator("gp_smc", n_train=64, **{**FAST, "seed": 5})
     with pytest.raises(fbia.ConfigError, match="not a prefix of this one"):
         other.reuse(first).run(problem)
@@ -292,14 +291,14 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
     """
     from pathlib import Path
 
-    from fbia.iterators.gp_smc import hpd_mass
+    from fbia.iterators.posterior import hpd_mass
 
     example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
     result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
     assert result.success and result.nfev == 144 + 8 and 0 < result.n_failed < 20
-    assert result.info["posterior_check"]["rmse"] < 1.0  # the surrogate is right there
+    assert result.check.rmse < 1.0  # the surrogate is right there
     assert abs(result.x["E"] - 400.0) < 60.0 and abs(result.x["nu"] - 0.3) < 0.2
-    cov = np.asarray(result.info["posterior_cov"])
+    cov = np.asarray(result.posterior.cov)
     assert cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]) > 0.5
     assert hpd_mass(result, TRUTH) < 0.6
     assert hpd_mass(result, {"E": 750.0, "nu": -0.7}) > 0.99
@@ -311,16 +310,16 @@ def test_resample_move_gives_the_algorithm_1_posterior_with_fewer_calls(runs):
         "gp_smc", n_train=256, n_test=32, **{**FAST, "rejuvenate": "after_resampling"}
     )
     result = it.run(problem)
-    smc, smc_ref = result.info["smc"], ref.info["smc"]
-    assert smc["rejuvenate"] == "after_resampling" and smc_ref["rejuvenate"] == "every_step"
-    assert smc["steps_with_moves"] < smc["n_steps"]
-    assert smc["nfev_log_likelihood"] < smc_ref["nfev_log_likelihood"]
+    smc, smc_ref = result.smc, ref.smc
+    assert smc.rejuvenate == "after_resampling" and smc_ref.rejuvenate == "every_step"
+    assert smc.steps_with_moves < smc.n_steps
+    assert smc.nfev_log_likelihood < smc_ref.nfev_log_likelihood
     # Same design and surrogate (same seed): the posteriors agree within Monte-Carlo error
     # (two estimates, ~4 sigma, particles correlated by few moves: 6 sd / sqrt(ESS)).
-    sd = np.sqrt(np.diag(ref.info["posterior_cov"]))
-    diff = np.abs(np.asarray(result.info["posterior_mean"]) - ref.info["posterior_mean"])
-    np.testing.assert_array_less(diff, 6 * sd / math.sqrt(smc["final_ess"]))
-    np.testing.assert_allclose(np.sqrt(np.diag(result.info["posterior_cov"])), sd, rtol=0.15)
+    sd = np.sqrt(np.diag(ref.posterior.cov))
+    diff = np.abs(np.asarray(result.posterior.mean) - ref.posterior.mean)
+    np.testing.assert_array_less(diff, 6 * sd / math.sqrt(smc.final_ess))
+    np.testing.assert_allclose(np.sqrt(np.diag(result.posterior.cov)), sd, rtol=0.15)
 
 
 def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
@@ -328,9 +327,9 @@ def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
     sigmas = [0.03]
     good = fbia.iterator("gp_smc", n_train=256, n_check=8, **FAST)
     result = good.run(problem)
-    check = result.info["posterior_check"]
-    assert check["n"] == 8 and check["n_failed"] == 0 and result.nfev == 256 + 8
-    x = np.asarray(check["x"])
+    check = result.check
+    assert check.n == 8 and check.n_failed == 0 and result.nfev == 256 + 8
+    x = np.asarray(check.x)
     assert len(np.unique(x, axis=0)) == 8  # distinct draws
     # The figures are the GP mean against the exact L at those points (eq. 5).
     exact = [
@@ -342,11 +341,11 @@ def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
         for row in x
     ]
     err = good.surrogate.predict_mean(x) - np.array(exact)
-    assert check["rmse"] == pytest.approx(float(np.sqrt(np.mean(err**2))), rel=1e-9)
-    assert check["rmse"] < 1.0 and "not reliable" not in result.message
+    assert check.rmse == pytest.approx(float(np.sqrt(np.mean(err**2))), rel=1e-9)
+    assert check.rmse < 1.0 and "not reliable" not in result.message
     # Eight training runs cannot resolve the posterior: the check says so.
     poor = fbia.iterator("gp_smc", n_train=8, n_check=8, **FAST).run(problem)
-    assert poor.info["posterior_check"]["rmse"] > 1.0 and "not reliable" in poor.message
+    assert poor.check.rmse > 1.0 and "not reliable" in poor.message
 
 
 def test_the_rkhs_residual_vector_does_not_change_the_likelihood():

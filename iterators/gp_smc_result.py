@@ -1,0 +1,183 @@
+"""The typed result of the ``gp_smc`` iterator (Paper B): design, surrogate, posterior.
+
+:class:`GpSmcResult` is a :class:`~fbia.core.problem.Result` whose parts are typed records
+instead of string keys: :class:`DesignRuns` (the Sobol design and what its forward runs
+gave), :class:`SurrogateFit` (the GP and its errors), :class:`PosteriorCheck` (the surrogate
+against forward runs at posterior draws), :class:`ParticlePosterior` (the weighted
+particles and their summaries) and :class:`SmcSummary` (how the sampler ran).  The plots,
+:func:`fbia.iterators.posterior.save_posterior` and :func:`~fbia.iterators.posterior.hpd_mass`
+read these attributes; ``to_dict()`` (``result.json``) writes them under ``"info"``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.problem import Result, _jsonable
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "DesignRuns",
+    "GpSmcResult",
+    "LaplaceApproximation",
+    "ParticlePosterior",
+    "PosteriorCheck",
+    "SmcSummary",
+    "SurrogateFit",
+]
+
+
+@dataclass(frozen=True)
+class DesignRuns:
+    """The space-filling design and its forward runs (stage 1-2)."""
+
+    points: FloatArray  # (n, d) Sobol points, x then theta
+    log_likelihood: FloatArray  # (n,) L of eq. 5 per run, -inf where the run failed
+    status: list[str]  # evaluation status per run
+    train_mask: NDArray[np.bool_]  # True: training point, False: held-out test point
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return np.isfinite(self.log_likelihood)
+
+
+@dataclass(frozen=True)
+class SurrogateFit:
+    """The GP surrogate of L (stage 3): its description and errors, and what rebuilds it."""
+
+    summary: dict[str, Any]  # kernel, hyperparameters, n_train, LOO and held-out errors
+    state: dict[str, Any]  # GpSurrogate.from_state(state) gives the GP back
+    best_x: FloatArray  # the training run of highest L
+    best_log_likelihood: float
+
+
+@dataclass(frozen=True)
+class PosteriorCheck:
+    """Forward runs at ``n`` distinct posterior draws: the surrogate's error where the
+    posterior is, in units of L (an error of order 1 changes posterior ratios by e)."""
+
+    n: int
+    n_failed: int
+    x: FloatArray
+    log_likelihood: FloatArray
+    rmse: float
+    max_abs: float
+    mean_error: float
+
+    @property
+    def reliable(self) -> bool:
+        return bool(self.rmse < 1.0)
+
+    def note(self) -> str:
+        """The check in the result message, with a warning when it failed."""
+        text = f"; surrogate RMSE {self.rmse:.3g} in L at {self.n} posterior draws"
+        if not self.reliable:
+            text += " (not well below 1: the posterior is not reliable, train on more runs)"
+        return text
+
+
+@dataclass(frozen=True)
+class LaplaceApproximation:
+    """N(mean, cov) from the Hessian of the log-posterior at the MAP (Paper B Fig. 9a/c)."""
+
+    mean: FloatArray
+    hessian: FloatArray
+    cov: FloatArray | None  # None where the Hessian is not negative definite
+    negative_definite: bool
+
+
+@dataclass(frozen=True)
+class ParticlePosterior:
+    """The weighted particles of the last SMC step and their summaries (stage 5)."""
+
+    names: list[str]  # x names, then theta names
+    n_x: int
+    particles: FloatArray  # (N, d)
+    weights: FloatArray  # (N,), normalised
+    log_likelihood: FloatArray  # (N,) L (surrogate or direct)
+    log_prior: FloatArray  # (N,)
+    log_evidence: float
+    log_evidence_se: float
+    mean: FloatArray  # of x
+    cov: FloatArray  # of x
+    mean_all: FloatArray  # of (x, theta)
+    cov_all: FloatArray
+    max_likelihood: FloatArray  # the particle of highest L
+    credible_intervals: dict[str, list[float]]  # 2.5 %, 50 %, 97.5 % per input
+    map: FloatArray  # of x
+    map_method: str
+    best_particle: FloatArray | None = None  # with theta: the particle of highest posterior
+    laplace: LaplaceApproximation | None = None
+
+    @property
+    def std(self) -> FloatArray:
+        return np.asarray(np.sqrt(np.diag(self.cov)))
+
+    @property
+    def log_posterior(self) -> FloatArray:
+        """L + log p, unnormalised."""
+        return np.asarray(self.log_likelihood + self.log_prior)
+
+
+@dataclass(frozen=True)
+class SmcSummary:
+    """How the sampler ran (Algorithm 1)."""
+
+    n_steps: int
+    gammas: list[float]
+    ess: list[float]
+    acceptance: list[float]
+    nfev_log_likelihood: int
+    final_ess: float
+    rejuvenate: str
+    steps_with_moves: int
+
+
+@dataclass
+class GpSmcResult(Result):
+    """:class:`~fbia.core.problem.Result` of ``gp_smc``; ``x`` is the MAP.
+
+    Attributes (besides those of ``Result``; None where the stage did not run)
+    ----------
+    names, n_x
+        Input names (x, then theta) and the number of calibration parameters x.
+    mode
+        ``surrogate`` or ``direct``.
+    priors
+        The inputs' descriptions (name, unit, bounds, prior).
+    design, surrogate, check, posterior, smc
+        The stages' records (see the module docstring).
+    seconds
+        Wall time of the analysis.
+    """
+
+    names: list[str] = field(default_factory=list)
+    n_x: int = 0
+    mode: str = "surrogate"
+    priors: list[dict[str, Any]] = field(default_factory=list)
+    design: DesignRuns | None = field(default=None, repr=False)
+    surrogate: SurrogateFit | None = field(default=None, repr=False)
+    check: PosteriorCheck | None = None
+    posterior: ParticlePosterior | None = field(default=None, repr=False)
+    smc: SmcSummary | None = field(default=None, repr=False)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        parts: dict[str, Any] = {
+            "names": self.names,
+            "n_x": self.n_x,
+            "mode": self.mode,
+            "priors": self.priors,
+            "seconds": self.seconds,
+        }
+        for name in ("design", "surrogate", "check", "posterior", "smc"):
+            value = getattr(self, name)
+            parts[name] = None if value is None else asdict(value)
+        out["info"] = {**out["info"], **_jsonable(parts)}
+        return out
