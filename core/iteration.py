@@ -11,12 +11,31 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
 
 from __future__ import annotations
 
-from collections.abc import Generator, Iterator
-from typing import Any, Protocol, runtime_checkable
+from collections.abc import Callable, Generator, Iterator
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from .evaluator import Evaluator, SerialEvaluator
 from .options import Configurable
 from .problem import InverseProblem, Result
+
+S = TypeVar("S")
+R = TypeVar("R")
+
+
+def drain(gen: Generator[S, None, R], on_state: Callable[[S], None] | None = None) -> R:
+    """Run a ``steps()`` generator to its end and return what it returns; ``on_state`` sees
+    every state it yields.  The generator is closed if anything raises on the way."""
+    try:
+        while True:
+            try:
+                state = next(gen)
+            except StopIteration as stop:
+                result: R = stop.value
+                return result
+            if on_state is not None:
+                on_state(state)
+    finally:
+        gen.close()
 
 
 @runtime_checkable
@@ -43,13 +62,8 @@ class IteratorBase(Configurable):
         own = evaluator is None
         ev: Evaluator = SerialEvaluator() if evaluator is None else evaluator
         try:
-            gen = self.steps(problem, ev)
-            while True:
-                try:
-                    next(gen)
-                except StopIteration as stop:
-                    self.result = stop.value
-                    return stop.value
+            self.result = drain(self.steps(problem, ev))
+            return self.result
         finally:
             if own:
                 ev.close()  # type: ignore[attr-defined]

@@ -174,15 +174,6 @@ def default_registry() -> Registry:
     return Registry.load()
 
 
-def reload_registry() -> Registry:
-    """Forget the cached registry (e.g. after installing a plugin in this process)."""
-    default_registry.cache_clear()
-    import importlib
-
-    importlib.invalidate_caches()
-    return default_registry()
-
-
 def forward_model(name: str, **options: Any) -> Any:
     """A forward model by registry name, e.g. ``fbia.forward_model("analytic_mound_2d")``."""
     return default_registry().create("forward_model", name, options)

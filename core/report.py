@@ -35,7 +35,7 @@ import shutil
 import socket
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TextIO
@@ -98,10 +98,6 @@ class EvaluationLog:
         self._fh.write(line + "\n")
         self._fh.flush()
 
-    def extend(self, records: Iterable[Evaluation]) -> None:
-        for record in records:
-            self.append(record)
-
     @property
     def n_failed(self) -> int:
         return sum(1 for r in self.records if not r.ok)
@@ -121,17 +117,6 @@ class EvaluationLog:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    @staticmethod
-    def read(path: str | Path) -> list[dict[str, Any]]:
-        """The records of a log file as dicts (lines that were cut off by a kill are skipped)."""
-        out = []
-        for line in Path(path).read_text(encoding="utf-8").splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue
-        return out
 
 
 # -- provenance --------------------------------------------------------------------------------

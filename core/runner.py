@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from . import report
+from .iteration import drain
 from .problem import Evaluation, InverseProblem, Result
 from .store import StudyStore
 from .study import ExecutorSpec, Study
@@ -297,18 +298,7 @@ def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Pr
     steps = getattr(iterator, "steps", None)
     if not callable(steps):
         return iterator.run(problem, evaluator)
-    gen = steps(problem, evaluator)
-    try:
-        while True:
-            try:
-                state = next(gen)
-            except StopIteration as stop:
-                if hasattr(iterator, "result"):
-                    iterator.result = stop.value
-                return stop.value
-            progress(state)
-    finally:
-        gen.close()
+    return drain(steps(problem, evaluator), progress)
 
 
 class _Progress:

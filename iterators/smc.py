@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 
 from ..core.errors import ConfigError
+from ..core.iteration import drain
 from ..core.parameters import Prior
 
 LogLikelihood = Callable[[NDArray[np.float64]], ArrayLike]
@@ -414,13 +415,7 @@ class SequentialMonteCarlo:
 
     def run(self) -> SmcResult:
         """Run Algorithm 1 to gamma = 1 and return the :class:`SmcResult`."""
-        gen = self.steps()
-        while True:
-            try:
-                next(gen)
-            except StopIteration as stop:
-                result: SmcResult = stop.value
-                return result
+        return drain(self.steps())
 
     def _proposal_factor(self, x: NDArray[np.float64], log_w: NDArray[np.float64], scale: float):
         """Cholesky factor of scale^2 times the weighted particle covariance."""
