@@ -32,7 +32,7 @@ typecheck: $(STAMP)
 	@rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/fbia
 	@for d in core plugins measures iterators; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
 	@ln -s ../../../__init__.py $(TYPECHECK)/fbia/__init__.py
-	@ln -s ../../../testing.py $(TYPECHECK)/fbia/testing.py
+	@for f in testing.py pytest_plugin.py; do ln -s ../../../$$f $(TYPECHECK)/fbia/$$f; done
 	MYPYPATH=$(TYPECHECK) $(BIN)/mypy -p fbia
 
 pytest: $(STAMP)

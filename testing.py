@@ -1,10 +1,11 @@
 """fbia.testing: conformance checks and pytest fixtures for fbia plugins.
 
-fbia registers this module as a pytest plugin (entry point ``pytest11: fbia``), so its fixtures
-are available in every test session of an environment where fbia is installed.  A third-party
+Its fixtures (:mod:`fbia.pytest_plugin`, registered as the pytest plugin ``fbia``) are
+available in every test session of an environment where fbia is installed.  A third-party
 plugin package proves that its classes behave like fbia's own with a few lines::
 
-    from .testing import check_forward_model, check_measure, check_options
+    from fbia.testing import check_forward_model, check_measure, check_options
+
 
     def test_my_solver_conforms(tmp_path):
         model = MySolverForwardModel(timeout=60.0)
@@ -39,8 +40,8 @@ Plugin classes may offer optional class attributes that the conformance tests of
     Measures: the spatial dimensions supported (default ``(2, 3)``), and whether the residuals
     belong to the simulated mesh (see :func:`check_measure`; default False).
 
-Its own module-level imports are the standard library and pytest, since pytest imports it at
-start-up; numpy, trimesh and the fbia sub-modules are imported by the functions that need them.
+pytest loads only the fixtures of :mod:`fbia.pytest_plugin` at start-up; this module (numpy,
+trimesh, the fbia sub-modules) is imported when a test uses it.
 """
 
 from __future__ import annotations
@@ -52,21 +53,27 @@ import json
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import numpy as np
 import pytest
+import trimesh
+from numpy.typing import NDArray
 
-if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import NDArray
-
-    from .core.interface import Interface
-    from .core.observation import Observation, Solution
-    from .core.problem import Evaluation, InverseProblem, Result
-    from .core.registry import PluginEntry, Registry
+from .core.errors import ConfigError, ForwardModelError
+from .core.evaluator import SerialEvaluator
+from .core.interface import Interface
+from .core.observation import Observation, Solution, coordinate_key
+from .core.options import Configurable, PluginOptions
+from .core.parameters import Parameter
+from .core.problem import Evaluation, InverseProblem, Result
+from .core.registry import PluginEntry, Registry, default_registry, forward_model
+from .core.registry import measure as make_measure
+from .core.synthetic import synthetic_observations
 
 __all__ = [
     "ConformanceError",
@@ -111,9 +118,6 @@ def straight_line_2d(
 
     Ordered upstream to downstream (solid below), so its normals point up into the fluid.
     """
-    import numpy as np
-
-    from .core.interface import Interface
 
     x = np.linspace(0.0, length, n + 1)
     return Interface.polyline(np.c_[x, height + slope * x])
@@ -124,9 +128,6 @@ def mound_2d(length: float = 1.0, height: float = 0.2, n: int = 64) -> Interface
 
     Ordered upstream to downstream (solid below), in ``n`` segments of equal x-extent.
     """
-    import numpy as np
-
-    from .core.interface import Interface
 
     x = np.linspace(0.0, length, n + 1)
     return Interface.polyline(np.c_[x, height * np.sin(np.pi * x / length) ** 2])
@@ -137,9 +138,6 @@ def circle_2d(radius: float = 0.3, n: int = 64, centre: Sequence[float] = (0.0, 
 
     Walked clockwise, so the solid lies on the right and the normals point outwards.
     """
-    import numpy as np
-
-    from .core.interface import Interface
 
     phi = -np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)  # clockwise
     pts = np.asarray(centre, dtype=float) + radius * np.c_[np.cos(phi), np.sin(phi)]
@@ -153,9 +151,6 @@ def square_3d(
 
     ``2 n^2`` triangles, ordered so that the normals point up (+z side is fluid).
     """
-    import numpy as np
-
-    from .core.interface import Interface
 
     t = np.linspace(0.0, size, n + 1)
     x, y = (a.ravel() for a in np.meshgrid(t, t, indexing="xy"))
@@ -174,10 +169,6 @@ def sphere_3d(
 
     ``subdivisions=2`` gives 320 triangles, each further level four times as many.
     """
-    import numpy as np
-    import trimesh
-
-    from .core.interface import Interface
 
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     return Interface.surface(np.asarray(mesh.vertices) + np.asarray(centre), mesh.faces)
@@ -196,8 +187,6 @@ def check_options(cls: type) -> list[str]:
 
     Returns the option names.
     """
-    from .core.errors import ConfigError
-    from .core.options import Configurable, PluginOptions
 
     options = getattr(cls, "Options", None)
     if not (isinstance(options, type) and issubclass(options, PluginOptions)):
@@ -284,13 +273,6 @@ def check_forward_model(
 
     Returns the first :class:`fbia.Solution`.
     """
-    import tempfile
-
-    import numpy as np
-
-    from .core.errors import ForwardModelError
-    from .core.interface import Interface
-    from .core.observation import Solution, coordinate_key
 
     tmp_path = Path(tmp_path)
     names = model.parameter_names()
@@ -451,9 +433,6 @@ class MeasureCase:
 
 
 def _case(name: str, observed: Interface, simulated: Interface, farther: Interface) -> MeasureCase:
-    import numpy as np
-
-    from .core.observation import Observation
 
     n = len(observed.vertices)
     interior = np.arange(n)
@@ -531,7 +510,6 @@ def _measure_values(
     measure: Any, gamma: Interface, obs: Observation, where: str
 ) -> tuple[NDArray[np.float64], float]:
     """Residuals and distance of ``gamma``, checked for type, shape and finiteness."""
-    import numpy as np
 
     try:
         r = measure.residuals(gamma, obs)
@@ -585,7 +563,6 @@ def check_measure(
 
     Returns ``{case: {"identical": D0, "simulated": D1, "refined": D1r, "farther": D2}}``.
     """
-    import numpy as np
 
     cases = measure_cases(dims) if cases is None else list(cases)
     out: dict[str, dict[str, float]] = {}
@@ -655,7 +632,6 @@ class CountingEvaluator:
     """Wraps an evaluator and counts the points it evaluates and the runs that failed."""
 
     def __init__(self, inner: Any = None) -> None:
-        from .core.evaluator import SerialEvaluator
 
         self.inner = SerialEvaluator() if inner is None else inner
         self.points = 0
@@ -682,7 +658,6 @@ class CountingEvaluator:
 
 def _global_rng_state() -> tuple[Any, ...]:
     """numpy's legacy global random state (to prove that a plugin leaves it alone)."""
-    import numpy as np
 
     state = np.random.get_state(legacy=False)  # noqa: NPY002
     inner = state["state"]
@@ -712,11 +687,6 @@ def check_iterator(
 
     Returns the result of the ``steps`` run.
     """
-    import tempfile
-
-    import numpy as np
-
-    from .core.problem import Result
 
     global_state = _global_rng_state()
     it = iterator_factory()
@@ -810,11 +780,6 @@ def tiny_problem(
     [-0.5, 0.45] (initial 0.1).  ``failure_region`` (e.g. ``{"E": (100.0, 150.0)}``) makes
     the runs there fail, as soft biofilms do in Paper B (Fig. 5).
     """
-    from .core.parameters import Parameter
-    from .core.problem import InverseProblem
-    from .core.registry import forward_model
-    from .core.registry import measure as make_measure
-    from .core.synthetic import synthetic_observations
 
     truth_model = forward_model("analytic_mound_2d", n_points=21)
     obs = synthetic_observations(
@@ -944,7 +909,6 @@ class PluginInstaller:
         ``source`` is a folder holding the plugin's modules; it goes on ``sys.path`` as an
         installed package's site folder would.  The default registry is reloaded on next use.
         """
-        from .core.registry import default_registry
 
         if not self.roots:
             self.monkeypatch.syspath_prepend(str(self.site))
@@ -960,7 +924,6 @@ class PluginInstaller:
 
     def registry(self) -> Registry:
         """A fresh registry loaded from all entry points, including the installed ones."""
-        from .core.registry import Registry
 
         return Registry.load()
 
@@ -968,7 +931,6 @@ class PluginInstaller:
         """Forget the modules imported from the installed folders and the cached registry."""
         if not self.roots:
             return
-        from .core.registry import default_registry
 
         roots = [str(r) for r in self.roots]
         for mod_name, module in list(sys.modules.items()):
@@ -977,40 +939,3 @@ class PluginInstaller:
                 del sys.modules[mod_name]
         importlib.invalidate_caches()
         default_registry.cache_clear()
-
-
-# ------------------------------------------------------------------------------------------
-# pytest fixtures
-# ------------------------------------------------------------------------------------------
-@pytest.fixture
-def fbia_registry() -> Registry:
-    """The process-wide plugin registry (what ``fbia.list_plugins()`` lists)."""
-    from .core.registry import default_registry
-
-    return default_registry()
-
-
-@pytest.fixture
-def fbia_installer(tmp_path_factory: pytest.TempPathFactory) -> Iterable[PluginInstaller]:
-    """Install plugin distributions (dist-info + entry points) for the duration of one test.
-
-    ::
-
-        def test_found(fbia_installer):
-            fbia_installer.install("fbia-mysolver", "0.1.0",
-                                   {"mysolver": "fbia_mysolver.plugin"}, source="src")
-            assert "mysolver" in fbia_installer.registry().names("forward_model")
-    """
-    with pytest.MonkeyPatch.context() as mp:
-        installer = PluginInstaller(tmp_path_factory.mktemp("fbia-site"), mp)
-        try:
-            yield installer
-        finally:
-            mp.undo()
-            installer.cleanup()
-
-
-@pytest.fixture
-def fbia_measure_cases() -> list[MeasureCase]:
-    """The 2-D and 3-D sample cases of :func:`check_measure`."""
-    return measure_cases()

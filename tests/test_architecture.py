@@ -21,7 +21,7 @@ MAX_LINES = 600
 OVERSIZE = {
     "core/study_file.py": 718,  # the hand-written validator, until pydantic section models
     "plugins/ale_fsi/solver.py": 1269,
-    "testing.py": 1016,
+    "testing.py": 941,
     "iterators/levenberg_marquardt.py": 747,
     "plugins/cutfem_fpi/coupled.py": 711,
     "core/store.py": 601,
@@ -29,7 +29,7 @@ OVERSIZE = {
 
 
 def package_files() -> list[Path]:
-    files = [ROOT / "__init__.py", ROOT / "testing.py"]
+    files = [ROOT / "__init__.py", ROOT / "testing.py", ROOT / "pytest_plugin.py"]
     for d in PACKAGES:
         files += sorted((ROOT / d).rglob("*.py"))
     return files
