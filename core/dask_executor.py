@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
-from .evaluator import _EvaluatorBase, _Job, _workers_ignore_sigint
+from .evaluator import EvaluatorBase, Job, workers_ignore_sigint
 from .isolation import RunOutcome, run_isolated_or_here, run_view
 from .problem import Evaluation, InverseProblem
 
@@ -76,7 +76,7 @@ def _task(
     return outcome
 
 
-class DaskEvaluator(_EvaluatorBase):
+class DaskEvaluator(EvaluatorBase):
     """Runs each batch as Dask tasks, one task per forward run.
 
     Parameters
@@ -169,7 +169,7 @@ class DaskEvaluator(_EvaluatorBase):
                 **cluster_options,
             }
             try:
-                with _workers_ignore_sigint():  # Ctrl-C reaches the study, which stops them
+                with workers_ignore_sigint():  # Ctrl-C reaches the study, which stops them
                     self._cluster = distributed.LocalCluster(**settings)
             except TypeError as exc:
                 raise ConfigError(f"bad cluster_options for the local cluster: {exc}") from None
@@ -192,7 +192,7 @@ class DaskEvaluator(_EvaluatorBase):
             self._scattered = (problem, data)
         return self._scattered[1]
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[_Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         from distributed import KilledWorker, as_completed
 
         data = self._problem_on_cluster(problem)

@@ -17,7 +17,8 @@ evaluator does the same way, whichever runs the forward models:
 * **Time-outs** (``timeout`` seconds of wall time per run) and **isolation** (``isolate``):
   each run in a child process of its own (:mod:`fbia.core.isolation`) that is killed, with
   everything it started, when the time is up.  A time-out implies isolation.
-* **The store** (``store``, a :class:`~fbia.core.store.StudyStore`): a point whose run is
+* **The store** (``store``, a :class:`~fbia.core.store.StudyStore`, used through
+  :class:`~fbia.core.cache.RunCache`): a point whose run is
   already stored is not run again, its stored record is returned (a failed run is a finished
   run too; ``retry_failed`` runs stored failures once more); every new record is written to the
   store the moment its run finishes.  A point asked for twice in one batch runs once.
@@ -42,6 +43,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
+from .cache import Plan, RunCache
 from .errors import ConfigError
 from .isolation import (
     IsolatedRunner,
@@ -55,7 +57,14 @@ from .problem import Evaluation, InverseProblem
 if TYPE_CHECKING:
     from .store import StudyStore
 
-__all__ = ["Evaluator", "ProcessPoolEvaluator", "RunListener", "SerialEvaluator"]
+__all__ = [
+    "Evaluator",
+    "EvaluatorBase",
+    "Job",
+    "ProcessPoolEvaluator",
+    "RunListener",
+    "SerialEvaluator",
+]
 
 
 @runtime_checkable
@@ -83,13 +92,15 @@ class RunListener(Protocol):
 
 
 #: (index, working folder, input values) of one run to make
-_Job = tuple[int, Path, dict[str, float]]
+Job = tuple[int, Path, dict[str, float]]
 
 
-class _EvaluatorBase:
-    """Numbering, working folders, the store, time-outs and listeners, shared by all
-    evaluators; a subclass implements :meth:`_run` (run the jobs, hand each outcome to
-    :meth:`_finish` as it arrives)."""
+class EvaluatorBase:
+    """The base of every executor: numbering, working folders, the run cache
+    (:class:`~fbia.core.cache.RunCache`, with ``store``), time-outs and listeners; a subclass
+    (serial, process pool, :class:`~fbia.core.dask_executor.DaskEvaluator`) implements
+    :meth:`_run`: run the jobs it is given and hand each outcome to :meth:`_finish` as it
+    arrives."""
 
     #: whether runs go to child processes when neither ``isolate`` nor ``timeout`` is given
     isolate_by_default = False
@@ -115,8 +126,8 @@ class _EvaluatorBase:
             )
         self.on_record = on_record
         self.listener = listener
-        self.store = store
-        self.retry_failed = retry_failed
+        #: store lookup, de-duplication and retry (fbia.core.cache), None without a store
+        self.cache = None if store is None else RunCache(store, retry_failed)
         self.timeout = timeout
         self.isolate = (
             bool(isolate)
@@ -133,8 +144,6 @@ class _EvaluatorBase:
         self.history: list[Evaluation] = []
         #: request indices whose records came from the store
         self.reused: set[int] = set()
-        self._keys: dict[int, str] = {}
-        self._retried: set[str] = set()
 
     #: number of runs under way at once (for progress displays)
     @property
@@ -149,38 +158,15 @@ class _EvaluatorBase:
             (self.count + k, {str(n): float(v) for n, v in x.items()}) for k, x in enumerate(points)
         ]
         self.count += len(requests)
-        done: dict[int, Evaluation] = {}
-        todo: list[_Job] = []
-        copies: list[tuple[int, int]] = []  # (index, index of the same point in this batch)
-        reused: list[Evaluation] = []
-        if self.store is None:
-            todo = [(i, self._workdir(i), x) for i, x in requests]
+        if self.cache is None:
+            plan = Plan(to_run=requests)
         else:
-            self.store.bind(problem)
-            keys = [self.store.key(x) for _, x in requests]
-            stored = self.store.lookup(keys)
-            first: dict[str, int] = {}
-            for (i, x), key in zip(requests, keys, strict=True):
-                run = stored.get(key)
-                retry = (
-                    run is not None
-                    and self.retry_failed
-                    and not run.record.ok
-                    and key not in self._retried
-                )
-                if run is not None and not retry:
-                    ev = dataclasses.replace(run.record, index=i, x=x)
-                    done[i] = ev
-                    reused.append(ev)
-                    self.reused.add(i)
-                elif key in first:
-                    copies.append((i, first[key]))
-                else:
-                    if retry:
-                        self._retried.add(key)
-                    first[key] = i
-                    self._keys[i] = key
-                    todo.append((i, self._workdir(i), x))
+            plan = self.cache.plan(problem, requests)
+        done: dict[int, Evaluation] = dict(plan.reused)
+        reused = list(plan.reused.values())
+        self.reused.update(plan.reused)
+        todo: list[Job] = [(i, self._workdir(i), x) for i, x in plan.to_run]
+        copies = plan.copies
         if self.listener is not None:
             self.listener.batch_started(len(requests), len(reused), len(todo), self.slots)
         for ev in reused:
@@ -204,7 +190,7 @@ class _EvaluatorBase:
             self.listener.batch_finished()
         return [done[i] for i, _ in requests]
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[_Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         raise NotImplementedError
 
     # -- folders and records -----------------------------------------------------------------
@@ -213,10 +199,10 @@ class _EvaluatorBase:
         (``eval_<index>-2``, ...) and one that no stored run owns (left by a run that was under
         way when the study stopped) is emptied."""
         wd = self.root / f"eval_{index:06d}"
-        if self.store is None:
+        if self.cache is None:
             return wd
         n = 1
-        while wd.exists() and self.store.workdir_taken(wd):
+        while wd.exists() and self.cache.workdir_taken(wd):
             n += 1
             wd = self.root / f"eval_{index:06d}-{n}"
         if wd.exists():
@@ -234,14 +220,8 @@ class _EvaluatorBase:
         if ev.workdir and not self._keep(ev):
             shutil.rmtree(ev.workdir, ignore_errors=True)
             ev.workdir = None
-        if self.store is not None:
-            self.store.put(
-                ev,
-                self._keys.pop(ev.index, None),
-                outcome.worker,
-                outcome.artifacts,
-                outcome.interfaces,
-            )
+        if self.cache is not None:
+            self.cache.record(outcome)
         self.history.append(ev)
         if self.listener is not None:
             self.listener.record(ev, False, outcome.worker)
@@ -270,7 +250,7 @@ class _EvaluatorBase:
         self.close()
 
 
-class SerialEvaluator(_EvaluatorBase):
+class SerialEvaluator(EvaluatorBase):
     """Runs the batch one after another in this process (or, with ``isolate`` or ``timeout``,
     in one child process that is replaced after a time-out or a crash).
 
@@ -297,7 +277,7 @@ class SerialEvaluator(_EvaluatorBase):
         super().__init__(workdir, keep_workdirs, on_record, **options)
         self._runner: IsolatedRunner | None = None
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[_Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         out: dict[int, Evaluation] = {}
         for i, wd, x in jobs:
             if self.isolate:
@@ -354,7 +334,7 @@ def _run_in_worker(
 
 
 @contextlib.contextmanager
-def _workers_ignore_sigint() -> Iterator[None]:
+def workers_ignore_sigint() -> Iterator[None]:
     """Processes started inside ignore SIGINT (the disposition survives exec): Ctrl-C then
     reaches only this process, which stops the workers, instead of every worker printing
     a traceback."""
@@ -374,7 +354,7 @@ _DIED = (
 )
 
 
-class ProcessPoolEvaluator(_EvaluatorBase):
+class ProcessPoolEvaluator(EvaluatorBase):
     """Runs the batch concurrently on a local pool of worker processes.
 
     Parameters
@@ -438,7 +418,7 @@ class ProcessPoolEvaluator(_EvaluatorBase):
             self._pool_problem = problem
         return self._pool
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[_Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         done: dict[int, Evaluation] = {}
         try:
             todo = list(jobs)
@@ -474,16 +454,16 @@ class ProcessPoolEvaluator(_EvaluatorBase):
         return done
 
     def _round(
-        self, problem: InverseProblem, jobs: Sequence[_Job], done: dict[int, Evaluation]
-    ) -> list[_Job]:
+        self, problem: InverseProblem, jobs: Sequence[Job], done: dict[int, Evaluation]
+    ) -> list[Job]:
         """Submit ``jobs``; record each as it finishes; return those lost to a dead worker."""
         pool = self._pool_for(problem)
-        with _workers_ignore_sigint():  # the pool starts its processes on submit
-            futures: dict[Future[RunOutcome], _Job] = {
+        with workers_ignore_sigint():  # the pool starts its processes on submit
+            futures: dict[Future[RunOutcome], Job] = {
                 pool.submit(_run_in_worker, x, str(wd), i, self.timeout, self.isolate): (i, wd, x)
                 for i, wd, x in jobs
             }
-        lost: list[_Job] = []
+        lost: list[Job] = []
         for fut in as_completed(futures):
             i, wd, x = job = futures[fut]
             try:
@@ -497,7 +477,7 @@ class ProcessPoolEvaluator(_EvaluatorBase):
             done[i] = self._finish(outcome)
         return sorted(lost)
 
-    def _died(self, job: _Job, message: str) -> Evaluation:
+    def _died(self, job: Job, message: str) -> Evaluation:
         i, wd, x = job
         ev = Evaluation(index=i, x=dict(x), status="failed", workdir=str(wd), message=message)
         return self._finish(RunOutcome(ev))
