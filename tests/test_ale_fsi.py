@@ -134,10 +134,10 @@ def test_deformation_grows_with_inflow_and_compliance(model, reference, tmp_path
 
 def test_fluid_mass_is_conserved(model, tmp_path):
     model.solve({"E": 300.0, "nu": 0.2}, [{"inflow_rate": 80.0}], tmp_path)
-    solver = model.solver
-    q_in = -solver.flux("inflow")
-    q_out = solver.flux("outflow")
-    q_gamma = solver.flux("interface")
+    solver, post = model.solver, model.postprocess
+    q_in = -post.flux("inflow")
+    q_out = post.flux("outflow")
+    q_gamma = post.flux("interface")
     assert q_in == pytest.approx(80.0, rel=1e-12)  # the parabolic profile is exact in P2
     assert q_out == pytest.approx(q_in, rel=1e-7)
     # quasi-static: the solid and the interface are at rest exactly (eq. 2.28), their velocity

@@ -178,6 +178,7 @@ class AleFsiForwardModel(Configurable):
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         super().__init__(options, **kwargs)
         self._solver: Any = None
+        self._post: Any = None  # AleFsiPostprocess of the solver
         self._store: list[tuple[dict[str, float], float, NDArray[np.float64]]] = []
         self._regions: list[str] | None = None
         self._given_rate = False
@@ -231,6 +232,7 @@ class AleFsiForwardModel(Configurable):
         self._given_rate = "inflow_rate" in parameters
         levels = self._check_coordinates(coordinates, params)
         solver = self._get_solver()
+        post = self._post
         solver.set_materials(self._materials(params))
         t_setup = time.perf_counter()
         n = len(coordinates)
@@ -246,12 +248,12 @@ class AleFsiForwardModel(Configurable):
             """Check the current state and store its results for coordinate ``index``."""
             for key, val in solver.check_state(label).items():
                 diag[key] = min(diag.get(key, math.inf), val)
-            curves[index] = solver.interface_curves()
-            per["max_displacement"][index] = solver.max_interface_displacement()
-            per["fluid_force"][index] = solver.forces().tolist()
+            curves[index] = post.interface_curves()
+            per["max_displacement"][index] = post.max_interface_displacement()
+            per["fluid_force"][index] = post.forces().tolist()
             if self.options.probes:
                 per["probe_displacements"][index] = [
-                    solver.point_displacement(p).tolist() for p in self.options.probes
+                    post.point_displacement(p).tolist() for p in self.options.probes
                 ]
             if self.options.write_vtu:
                 from .output import write_vtu
@@ -390,6 +392,9 @@ class AleFsiForwardModel(Configurable):
             except ForwardModelError as exc:
                 raise ConfigError(str(exc), "ale_fsi mesh") from None
             self._regions = self._solver.solids
+            from .postprocess import AleFsiPostprocess
+
+            self._post = AleFsiPostprocess(self._solver)
         return self._solver
 
     def build_mesh(self) -> Any:
@@ -417,6 +422,13 @@ class AleFsiForwardModel(Configurable):
     def solver(self) -> Any:
         """The underlying :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver` (built lazily)."""
         return self._get_solver()
+
+    @property
+    def postprocess(self) -> Any:
+        """Its :class:`~fbia.plugins.ale_fsi.postprocess.AleFsiPostprocess` (curves, fluxes,
+        forces of the current state)."""
+        self._get_solver()
+        return self._post
 
     def _quasi_static(
         self, solver: Any, params: dict[str, float], levels: list[float], record: Any

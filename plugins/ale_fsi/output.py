@@ -50,7 +50,9 @@ def write_vtu(solver: Any, path: str | Path) -> Path:
     fluid = np.zeros(nv, dtype=bool)
     fluid[np.unique(regions[FLUID])] = True
     pressure[solid & ~fluid] = 0.0
-    force = solver.interface_nodal_forces()
+    from .postprocess import AleFsiPostprocess
+
+    force = AleFsiPostprocess(solver).interface_nodal_forces()
     out = meshio.Mesh(
         np.c_[pts, np.zeros(nv)],
         [("triangle", tris)],

@@ -30,7 +30,8 @@ on the reference mesh, so it is assembled once and added to every Jacobian.
 >>> solver = AleFsiSolver(build_flow_cell(mesh_size=0.2), SolverSettings())  # doctest: +SKIP
 >>> solver.set_materials({"solid": (400.0, 0.3)})                             # doctest: +SKIP
 >>> report = solver.solve_steady(100.0)                                       # doctest: +SKIP
->>> curves = solver.interface_curves()                                        # doctest: +SKIP
+>>> from fbia.plugins.ale_fsi.postprocess import AleFsiPostprocess
+>>> curves = AleFsiPostprocess(solver).interface_curves()                     # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -38,14 +39,14 @@ from __future__ import annotations
 import math
 import os
 import time
-import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
+from ..fem.newton import NewtonFailure, NewtonSolver, StepReport, sparse_direct_solver
 from .geometry import FLUID, solid_regions
 
 if TYPE_CHECKING:
@@ -74,29 +75,6 @@ class SolverSettings:
     min_quality: float = 0.02  # smallest admissible deformed fluid element quality
     theta: float = 1.0  # one-step-theta
     threads: int = 1
-
-
-@dataclass
-class StepReport:
-    """What one Newton solve did."""
-
-    iterations: int = 0
-    jacobians: int = 0
-    assembly_time: float = 0.0
-    solve_time: float = 0.0
-    converged: bool = False
-    message: str = ""
-    norms: list[float] = field(default_factory=list)
-
-
-class NewtonFailure(Exception):
-    """A Newton solve that did not converge (internal; becomes ForwardModelError)."""
-
-    def __init__(self, message: str, reason: str) -> None:
-        super().__init__(message)
-        self.reason = reason
-        self.norms: list[float] = []  # scaled updates so far (set by AleFsiSolver.newton)
-        self.jacobians = 0
 
 
 def lame(E: float, nu: float) -> tuple[float, float]:
@@ -175,6 +153,8 @@ class AleFsiSolver:
         self._mu = {r: ngs.Parameter(1.0) for r in self.solids}
         self._lam = {r: ngs.Parameter(1.0) for r in self.solids}
         self.transient = False
+        self.linear_solver = sparse_direct_solver()
+        self._newton = NewtonSolver(self, s.newton_tol, s.newton_max_iter, self.linear_solver)
         self._build_motion()
         self._build_forms(transient=False)
         self._det_points = mesh.MapToAllElements(self._check_rule(), ngs.VOL)
@@ -182,8 +162,6 @@ class AleFsiSolver:
             :, 0
         ].astype(bool)
         self.materials: dict[str, tuple[float, float]] = {}
-        self.timings = {"assembly": 0.0, "solve": 0.0}
-        self.linear_solver = sparse_direct_solver()
 
     # -- set-up ------------------------------------------------------------------------------
     def _inflow_geometry(self) -> None:
@@ -333,8 +311,7 @@ class AleFsiSolver:
             form += solid.Compile() * ngs.dx(region, bonus_intorder=bonus)
         self.form = form
         self.transient = transient
-        self._inverse: Any = None
-        self._chord_ok = False
+        self._newton.reset()
         self._positions: dict[str, Any] | None = None  # CSR positions, after the 1st assembly
         self._set_free_dofs(transient)
 
@@ -505,7 +482,7 @@ class AleFsiSolver:
         return {"min_det_f_fluid": det_fluid, "min_det_f_solid": det_solid, "min_quality": quality}
 
     # -- Newton ------------------------------------------------------------------------------
-    def _scales(self) -> NDArray[np.float64]:
+    def scales(self) -> NDArray[np.float64]:
         """Per-dof scales of the Newton correction: velocity, displacement and pressure.
 
         Each field's largest value, at least a physical floor: the mean inflow speed, its
@@ -553,7 +530,7 @@ class AleFsiSolver:
             self._positions = pos
         return self._positions
 
-    def _residual(self, res: Any) -> None:
+    def residual(self, res: Any) -> None:
         """The residual of the Newton system at the current state, into ``res``."""
         with self.ngs.TaskManager():
             self.form.Apply(self.gfu.vec, res)
@@ -563,7 +540,7 @@ class AleFsiSolver:
             src, dst = self._iface_rows
             r[dst] += r[src]
 
-    def _jacobian(self) -> None:
+    def assemble_jacobian(self) -> None:
         """Assemble the consistent Jacobian at the current state into ``self.form.mat``."""
         with self.ngs.TaskManager():
             self.form.AssembleLinearization(self.gfu.vec)
@@ -574,167 +551,43 @@ class AleFsiSolver:
             data[pos["iface_dst"]] += data[pos["iface_src"]]
 
     def newton(self, where: str = "Newton") -> StepReport:
-        """Newton's method with consistent linearisation and Pardiso; raises NewtonFailure.
-
-        The update is measured per field (velocity, displacement, pressure), each scaled by its
-        current maximum or a physical floor, in the max norm.  Converged when that scaled
-        update is below ``newton_tol`` or when the error it leaves, estimated from the
-        contraction of the last two updates, is.  After every undamped step the factorised
-        Jacobian is first tried again (a chord step: one residual and one back-substitution,
-        about a tenth of a Newton step): the chord update is taken if it is below 0.1 and at
-        most a quarter of the previous update, else the Jacobian is assembled afresh at the
-        same point.  A warm start tries the previous run's factorisation the same way.  An
-        update that would invert an element (det F <= 0) is halved, up to 5 times.  At most
-        ``newton_max_iter`` Jacobians are assembled.
-        """
-        s = self.settings
-        rep = StepReport()
-        res = self.gfu.vec.CreateVector()
-        du = self.gfu.vec.CreateVector()
-        x_np = self.gfu.vec.FV().NumPy()
+        """Solve the current nonlinear system with :class:`~fbia.plugins.fem.newton.NewtonSolver`
+        (consistent Jacobian, chord steps, damping against inverted elements, Pardiso);
+        raises NewtonFailure.  Quasi-static: the solid velocity is zero first."""
         if not self.transient:
-            x_np[self._v_solid] = 0.0  # the solid is at rest
-        free, free_np = self._free, self._free_np
-        try_chord = self._inverse is not None and self._chord_ok
-        newton_norms: list[float] = []  # updates of the steps with a fresh Jacobian
-        refine = False  # refine every solve, not only those of fresh Jacobians (_linear_solve)
-        try:
-            for it in range(1, 4 * s.newton_max_iter + 1):
-                rep.iterations = it
-                t0 = time.perf_counter()
-                self._residual(res)
-                chord = False
-                if try_chord:  # a step with the last factorised Jacobian
-                    self._linear_solve(du, res, where, refine)
-                    norm = self._scaled_norm(du, free_np)
-                    previous = rep.norms[-1] if rep.norms else 1e-3
-                    chord = norm <= min(0.25 * previous, 0.1)
-                    rep.solve_time += time.perf_counter() - t0
-                    t0 = time.perf_counter()
-                if not chord:  # a Newton step with a fresh Jacobian
-                    if rep.jacobians >= s.newton_max_iter:
-                        break
-                    self._jacobian()
-                    t1 = time.perf_counter()
-                    self._factorise(free, where)
-                    refine = not self._linear_solve(du, res, where, refine=True) or refine
-                    rep.assembly_time += t1 - t0
-                    rep.solve_time += time.perf_counter() - t1
-                    norm = self._scaled_norm(du, free_np)
-                    rep.jacobians += 1
-                    newton_norms.append(norm)
-                rep.norms.append(norm)
-                step = du.FV().NumPy()
-                x0 = x_np.copy()
-                factor = 1.0
-                for _ in range(6):
-                    x_np[:] = x0 - factor * step
-                    if min(self.min_det_f()) > 0.0:
-                        break
-                    factor *= 0.5
-                else:
-                    x_np[:] = x0
-                    raise NewtonFailure(
-                        f"{where}: every damped update inverts elements", "ale_jacobian"
-                    )
-                contraction = norm / rep.norms[-2] if len(rep.norms) > 1 else 1.0
-                left = norm * contraction / (1.0 - contraction) if contraction < 0.5 else norm
-                if factor == 1.0 and (
-                    norm <= s.newton_tol or (norm <= 1e-3 and left <= s.newton_tol)
-                ):
-                    rep.converged = True
-                    break
-                if refine and not chord and norm <= 1e-6 and contraction > 0.25:
-                    # refined solves, yet a fresh Newton step no longer contracts: the state is
-                    # as accurate as the rounding in the linear algebra allows
-                    rep.converged = True
-                    break
-                try_chord = factor == 1.0
-                self._check_progress(newton_norms, where)
-            if not rep.converged:
-                raise NewtonFailure(
-                    f"{where}: Newton did not converge with {rep.jacobians} Jacobians "
-                    f"(scaled updates {', '.join(f'{n:.2g}' for n in rep.norms[-3:])})",
-                    "newton_divergence",
-                )
-        except NewtonFailure as fail:
-            fail.norms, fail.jacobians = list(rep.norms), rep.jacobians
-            raise
-        finally:
-            self.timings["assembly"] += rep.assembly_time
-            self.timings["solve"] += rep.solve_time
-            # the factorisation may serve the next solve only if this one ended converged
-            self._chord_ok = rep.converged
-        return rep
+            self.gfu.vec.FV().NumPy()[self._v_solid] = 0.0  # the solid is at rest
+        return self._newton.solve(where)
 
-    @staticmethod
-    def _check_progress(norms: list[float], where: str) -> None:
-        """Raise NewtonFailure if the Newton updates (fresh Jacobians) diverge or stagnate."""
-        if len(norms) >= 3 and norms[-1] > 1e3 * max(norms[0], 1.0):
-            raise NewtonFailure(
-                f"{where}: Newton diverges (scaled update {norms[-1]:.3g})", "newton_divergence"
-            )
-        if len(norms) >= 5 and norms[-1] > 0.1 * norms[-4]:
-            raise NewtonFailure(
-                f"{where}: Newton stagnates (scaled updates "
-                f"{', '.join(f'{n:.2g}' for n in norms[-4:])})",
-                "newton_divergence",
-            )
+    # -- what NewtonSolver needs (fbia.plugins.fem.newton.NonlinearSystem) ----------------------
+    @property
+    def vector(self) -> Any:
+        return self.gfu.vec
 
-    def _factorise(self, free: Any, where: str) -> None:
-        """(Re)factorise the Jacobian with Pardiso, reusing the symbolic factorisation."""
-        from pyngcore import Flags
+    @property
+    def matrix(self) -> Any:
+        return self.form.mat
 
-        try:
-            if self._inverse is None:
-                flags = {"refinement": 0} if self.linear_solver == "pardiso" else {}
-                self._inverse = self.form.mat.Inverse(
-                    free, inverse=self.linear_solver, flags=Flags(flags)
-                )
-            else:
-                self._inverse.Update()
-        except Exception as exc:  # Pardiso/NGSolve report a singular matrix as plain errors
-            self._inverse = None
-            raise NewtonFailure(f"{where}: factorisation failed: {exc}", "linear_solver") from exc
+    @property
+    def free(self) -> Any:
+        return self._free
 
-    def _linear_solve(self, du: Any, res: Any, where: str, refine: bool = False) -> bool:
-        """``du = J^-1 res`` on the free dofs; ``refine``: with iterative refinement.
+    @property
+    def free_mask(self) -> NDArray[np.bool_]:
+        return self._free_np
 
-        Pardiso runs without iterative refinement (it cost 8x the back-substitution).  With
-        ``refine`` the residual of the solve is corrected up to 3 times, until the correction
-        is below 1e-6 of the solution (scaled per field); returns whether the first correction
-        was that small, i.e. whether the plain solve was accurate.  Newton refines the solves
-        of fresh Jacobians, and all solves once one of them was inaccurate -- as with a nearly
-        rigid solid (Turek-Hron CFD1, E = 1e15 Pa, next to a mesh motion of weight 1e-8 Pa).
-        """
-        try:
-            du.data = self._inverse * res
-            if not refine:
-                return True
-            free = self._free_np
-            size = self._scaled_norm(du, free)
-            k_du = res.CreateVector()
-            r = res.CreateVector()
-            correction = res.CreateVector()
-            for k in range(3):
-                self.form.mat.Mult(du, k_du)
-                r.data = res - k_du
-                correction.data = self._inverse * r
-                du.data += correction
-                small = self._scaled_norm(correction, free) <= 1e-6 * max(size, 1e-12)
-                if small:
-                    return k == 0
-            return False
-        except NewtonFailure:
-            raise
-        except Exception as exc:  # see _factorise
-            raise NewtonFailure(f"{where}: linear solve failed: {exc}", "linear_solver") from exc
+    def admissible(self) -> bool:
+        """No element of the ALE map or of the solid is inverted (det F > 0)."""
+        return min(self.min_det_f()) > 0.0
 
-    def _scaled_norm(self, du: Any, free: NDArray[np.bool_]) -> float:
-        step = du.FV().NumPy()
-        if not np.all(np.isfinite(step)):
-            raise NewtonFailure("the linear solve returned NaN", "newton_nan")
-        return float(np.max(np.abs(step[free]) / self._scales()[free]))
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds spent assembling and solving (Newton and continuation), since the last
+        reset (assign a fresh dict)."""
+        return self._newton.timings
+
+    @timings.setter
+    def timings(self, value: dict[str, float]) -> None:
+        self._newton.timings = value
 
     # -- quasi-static solution with continuation ---------------------------------------------
     def solve_steady(
@@ -814,7 +667,7 @@ class AleFsiSolver:
         full = np.zeros(len(free))
         full[free] = dy_dmu
         size = np.maximum(np.abs(self.state()), np.abs(full))
-        floor = self._scales()
+        floor = self.scales()
         scale = np.empty(len(free))
         for i in range(3):
             blk = slice(self.fes.Range(i).start, self.fes.Range(i).stop)
@@ -903,9 +756,9 @@ class AleFsiSolver:
 
     def _branch_derivative(self, jump: float, where: str) -> NDArray[np.float64]:
         """``dy/dmu = -J^-1 dR/dmu`` at the current state (free dofs), with a fresh Jacobian."""
-        self._jacobian()
-        self._factorise(self._free, where)
-        self._chord_ok = False
+        self.assemble_jacobian()
+        self._newton.factorise(where)
+        self._newton.chord_ok = False
         return -self._solve_rate_derivative(jump, where)
 
     def _solve_rate_derivative(self, jump: float, where: str) -> NDArray[np.float64]:
@@ -915,7 +768,7 @@ class AleFsiSolver:
         kg = self.gfu.vec.CreateVector()
         self.form.mat.Mult(g, kg)
         out = self.gfu.vec.CreateVector()
-        self._linear_solve(out, kg, where)
+        self._newton.linear_solve(out, kg, where)
         return np.array(out.FV().NumPy()[self._free_np], copy=True)
 
     def _corrector(
@@ -940,7 +793,7 @@ class AleFsiSolver:
         Jacobians, dy/dmu at the solution); raises NewtonFailure.
         """
         s = self.settings
-        free, free_np = self._free, self._free_np
+        free_np = self._free_np
         x_np = self.gfu.vec.FV().NumPy()
         x_np[free_np] = z_pred[:-1] * scale
         mu = float(z_pred[-1])
@@ -949,15 +802,15 @@ class AleFsiSolver:
         du = self.gfu.vec.CreateVector()
         norms: list[float] = []
         jacobians = 0
-        self._chord_ok = False
+        self._newton.chord_ok = False
 
         def update(fresh: bool) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
             t0 = time.perf_counter()
             if fresh:
-                self._jacobian()
-                self._factorise(free, where)
+                self.assemble_jacobian()
+                self._newton.factorise(where)
             t1 = time.perf_counter()
-            self._linear_solve(du, res, where)
+            self._newton.linear_solve(du, res, where)
             a = np.array(du.FV().NumPy()[free_np], copy=True)
             if not np.all(np.isfinite(a)):
                 raise NewtonFailure(f"{where}: the linear solve returned NaN", "newton_nan")
@@ -970,11 +823,11 @@ class AleFsiSolver:
             else:  # y[lead] held: dy[lead] = -a[lead] - dmu b[lead] = target - y[lead]
                 dmu = (a[lead] + z_pred[lead] * scale[lead] - y[lead]) / -b[lead]
             dy = -a - dmu * b
-            norm = max(float(np.max(np.abs(dy) / self._scales()[free_np])), abs(dmu))
+            norm = max(float(np.max(np.abs(dy) / self.scales()[free_np])), abs(dmu))
             return dy, dmu, b, norm
 
         for it in range(1, 4 * s.newton_max_iter + 1):
-            self._residual(res)
+            self.residual(res)
             total.iterations += 1
             accepted = False
             if it > 1:  # chord step with the last factorisation
@@ -1067,143 +920,6 @@ class AleFsiSolver:
         return total
 
     # -- post-processing ---------------------------------------------------------------------
-    def interface_curves(self, deformed: bool = True) -> list[NDArray[np.float64]]:
-        """Ordered interface polylines (solid on the right), with the edge midpoints.
-
-        Each chain of ``interface`` edges is walked so that the solid lies on its right; open
-        chains start at their upstream end.  The points are the ends and midpoints of the
-        (possibly curved) reference edges, moved by the displacement evaluated on the edges.
-        """
-        ngs = self.ngs
-        if not hasattr(self, "_iface_cache"):
-            chains = interface_chains(self.mesh, ngs)
-            ir = ngs.IntegrationRule([(0.0,), (0.5,), (1.0,)], [0.0, 0.0, 0.0])
-            pts = self.mesh.MapToAllElements(ir, ngs.BND)
-            xy = np.c_[np.asarray(ngs.x(pts)).ravel(), np.asarray(ngs.y(pts)).ravel()]
-            xy = xy.reshape(-1, 3, 2)
-            vert = np.array([v.point for v in self.mesh.vertices])
-            # per edge of a chain: is reference point 1 (not 0) the start vertex?
-            oriented = [
-                [
-                    (
-                        el,
-                        bool(
-                            np.linalg.norm(xy[el, 2] - vert[start])
-                            < np.linalg.norm(xy[el, 0] - vert[start])
-                        ),
-                    )
-                    for el, start in chain
-                ]
-                for chain in chains
-            ]
-            self._iface_cache = (oriented, pts, xy)
-        oriented, pts, xy = self._iface_cache
-        u = np.asarray(self.displacement(pts)).reshape(-1, 3, 2) if deformed else 0.0 * xy
-        out = []
-        for chain_o in oriented:
-            curve = []
-            for el, flip in chain_o:
-                order = [2, 1] if flip else [0, 1]  # start point and midpoint of the edge
-                curve.append(xy[el, order] + u[el, order])
-            el, flip = chain_o[-1]
-            end = 0 if flip else 2
-            curve.append((xy[el, end] + u[el, end])[None, :])
-            out.append(np.vstack(curve))
-        return out
-
-    def flux(self, boundary: str) -> float:
-        """Volume flux (mm^2/s) out of the fluid through a boundary of the deformed domain."""
-        ngs = self.ngs
-        n = ngs.specialcf.normal(2)
-        F = ngs.Id(2) + ngs.Grad(self.displacement)
-        # Nanson: n da = J F^-T N dA; for the boundary integrals use the reference normal.
-        Jn = ngs.Det(F) * ngs.Inv(F).trans * n
-        val = ngs.Integrate(
-            ngs.InnerProduct(self.velocity, Jn),
-            self.mesh,
-            definedon=self.mesh.Boundaries(boundary),
-            order=2 * self.settings.order + 2,
-        )
-        return float(val)
-
-    def _fluid_residual(self) -> NDArray[np.float64]:
-        """Residual of the fluid equations alone (velocity rows: consistent nodal forces)."""
-        res = self.gfu.vec.CreateVector()
-        with self.ngs.TaskManager():
-            self._fluid_form.Apply(self.gfu.vec, res)
-        r = self.fes.Range(0)
-        return np.array(res.FV().NumPy()[r.start : r.stop], copy=True)
-
-    def _vertex_dofs(self, names: tuple[str, ...], boundary: bool) -> NDArray[np.int64]:
-        """Vertex numbers of the named boundaries (or regions)."""
-        ngs = self.ngs
-        kind = ngs.BND if boundary else ngs.VOL
-        verts: set[int] = set()
-        for el in self.mesh.Elements(kind):
-            if el.mat in names:
-                verts.update(v.nr for v in el.vertices)
-        return np.array(sorted(verts), dtype=np.int64)
-
-    def forces(
-        self, boundaries: tuple[str, ...] = ("obstacle", "interface")
-    ) -> NDArray[np.float64]:
-        """Force of the fluid on the body bounded by ``boundaries`` (g/s^2 per unit depth).
-
-        Computed from the residual of the fluid equations (Babuska-Miller): the test function
-        that is 1 (in x or y) on the body and 0 elsewhere on the boundary is the sum of the
-        vertex hat functions of the body's nodes, so the force is minus the sum of the fluid
-        residual over those rows -- far more accurate than integrating the traction.
-        """
-        res = self._fluid_residual()
-        verts = self._vertex_dofs(boundaries, boundary=True)
-        n = len(res) // 2  # VectorH1: all x dofs, then all y dofs; vertex dofs first
-        return -np.array([res[verts].sum(), res[n + verts].sum()])
-
-    def interface_nodal_forces(self) -> NDArray[np.float64]:
-        """Consistent nodal force (g/s^2) of the fluid on every interface vertex; 0 elsewhere."""
-        res = self._fluid_residual()
-        n = len(res) // 2
-        nv = self.mesh.nv
-        out = np.zeros((nv, 2))
-        verts = self._vertex_dofs(("interface",), boundary=True)
-        out[verts, 0] = -res[verts]
-        out[verts, 1] = -res[n + verts]
-        return out
-
-    def point_displacement(self, point: tuple[float, float]) -> NDArray[np.float64]:
-        mp = self.mesh(float(point[0]), float(point[1]))
-        return np.asarray(self.displacement(mp), dtype=float).ravel()
-
-    def max_interface_displacement(self) -> float:
-        """Largest displacement magnitude (mm) on the interface."""
-        ref = self.interface_curves(deformed=False)
-        cur = self.interface_curves(deformed=True)
-        return float(
-            max(np.linalg.norm(c - r, axis=1).max() for c, r in zip(cur, ref, strict=True))
-        )
-
-
-def sparse_direct_solver() -> str:
-    """``"pardiso"`` if MKL Pardiso is available (``pip install mkl``), else ``"umfpack"``.
-
-    The monolithic Jacobian is non-symmetric with zero diagonal blocks: Cholesky-type solvers
-    fail on it.  UMFPACK works but was 2.5-10x slower than Pardiso on the test machine.
-    """
-    try:
-        from ngsolve.solvers import mkl_pardiso
-    except ImportError:
-        available = False
-    else:
-        available = getattr(mkl_pardiso, "_pardiso", None) is not None
-    if available:
-        return "pardiso"
-    warnings.warn(
-        "MKL Pardiso is not available (pip install mkl); ale_fsi falls back to UMFPACK, "
-        "which is several times slower",
-        RuntimeWarning,
-        stacklevel=2,
-    )
-    return "umfpack"
 
 
 def ramp(t: float, ramp_time: float, steps: int) -> float:
