@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from .observation import coordinate_key
+from .options import plugin_options
 from .problem import InverseProblem, _jsonable
 
 __all__ = [
@@ -71,12 +72,10 @@ def _class_version(obj: Any) -> dict[str, str]:
 
 def _options(obj: Any) -> dict[str, Any]:
     """A plugin's options; a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
+    out = dict(_jsonable(plugin_options(obj)))  # inf and nan as strings, as canonical() does
     opts = getattr(obj, "options", None)
-    dump = getattr(opts, "model_dump", None)
-    if not callable(dump):
-        return {}
-    out = dict(_jsonable(dump(mode="json")))
-    for key, value in dump().items():
+    for key in out:
+        value = getattr(opts, key, None)
         if isinstance(value, Path):
             out[key] = _file_digest(value)
     return out

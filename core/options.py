@@ -80,3 +80,13 @@ class Configurable:
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options.model_dump().items())
         return f"{type(self).__name__}({opts})"
+
+
+def plugin_options(obj: Any, *, exclude_defaults: bool = False) -> dict[str, Any]:
+    """A plugin object's options as JSON-ready values (paths as strings, tuples as lists);
+    ``{}`` for an object without an ``Options`` model.  The one dump every report,
+    provenance record and store fingerprint uses."""
+    opts = getattr(obj, "options", None)
+    if not isinstance(opts, BaseModel):
+        return {}
+    return dict(opts.model_dump(mode="json", exclude_defaults=exclude_defaults))

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import ConfigError, ForwardModelError, MeasureError
 from .observation import Observation, Solution, coordinate_key
+from .options import plugin_options
 from .parameters import Parameter
 from .protocols import Discrepancy, ForwardModel
 
@@ -280,9 +281,9 @@ class InverseProblem:
         """A JSON-ready description of the problem (for results and provenance)."""
         return {
             "model": type(self.model).__name__,
-            "model_options": _options_of(self.model),
+            "model_options": plugin_options(self.model),
             "measure": type(self.measure).__name__,
-            "measure_options": _options_of(self.measure),
+            "measure_options": plugin_options(self.measure),
             "parameters": [p.describe() for p in self.parameters],
             "uncertain": [p.describe() for p in self.uncertain],
             "fixed": self.fixed,
@@ -296,14 +297,6 @@ class InverseProblem:
 
 class _PluginBug(Exception):
     pass
-
-
-def _options_of(obj: Any) -> dict[str, Any]:
-    opts = getattr(obj, "options", None)
-    if opts is None:
-        return {}
-    dump = getattr(opts, "model_dump", None)
-    return _jsonable(dump() if callable(dump) else dict(opts))
 
 
 def _jsonable(value: Any) -> Any:

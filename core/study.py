@@ -16,9 +16,12 @@ import numpy as np
 
 from .errors import ConfigError, ForwardModelError
 from .executors import make_evaluator
+from .iteration import InverseIterator
 from .observation import Observation
+from .options import plugin_options
 from .parameters import Parameter
 from .problem import Evaluation, InverseProblem
+from .protocols import Discrepancy, ForwardModel
 
 __all__ = ["ExecutorSpec", "Study", "SyntheticSpec", "derived_seed"]
 
@@ -150,9 +153,9 @@ class Study:
     name: str
     seed: int
     output: Path
-    model: Any
+    model: ForwardModel
     model_name: str
-    measure: Any
+    measure: Discrepancy
     measure_name: str
     parameters: list[Parameter]
     uncertain: list[Parameter]
@@ -160,7 +163,7 @@ class Study:
     observations: list[Observation]
     synthetic: SyntheticSpec | None
     noise_std: float | None
-    iterator: Any | None
+    iterator: InverseIterator | None
     iterator_name: str | None
     executor: ExecutorSpec
     raw: dict[str, Any] = field(repr=False)
@@ -281,9 +284,5 @@ class Study:
 
 def _opts(obj: Any) -> str:
     """The options that differ from their defaults, e.g. ``(n_points=81)``."""
-    opts = getattr(obj, "options", None)
-    dump = getattr(opts, "model_dump", None)
-    if not callable(dump):
-        return ""
-    given = dump(exclude_defaults=True)
+    given = plugin_options(obj, exclude_defaults=True)
     return "(" + ", ".join(f"{k}={v!r}" for k, v in given.items()) + ")" if given else ""
