@@ -202,7 +202,7 @@ def _plugins(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
-    from .report import format_table
+    from .tables import format_table
 
     print(format_table(rows, ["name", "kind", "distribution", "version", "class"]))
     return 0

@@ -14,10 +14,16 @@ from pathlib import Path
 from typing import Any
 
 from . import report
+from .evaluation_log import EvaluationLog
 from .iteration import drain
+from .plots import plot_evaluations, plot_interfaces
 from .problem import Evaluation, InverseProblem, Result
+from .progress import RunProgress, log_to_file
+from .provenance import now
+from .provenance import provenance as make_provenance
 from .store import StudyStore
 from .study import ExecutorSpec, Study
+from .tables import discrepancy_rows
 
 __all__ = ["STORE_NAME", "forward_study", "run_study", "study_seeds"]
 
@@ -43,7 +49,7 @@ def forward_study(
     ``report.txt``; echoes the discrepancy table (measure, D, number of residuals, max |r|).
     """
     out = Path(output) if output is not None else study.output / "forward"
-    return _forward(study, values, out, echo, started=report.now())
+    return _forward(study, values, out, echo, started=now())
 
 
 def _forward(
@@ -52,7 +58,7 @@ def _forward(
     problem = study.problem
     x = study.start_point(values)
     out.mkdir(parents=True, exist_ok=True)
-    with report.EvaluationLog(out / "evaluations.jsonl") as log:
+    with EvaluationLog(out / "evaluations.jsonl") as log:
         ev = problem.evaluate(x, workdir=out / "run", index=0, keep_solution=True)
         log.append(ev)
     echo(f"forward run of {study.model_name} at {_point(ev.x)}: {ev.status} ({ev.time:.3g} s)")
@@ -71,7 +77,7 @@ def _forward(
         evaluations=[ev],
     )
     if ev.ok and ev.solution is not None:
-        rows = report.discrepancy_rows(problem, ev.solution, study.measure_name)
+        rows = discrepancy_rows(problem, ev.solution, study.measure_name)
         result.info["discrepancy"] = rows
         files = result.info["files"] = _write_solution(study, ev.solution, out, "forward run")
         result.info["inputs"] = ev.x
@@ -122,7 +128,7 @@ def run_study(
     goes on to the caller.
     """
     out = Path(output) if output is not None else study.output
-    started = report.now()
+    started = now()
     if study.iterator is None:
         echo("the study has no [iterator]: one forward run at the start point")
         return _forward(study, None, out, echo, started)
@@ -134,7 +140,7 @@ def run_study(
         if fresh:
             shutil.rmtree(out / "runs", ignore_errors=True)
         store.bind(problem)
-        with report.log_to_file(out / "fbia.log") as logger:
+        with log_to_file(out / "fbia.log") as logger:
 
             def say(line: str) -> None:
                 echo(line)
@@ -159,9 +165,9 @@ def _run_stored(
     fresh: bool,
 ) -> Result:
     _announce_resume(study, store, echo, retry_failed, fresh)
-    log = report.EvaluationLog(out / "evaluations.jsonl")
+    log = EvaluationLog(out / "evaluations.jsonl")
     progress = _Progress(echo, log, problem.names)
-    listener = report.RunProgress(log, echo)
+    listener = RunProgress(log, echo)
     echo(
         f"running {study.iterator_name} on {study.model_name} with the {study.measure_name} "
         f"measure ({executor.label()}); evaluations go to {store.path}"
@@ -234,7 +240,7 @@ def _run_stored(
         if best.ok and best.solution is not None:
             solution = best.solution
             result.info.setdefault(
-                "discrepancy", report.discrepancy_rows(problem, solution, study.measure_name)
+                "discrepancy", discrepancy_rows(problem, solution, study.measure_name)
             )
             title = f"{study.iterator_name} result"
             files.update(
@@ -254,7 +260,7 @@ def _run_stored(
     names, units = problem.names, [p.unit for p in problem.parameters]
     made_ev = extra(
         "the evaluations plot",
-        lambda: report.plot_evaluations(
+        lambda: plot_evaluations(
             out / "plots" / "evaluations.png", log.records, names, units
         ),
     )
@@ -304,7 +310,7 @@ def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Pr
 class _Progress:
     """One line per iterator step, at most one a second: evaluations, failures, best D."""
 
-    def __init__(self, echo: Echo, log: report.EvaluationLog, names: Sequence[str]) -> None:
+    def __init__(self, echo: Echo, log: EvaluationLog, names: Sequence[str]) -> None:
         self.echo, self.log, self.names = echo, log, list(names)
         self.t0 = self.shown = time.perf_counter()
         self.steps = 0
@@ -331,7 +337,7 @@ class _Progress:
             self.show()
 
 
-def _partial(study: Study, log: report.EvaluationLog, status: str, message: str) -> Result:
+def _partial(study: Study, log: EvaluationLog, status: str, message: str) -> Result:
     best = log.best()
     names = [p.name for p in study.parameters]
     return Result(
@@ -357,7 +363,7 @@ def _write_solution(study: Study, solution: Any, out: Path, title: str) -> dict[
     fields = report.copy_fields(solution, out / "fields", root=out)
     if fields:
         files["fields"] = {k: str(v) for k, v in fields.items()}
-    png = report.plot_interfaces(out / "plots" / "interfaces.png", problem, solution, title)
+    png = plot_interfaces(out / "plots" / "interfaces.png", problem, solution, title)
     if png is not None:
         files["interfaces plot"] = str(png)
     return files
@@ -375,7 +381,7 @@ def _finish(
 ) -> None:
     """Provenance, ``result.json`` and ``report.txt``; echo the report unless ``quiet``."""
     problem = study.problem
-    result.provenance = report.provenance(
+    result.provenance = make_provenance(
         study_path=study.path.resolve(),
         study_text=study.text,
         study_sha256=study.sha256,
@@ -384,7 +390,7 @@ def _finish(
         executor=executor or {"kind": "serial", "workers": 1},
         plugins=[problem.model, problem.measure, study.iterator],
         started=started,
-        finished=report.now(),
+        finished=now(),
         store=None if store is None else store.describe(),
     )
     result.info.setdefault("problem", problem.describe())

@@ -23,7 +23,8 @@ import pytest
 from _models import FAULT_GRID, check_injected_faults, toy_curve, toy_problem
 
 import fbia
-from fbia.core import report
+from fbia.core.evaluation_log import EvaluationLog
+from fbia.core.progress import RunProgress
 from fbia.core.store import StudyStore
 
 PROBLEM = toy_problem(fail_above=650.0, bug_above=680.0, die_above=750.0, slow_above=790.0)
@@ -214,9 +215,9 @@ def test_progress_lines_bar_and_log_follow_the_batch(tmp_path, capsys):
     lines: list[str] = []
     with (
         StudyStore(tmp_path / "s.sqlite") as store,
-        report.EvaluationLog(tmp_path / "e.jsonl") as log,
+        EvaluationLog(tmp_path / "e.jsonl") as log,
     ):
-        plain = report.RunProgress(log, lines.append, tty=False, interval=0.0)
+        plain = RunProgress(log, lines.append, tty=False, interval=0.0)
         with fbia.SerialEvaluator(store=store, listener=plain) as ev:
             ev.evaluate(PROBLEM, batch)
             ev.evaluate(PROBLEM, batch[3:])  # from the store: nothing to show
@@ -228,7 +229,7 @@ def test_progress_lines_bar_and_log_follow_the_batch(tmp_path, capsys):
         assert lines[-1] == "  batch 1: 5/5 runs done, failed 1, running 0"
         assert plain.totals == {"runs": 5, "reused": 2, "failed": 1}
         # on a terminal: a bar with the same counts, on stderr
-        bar = report.RunProgress(log, lines.append, tty=True)
+        bar = RunProgress(log, lines.append, tty=True)
         with fbia.SerialEvaluator(store=store, listener=bar) as ev:
             ev.evaluate(PROBLEM, [{"E": 700.0, "nu": 0.1}, {"E": 210.0, "nu": 0.1}])
         err = capsys.readouterr().err

@@ -1,0 +1,114 @@
+"""The study's own figures (matplotlib, Agg): the interfaces, the evaluations."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .observation import Solution
+from .problem import Evaluation, InverseProblem
+
+__all__ = ["plot_evaluations", "plot_interfaces"]
+
+
+# -- plots -------------------------------------------------------------------------------------
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_interfaces(
+    path: Path, problem: InverseProblem, solution: Solution | None, title: str = ""
+) -> Path | None:
+    """Observed (and simulated) 2-D interfaces of every state in one figure; None for 3-D."""
+    if problem.dim != 2:
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for k, obs in enumerate(problem.observations):
+        colour = f"C{k % 10}"
+        if obs.interface is not None:
+            for j, curve in enumerate(obs.interface.curves()):
+                ax.plot(
+                    curve[:, 0],
+                    curve[:, 1],
+                    ".",
+                    ms=3,
+                    color=colour,
+                    label=f"observed {obs.label()}" if j == 0 else None,
+                )
+        mp = obs.measurement_points
+        if mp is not None:
+            ax.plot(mp.points[:, 0], mp.points[:, 1], "x", color=colour, ms=5)
+        if solution is not None:
+            gamma = solution.interface(obs.coordinate)
+            for j, curve in enumerate(gamma.curves()):
+                ax.plot(
+                    curve[:, 0],
+                    curve[:, 1],
+                    "-",
+                    lw=1.2,
+                    color=colour,
+                    label=f"simulated {obs.label()}" if j == 0 else None,
+                )
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_evaluations(
+    path: Path, records: Sequence[Evaluation], names: Sequence[str], units: Sequence[str] = ()
+) -> Path | None:
+    """Distance D of every evaluation in order (log scale), and for two parameters the
+    evaluated points in parameter space coloured by log10 D (failed runs as red crosses)."""
+    if not records:
+        return None
+    plt = _pyplot()
+    two = len(names) == 2
+    fig, axes = plt.subplots(1, 2 if two else 1, figsize=(10 if two else 5.5, 4), squeeze=False)
+    ok = [r for r in records if r.ok and r.distance > 0 and math.isfinite(r.distance)]
+    bad = [r for r in records if not r.ok]
+    ax = axes[0, 0]
+    ax.semilogy([r.index for r in ok], [r.distance for r in ok], ".", ms=4)
+    ax.set_xlabel("evaluation")
+    ax.set_ylabel("D")
+    ax.set_title(f"{len(records)} evaluations, {len(bad)} failed", fontsize=9)
+    if two:
+        units = list(units) + [""] * 2
+        ax = axes[0, 1]
+        x0 = [r.x.get(names[0], math.nan) for r in ok]
+        x1 = [r.x.get(names[1], math.nan) for r in ok]
+        sc = ax.scatter(x0, x1, c=np.log10([r.distance for r in ok]), s=10, cmap="viridis")
+        fig.colorbar(sc, ax=ax, label="log10 D")
+        if bad:
+            ax.plot(
+                [r.x.get(names[0], math.nan) for r in bad],
+                [r.x.get(names[1], math.nan) for r in bad],
+                "x",
+                color="red",
+                label="failed",
+            )
+            ax.legend(fontsize=8)
+        ax.set_xlabel(f"{names[0]} [{units[0]}]" if units[0] else names[0])
+        ax.set_ylabel(f"{names[1]} [{units[1]}]" if units[1] else names[1])
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
