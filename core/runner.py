@@ -10,6 +10,7 @@ from __future__ import annotations
 import shutil
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -153,6 +154,31 @@ def run_study(
         store.close()
 
 
+@dataclass
+class _Session:
+    """What the stages of one ``fbia run`` session share."""
+
+    study: Study
+    problem: InverseProblem
+    store: StudyStore
+    out: Path
+    started: str
+    echo: Echo
+    executor_info: dict[str, Any] = field(default_factory=dict)
+
+    def finish(self, result: Result, quiet: bool = False) -> None:
+        _finish(
+            self.study,
+            result,
+            self.out,
+            self.started,
+            self.echo,
+            self.executor_info,
+            quiet=quiet,
+            store=self.store,
+        )
+
+
 def _run_stored(
     study: Study,
     problem: InverseProblem,
@@ -164,33 +190,19 @@ def _run_stored(
     retry_failed: bool,
     fresh: bool,
 ) -> Result:
+    """The stages of a session: announce, evaluate (saving what was computed on Ctrl-C or an
+    error), check the result, save it, add the extra files, save it again."""
     _announce_resume(study, store, echo, retry_failed, fresh)
+    session = _Session(study, problem, store, out, started, echo, executor.describe())
     log = EvaluationLog(out / "evaluations.jsonl")
-    progress = _Progress(echo, log, problem.names)
     listener = RunProgress(log, echo)
     echo(
         f"running {study.iterator_name} on {study.model_name} with the {study.measure_name} "
         f"measure ({executor.label()}); evaluations go to {store.path}"
     )
-    executor_info = executor.describe()
-    store.begin_session(executor_info, study.sha256)
+    store.begin_session(session.executor_info, study.sha256)
     try:
-        evaluator = executor.make(out, store=store, listener=listener, retry_failed=retry_failed)
-        try:
-            executor_info.update(evaluator.describe())
-            if executor.kind == "dask":
-                where = (
-                    f"the Dask scheduler at {executor_info['scheduler']}"
-                    if executor_info["cluster"] == "scheduler"
-                    else f"a Dask {executor_info['cluster']} cluster ({executor_info['scheduler']})"
-                )
-                echo(
-                    f"{where}: {executor_info['workers']} worker thread(s), ready after "
-                    f"{executor_info['startup_seconds']:.3g} s"
-                )
-            result = _drive(study.iterator, problem, evaluator, progress)
-        finally:
-            evaluator.close()
+        result = _evaluate(session, executor, log, listener, retry_failed)
     except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
         interrupted = isinstance(exc, KeyboardInterrupt)
         store.end_session("interrupted" if interrupted else "error")
@@ -203,16 +215,62 @@ def _run_stored(
             else f"the iterator stopped with {type(exc).__name__}: {exc}",
         )
         log.close()
-        _finish(study, partial, out, started, echo, executor_info, quiet=True, store=store)
+        session.finish(partial, quiet=True)
         raise
     store.end_session("done")
     log.close()
-    progress.last()
     totals = listener.totals
     echo(
         f"{totals['runs'] + totals['reused']} evaluations: {totals['runs']} run now "
         f"({totals['failed']} failed), {totals['reused']} taken from the store"
     )
+    result = _checked(study, result, log)
+    # The result is saved before the extras, which only add files to it: a plot that fails
+    # is reported (echoed and kept in result.info["warnings"]), never fatal.
+    session.finish(result, quiet=True)
+    files, warnings = _extras(session, result, log)
+    if warnings:
+        result.info["warnings"] = warnings
+    result.info.setdefault("files", files)
+    session.finish(result)
+    return result
+
+
+def _evaluate(
+    session: _Session,
+    executor: ExecutorSpec,
+    log: EvaluationLog,
+    listener: RunProgress,
+    retry_failed: bool,
+) -> Any:
+    """Make the evaluator (say where a Dask cluster is) and drive the iterator with it."""
+    study, echo, info = session.study, session.echo, session.executor_info
+    progress = _Progress(echo, log, session.problem.names)
+    evaluator = executor.make(
+        session.out, store=session.store, listener=listener, retry_failed=retry_failed
+    )
+    try:
+        info.update(evaluator.describe())
+        if executor.kind == "dask":
+            where = (
+                f"the Dask scheduler at {info['scheduler']}"
+                if info["cluster"] == "scheduler"
+                else f"a Dask {info['cluster']} cluster ({info['scheduler']})"
+            )
+            echo(
+                f"{where}: {info['workers']} worker thread(s), ready after "
+                f"{info['startup_seconds']:.3g} s"
+            )
+        assert study.iterator is not None
+        result = _drive(study.iterator, session.problem, evaluator, progress)
+    finally:
+        evaluator.close()
+    progress.last()
+    return result
+
+
+def _checked(study: Study, result: Any, log: EvaluationLog) -> Result:
+    """The iterator's result, with its name and (if it kept none) the session's records."""
     if not isinstance(result, Result):
         raise TypeError(
             f"iterator {study.iterator_name!r} returned {type(result).__name__}, not fbia.Result"
@@ -220,9 +278,15 @@ def _run_stored(
     result.iterator = result.iterator or study.iterator_name or ""
     if not result.evaluations:
         result.evaluations = list(log.records)
-    # The result is saved before the extras below, which only add files to it: a plot that
-    # fails is reported (echoed and kept in result.info["warnings"]), never fatal.
-    _finish(study, result, out, started, echo, executor_info, quiet=True, store=store)
+    return result
+
+
+def _extras(
+    session: _Session, result: Result, log: EvaluationLog
+) -> tuple[dict[str, Any], list[str]]:
+    """The files beside the result: the interfaces and discrepancy at the result's x (one
+    more forward run), the iterator's own plots, the evaluations plot; what failed."""
+    study, problem, out, echo = session.study, session.problem, session.out, session.echo
     files: dict[str, Any] = {}
     warnings: list[str] = []
 
@@ -235,20 +299,17 @@ def _run_stored(
             return None
 
     if result.x and all(n in result.x for n in problem.names):
-        x_star = dict(result.x)
-        best = problem.evaluate(x_star, workdir=out / "best", keep_solution=True)
+        best = problem.evaluate(dict(result.x), workdir=out / "best", keep_solution=True)
         if best.ok and best.solution is not None:
             solution = best.solution
             result.info.setdefault(
                 "discrepancy", discrepancy_rows(problem, solution, study.measure_name)
             )
             title = f"{study.iterator_name} result"
-            files.update(
-                extra(
-                    "writing the interfaces", lambda: _write_solution(study, solution, out, title)
-                )
-                or {}
+            written = extra(
+                "writing the interfaces", lambda: _write_solution(study, solution, out, title)
             )
+            files.update(written or {})
         else:
             warnings.append(f"the forward run at the result's x {best.status}: {best.message}")
             echo(f"warning: {warnings[-1]}")
@@ -260,17 +321,11 @@ def _run_stored(
     names, units = problem.names, [p.unit for p in problem.parameters]
     made_ev = extra(
         "the evaluations plot",
-        lambda: plot_evaluations(
-            out / "plots" / "evaluations.png", log.records, names, units
-        ),
+        lambda: plot_evaluations(out / "plots" / "evaluations.png", log.records, names, units),
     )
     if made_ev is not None:
         files["evaluations plot"] = str(made_ev)
-    if warnings:
-        result.info["warnings"] = warnings
-    result.info.setdefault("files", files)
-    _finish(study, result, out, started, echo, executor_info, store=store)
-    return result
+    return files, warnings
 
 
 def _announce_resume(
