@@ -29,7 +29,7 @@ _LAZY = {
     "load_study": "fbia.core.study_file:load_study",
     "run_study": "fbia.core.runner:run_study",
     "forward_study": "fbia.core.runner:forward_study",
-    "least_squares": "fbia.iterators.levenberg_marquardt:least_squares",
+    "least_squares": "fbia.iterators.least_squares:least_squares",
     "smc": "fbia.iterators.smc:smc",
     "DaskEvaluator": "fbia.core.dask_executor:DaskEvaluator",
     "StudyStore": "fbia.core.store:StudyStore",

@@ -10,12 +10,8 @@ import numpy as np
 import pytest
 
 import fbia
-from fbia.iterators.levenberg_marquardt import (
-    LevenbergMarquardtIterator,
-    LMResult,
-    LMState,
-    ResidualFunctionProblem,
-)
+from fbia.iterators.least_squares import ResidualFunctionProblem
+from fbia.iterators.levenberg_marquardt import LevenbergMarquardtIterator, LMResult, LMState
 
 T = np.linspace(0.0, 4.0, 25)
 Y = 3.0 * np.exp(-0.7 * T)
@@ -340,7 +336,7 @@ def test_iteration_limit():
 def test_registry_and_lazy_least_squares():
     it = fbia.iterator("levenberg_marquardt", mode="paper", x0={"E": 1.0})
     assert isinstance(it, LevenbergMarquardtIterator) and it.options.mode == "paper"
-    from fbia.iterators.levenberg_marquardt import least_squares
+    from fbia.iterators.least_squares import least_squares
 
     assert fbia.least_squares is least_squares
 
@@ -412,7 +408,11 @@ def test_plots_three_parameters(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "module", ["fbia.iterators.lm_robust", "fbia.iterators.levenberg_marquardt"]
+    "module",
+    [
+        "fbia.iterators.lm_robust",
+        "fbia.iterators.levenberg_marquardt",
+    ],
 )
 def test_module_docstring_recipes_run(module):
     import doctest
