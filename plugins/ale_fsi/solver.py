@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -46,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
+from ..fem.continuation import ArclengthContinuation
 from ..fem.newton import NewtonFailure, NewtonSolver, StepReport, sparse_direct_solver
 from .geometry import FLUID, solid_regions
 
@@ -155,6 +155,9 @@ class AleFsiSolver:
         self.transient = False
         self.linear_solver = sparse_direct_solver()
         self._newton = NewtonSolver(self, s.newton_tol, s.newton_max_iter, self.linear_solver)
+        self._continuation = ArclengthContinuation(
+            self, self._newton, self.newton, s.continuation_min_fraction, unit="mm^2/s"
+        )
         self._build_motion()
         self._build_forms(transient=False)
         self._det_points = mesh.MapToAllElements(self._check_rule(), ngs.VOL)
@@ -162,6 +165,8 @@ class AleFsiSolver:
             :, 0
         ].astype(bool)
         self.materials: dict[str, tuple[float, float]] = {}
+        self._tri_cache: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
+        self._dxd_rate: NDArray[np.float64] | None = None  # see load_direction
 
     # -- set-up ------------------------------------------------------------------------------
     def _inflow_geometry(self) -> None:
@@ -432,7 +437,7 @@ class AleFsiSolver:
         return float(np.min(4.0 * math.sqrt(3.0) * area / l2))
 
     def _fluid_triangles(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        if not hasattr(self, "_tri_cache"):
+        if self._tri_cache is None:
             ngs = self.ngs
             tris = np.array(
                 [
@@ -579,6 +584,19 @@ class AleFsiSolver:
         """No element of the ALE map or of the solid is inverted (det F > 0)."""
         return min(self.min_det_f()) > 0.0
 
+    # -- what ArclengthContinuation needs (fbia.plugins.fem.continuation.LoadedSystem) -------
+    @property
+    def load(self) -> float:
+        """The inflow rate (mm^2/s)."""
+        return float(self.inflow_rate.Get())
+
+    def set_load(self, value: float) -> None:
+        self.set_inflow(value)
+
+    def field_blocks(self) -> list[slice]:
+        """Velocity, displacement and pressure dofs."""
+        return [slice(self.fes.Range(i).start, self.fes.Range(i).stop) for i in range(3)]
+
     @property
     def timings(self) -> dict[str, float]:
         """Seconds spent assembling and solving (Newton and continuation), since the last
@@ -612,7 +630,7 @@ class AleFsiSolver:
         where = where or f"inflow rate {rate:g} mm^2/s"
         start = float(self.inflow_rate.Get())
         if not direct and continuation and rate != start:
-            rep = self._arclength(rate, where, StepReport())
+            rep = self._continuation.follow(rate, where, StepReport())
             rep.converged = True
             return rep
         x_start = self.state()
@@ -625,13 +643,13 @@ class AleFsiSolver:
             if not continuation or rate == start:
                 raise ForwardModelError(str(fail), fail.reason) from None
             first = StepReport(iterations=len(fail.norms), jacobians=fail.jacobians)
-            rep = self._arclength(rate, where, first)
+            rep = self._continuation.follow(rate, where, first)
         rep.converged = True
         return rep
 
-    def _inflow_direction(self) -> NDArray[np.float64]:
+    def load_direction(self) -> NDArray[np.float64]:
         """Derivative of the state's Dirichlet values with respect to the inflow rate."""
-        if not hasattr(self, "_dxd_rate"):
+        if self._dxd_rate is None:
             x = self.state()
             rate = float(self.inflow_rate.Get())
             self.gfu.vec[:] = 0.0
@@ -641,105 +659,7 @@ class AleFsiSolver:
             self.inflow_rate.Set(rate)
         return self._dxd_rate
 
-    def _arclength(self, rate: float, where: str, total: StepReport) -> StepReport:
-        """Continuation along the branch of steady states, locally parametrised (Rheinboldt).
-
-        The unknowns are the free dofs ``y`` and the load parameter ``mu`` (rate = start + mu
-        (rate - start), so ``mu`` runs from 0 to 1); the Dirichlet inflow values follow ``mu``.
-        All are measured in scaled units: each field relative to its size over the whole jump.
-        Each step predicts along the tangent ``t`` of the branch (``J dy/dmu = -dR/dmu``), scaled
-        to a largest component of 1, by a step ``ds`` and corrects with Newton's method on
-        ``R(y, mu) = 0`` with that largest component held at its predicted value -- ``mu``
-        itself far from a limit point (plain continuation in the rate), a state dof near one,
-        so the corrector passes limit points, also local ones such as the collapse of a single
-        corner element.  The bordered Newton system is solved with two back-substitutions of
-        the factorised Jacobian.  ``ds`` is halved after a failed corrector and grows after an
-        easy one; the continuation fails when it falls below ``continuation_min_fraction`` of
-        the first step.  A tangent whose ``mu`` component changes sign marks a limit point
-        (fold): the branch turns back there.
-        """
-        s = self.settings
-        free = self._free_np
-        lam0 = float(self.inflow_rate.Get())
-        jump = rate - lam0
-        dy_dmu = self._branch_derivative(jump, where)
-        # per-field size over the jump: the state, its linear prediction or a physical floor
-        full = np.zeros(len(free))
-        full[free] = dy_dmu
-        size = np.maximum(np.abs(self.state()), np.abs(full))
-        floor = self.scales()
-        scale = np.empty(len(free))
-        for i in range(3):
-            blk = slice(self.fes.Range(i).start, self.fes.Range(i).stop)
-            scale[blk] = max(float(size[blk].max(initial=0.0)), float(floor[blk].max()))
-        scale = scale[free]
-
-        def unit(dy: NDArray[np.float64]) -> NDArray[np.float64]:
-            """The tangent (dy/dmu, 1) in scaled units, largest component 1 in size."""
-            t = np.append(dy / scale, 1.0)
-            return t / np.abs(t).max()
-
-        t = unit(dy_dmu)
-        z = np.append(self.state()[free] / scale, 0.0)  # scaled (y, mu)
-        ds = 0.5 / abs(t[-1])  # the first prediction goes half way
-        ds_min = s.continuation_min_fraction * ds
-        history = [(0.0, self.state())]
-        while True:
-            z_pred = z + ds * t
-            lead = int(np.argmax(np.abs(t)))
-            label = f"{where} (continuation near {lam0 + z_pred[-1] * jump:.4g} mm^2/s)"
-            try:
-                its, dy_dmu = self._corrector(z_pred, lead, scale, lam0, jump, label, total)
-            except NewtonFailure as fail:
-                self.set_state(history[-1][1])
-                self.set_inflow(lam0 + z[-1] * jump)
-                ds *= 0.5
-                if ds < ds_min:
-                    raise ForwardModelError(
-                        f"{where}: continuation failed at {lam0 + z[-1] * jump:.4g} mm^2/s "
-                        f"({fail}); there {self._compression_note()}",
-                        fail.reason,
-                    ) from None
-                continue
-            x_new = self.state()
-            mu_new = (float(self.inflow_rate.Get()) - lam0) / jump
-            t_new = unit(dy_dmu)
-            if t_new[lead] * t[lead] < 0.0:
-                t_new = -t_new  # keep the orientation along the branch
-            if mu_new >= 1.0:
-                # passed the requested rate: Newton there from the state interpolated on the branch
-                mu_prev, x_prev = history[-1]
-                theta = (1.0 - mu_prev) / (mu_new - mu_prev)
-                self.set_state(x_prev + theta * (x_new - x_prev))
-                self.set_inflow(rate)
-                try:
-                    rep = self.newton(where)
-                except NewtonFailure as fail:
-                    total.iterations += len(fail.norms)
-                    total.jacobians += fail.jacobians
-                    self.set_state(x_prev)
-                    self.set_inflow(lam0 + mu_prev * jump)
-                    ds *= 0.5
-                    if ds < ds_min:
-                        raise ForwardModelError(str(fail), fail.reason) from None
-                    continue
-                total.iterations += rep.iterations
-                total.jacobians += rep.jacobians
-                return total
-            history.append((mu_new, x_new))
-            if t_new[-1] <= 0.0:
-                mu_max = max(m for m, _ in history)
-                self.set_state(max(history, key=lambda h: h[0])[1])
-                raise ForwardModelError(
-                    f"{where}: no steady state -- the branch of steady states turns back at a "
-                    f"limit point near {lam0 + mu_max * jump:.4g} mm^2/s (continuation from "
-                    f"{lam0:g} mm^2/s); there {self._compression_note()}",
-                    "limit_point",
-                )
-            z, t = np.append(x_new[free] / scale, mu_new), t_new
-            ds *= 2.0 if its <= 2 else (1.25 if its <= 3 else (1.0 if its <= 4 else 0.6))
-
-    def _compression_note(self) -> str:
+    def failure_note(self) -> str:
         """Where the current state compresses the solid most (for failure messages)."""
         ngs = self.ngs
         detf = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
@@ -753,120 +673,6 @@ class AleFsiSolver:
             # has its extremum at s^2 = det F = 1/3; below it the material softens
             note += " (Saint Venant-Kirchhoff softens under compression beyond det F = 1/3)"
         return note
-
-    def _branch_derivative(self, jump: float, where: str) -> NDArray[np.float64]:
-        """``dy/dmu = -J^-1 dR/dmu`` at the current state (free dofs), with a fresh Jacobian."""
-        self.assemble_jacobian()
-        self._newton.factorise(where)
-        self._newton.chord_ok = False
-        return -self._solve_rate_derivative(jump, where)
-
-    def _solve_rate_derivative(self, jump: float, where: str) -> NDArray[np.float64]:
-        """``J^-1 dR/dmu`` with the factorised Jacobian; ``dR/dmu = K g jump``."""
-        g = self.gfu.vec.CreateVector()
-        g.FV().NumPy()[:] = self._inflow_direction() * jump
-        kg = self.gfu.vec.CreateVector()
-        self.form.mat.Mult(g, kg)
-        out = self.gfu.vec.CreateVector()
-        self._newton.linear_solve(out, kg, where)
-        return np.array(out.FV().NumPy()[self._free_np], copy=True)
-
-    def _corrector(
-        self,
-        z_pred: NDArray[np.float64],
-        lead: int,
-        scale: NDArray[np.float64],
-        lam0: float,
-        jump: float,
-        where: str,
-        total: StepReport,
-    ) -> tuple[int, NDArray[np.float64]]:
-        """Newton on one continuation step, component ``lead`` of ``z`` held at ``z_pred``.
-
-        ``z = (y / scale, mu)``.  The Newton system ``J dy + dR/dmu dmu = -R`` with the
-        constraint ``dz[lead] = z_pred[lead] - z[lead]`` is solved by block elimination: with
-        ``a = J^-1 R`` and ``b = J^-1 dR/dmu``, ``dy = -a - dmu b``.  As in :meth:`newton`,
-        after the first step the factorised Jacobian is tried again (chord step) and kept if
-        the update contracts by 4x.  Converged at a scaled update below 1e-8 (the point at the
-        requested rate is then solved by :meth:`newton` to the full tolerance).  A fresh
-        Newton step that does not halve the update means the step was too long.  Returns (fresh
-        Jacobians, dy/dmu at the solution); raises NewtonFailure.
-        """
-        s = self.settings
-        free_np = self._free_np
-        x_np = self.gfu.vec.FV().NumPy()
-        x_np[free_np] = z_pred[:-1] * scale
-        mu = float(z_pred[-1])
-        self.set_inflow(lam0 + mu * jump)
-        res = self.gfu.vec.CreateVector()
-        du = self.gfu.vec.CreateVector()
-        norms: list[float] = []
-        jacobians = 0
-        self._newton.chord_ok = False
-
-        def update(fresh: bool) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
-            t0 = time.perf_counter()
-            if fresh:
-                self.assemble_jacobian()
-                self._newton.factorise(where)
-            t1 = time.perf_counter()
-            self._newton.linear_solve(du, res, where)
-            a = np.array(du.FV().NumPy()[free_np], copy=True)
-            if not np.all(np.isfinite(a)):
-                raise NewtonFailure(f"{where}: the linear solve returned NaN", "newton_nan")
-            b = self._solve_rate_derivative(jump, where)
-            self.timings["assembly"] += t1 - t0
-            self.timings["solve"] += time.perf_counter() - t1
-            y = x_np[free_np]
-            if lead == len(z_pred) - 1:  # mu held: a plain Newton step at fixed rate
-                dmu = z_pred[-1] - mu
-            else:  # y[lead] held: dy[lead] = -a[lead] - dmu b[lead] = target - y[lead]
-                dmu = (a[lead] + z_pred[lead] * scale[lead] - y[lead]) / -b[lead]
-            dy = -a - dmu * b
-            norm = max(float(np.max(np.abs(dy) / self.scales()[free_np])), abs(dmu))
-            return dy, dmu, b, norm
-
-        for it in range(1, 4 * s.newton_max_iter + 1):
-            self.residual(res)
-            total.iterations += 1
-            accepted = False
-            if it > 1:  # chord step with the last factorisation
-                dy, dmu, b, norm = update(fresh=False)
-                accepted = norm <= min(0.25 * norms[-1], 0.1)
-            if not accepted:
-                if jacobians >= s.newton_max_iter // 2:
-                    break
-                dy, dmu, b, norm = update(fresh=True)
-                jacobians += 1
-                total.jacobians += 1
-                if jacobians >= 3 and norm > 0.5 * norms[-1]:
-                    # from a predictor on the tangent Newton contracts at once; if not, a
-                    # smaller step is cheaper than more iterations
-                    raise NewtonFailure(
-                        f"{where}: the continuation step does not converge (scaled updates "
-                        f"{', '.join(f'{n:.2g}' for n in [*norms[-2:], norm])})",
-                        "newton_divergence",
-                    )
-            norms.append(norm)
-            y0, mu0 = x_np[free_np].copy(), mu
-            for _ in range(6):
-                x_np[free_np] = y0 + dy
-                mu = mu0 + dmu
-                self.set_inflow(lam0 + mu * jump)
-                if min(self.min_det_f()) > 0.0:
-                    break
-                dy, dmu = 0.5 * dy, 0.5 * dmu
-            else:
-                raise NewtonFailure(
-                    f"{where}: every damped update inverts elements", "ale_jacobian"
-                )
-            if norm <= 1e-8:
-                return jacobians, -b
-        raise NewtonFailure(
-            f"{where}: the continuation step did not converge "
-            f"(scaled updates {', '.join(f'{n:.2g}' for n in norms[-3:])})",
-            "newton_divergence",
-        )
 
     # -- transient solution (one-step-theta) ----------------------------------------------------
     def solve_transient(
