@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
+from ..fem.newton import sparse_direct_solver
 
 
 @dataclass(frozen=True)
@@ -380,7 +381,9 @@ class CutFlow:
                     a.Assemble()
                     f.Assemble()
                     if sysm["inv"] is None:
-                        sysm["inv"] = a.mat.Inverse(self.freedofs, inverse="pardiso")
+                        sysm["inv"] = a.mat.Inverse(
+                            self.freedofs, inverse=sparse_direct_solver()
+                        )
                     else:
                         sysm["inv"].Update()  # same pattern: numerical factorisation only
                     sysm["fresh"] = True

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
+from ..fem.newton import sparse_direct_solver
 
 
 @dataclass(frozen=True)
@@ -191,7 +192,9 @@ class Skeleton:
                 self.form.Apply(self.gfx.vec, res)
                 self.form.AssembleLinearization(self.gfx.vec)
                 if self._inverse is None:
-                    self._inverse = self.form.mat.Inverse(self.X.FreeDofs(), inverse="pardiso")
+                    self._inverse = self.form.mat.Inverse(
+                        self.X.FreeDofs(), inverse=sparse_direct_solver()
+                    )
                 else:
                     self._inverse.Update()
                 du.data = self._inverse * res
