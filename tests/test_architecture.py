@@ -20,7 +20,6 @@ MAX_LINES = 600
 #: Modules still above MAX_LINES, with the size they may not exceed (shrink, never grow).
 OVERSIZE = {
     "core/study_file.py": 718,  # the hand-written validator, until pydantic section models
-    "plugins/ale_fsi/solver.py": 791,  # spaces, forms, transient stepping: to split further
     "testing.py": 941,
     "plugins/cutfem_fpi/coupled.py": 711,
 }

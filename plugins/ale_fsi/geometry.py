@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ...core.errors import ConfigError
+from ...core.errors import ConfigError, ForwardModelError
 
 if TYPE_CHECKING:
     import ngsolve
@@ -435,3 +435,54 @@ def write_mesh(mesh: ngsolve.Mesh, path: str | Path) -> Path:
     )
     meshio.write(path, out, file_format="gmsh22", binary=False)
     return path
+
+
+def interface_chains(mesh: Any, ngs: Any) -> list[list[tuple[int, int]]]:
+    """The interface as chains of ``(boundary element, start vertex)``, solid on the right."""
+    solid_names = set(solid_regions(mesh))
+    pts = np.array([v.point for v in mesh.vertices])
+    edges: dict[tuple[int, int], tuple[int, int]] = {}  # directed (a, b) -> (element, a)
+    solid_tris: dict[frozenset[int], int] = {}
+    for el in mesh.Elements(ngs.VOL):
+        if el.mat in solid_names:
+            vs = [v.nr for v in el.vertices]
+            for i in range(3):
+                solid_tris[frozenset((vs[i], vs[(i + 1) % 3]))] = vs[(i + 2) % 3]
+    for nr, el in enumerate(mesh.Elements(ngs.BND)):
+        if el.mat != "interface":
+            continue
+        a, b = (v.nr for v in el.vertices)
+        opp = solid_tris.get(frozenset((a, b)))
+        if opp is None:
+            raise ForwardModelError("an interface edge touches no solid element", "bad_mesh")
+        t, c = pts[b] - pts[a], pts[opp] - pts[a]
+        solid_left = t[0] * c[1] - t[1] * c[0] > 0
+        start, stop = (b, a) if solid_left else (a, b)  # the solid must lie on the right
+        if (start, stop) in edges or any(s == start for s, _ in edges):
+            raise ForwardModelError("interface edges branch at a vertex", "bad_mesh")
+        edges[(start, stop)] = (nr, start)
+    if not edges:
+        raise ForwardModelError("mesh has no interface edges", "bad_mesh")
+    succ = {s: (t, edges[(s, t)]) for s, t in edges}
+    starts = set(succ) - {t for t, _ in succ.values()}
+    chains: list[list[tuple[int, int]]] = []
+    seen: set[int] = set()
+    for first in sorted(starts, key=lambda i: (pts[i][0], pts[i][1])):
+        chain, v = [], first
+        while v in succ:
+            v, item = succ[v]
+            chain.append(item)
+        chains.append(chain)
+        seen.update(e for e, _ in chain)
+    for first in sorted(succ):  # closed loops
+        if succ[first][1][0] in seen:
+            continue
+        chain, v = [], first
+        while True:
+            v, item = succ[v]
+            chain.append(item)
+            seen.add(item[0])
+            if v == first:
+                break
+        chains.append(chain)
+    return chains

@@ -9,21 +9,19 @@ nodal interface forces and point displacements.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .solver import interface_chains
-
-if TYPE_CHECKING:
-    from .solver import AleFsiSolver
+from .forms import AleFsiProblem
+from .geometry import interface_chains
 
 
 class AleFsiPostprocess:
     """What an :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver` state gives."""
 
-    def __init__(self, solver: AleFsiSolver) -> None:
+    def __init__(self, solver: AleFsiProblem) -> None:
         self.solver = solver
         self._iface_cache: tuple[Any, Any, Any] | None = None
 

@@ -1,110 +1,38 @@
-"""Monolithic ALE fluid-solid interaction on NGSolve: weak forms, Newton, continuation.
+"""Solution algorithms of the monolithic ALE FSI problem: steady states (Newton with
+continuation in the inflow rate) and transient runs (one-step-theta).
 
-Unknowns on one mesh (reference configuration, plane strain, Taylor-Hood for the fluid):
-
-* ``v`` -- velocity, continuous over fluid *and* solid (P2): fluid velocity in the fluid, solid
-  velocity in the solid, so the kinematic coupling (thesis eq. 2.28, Paper A eq. 4b) holds
-  strongly;
-* ``d`` -- displacement, continuous over fluid and solid (P2): solid displacement ``d^S`` in the
-  solid, ALE mesh displacement ``d^G`` in the fluid, so eq. 2.30 holds strongly;
-* ``p`` -- fluid pressure (P1, fluid only).
-
-Transient mode: the fluid momentum (eq. 2.19a, pulled back to the reference configuration) and
-the solid balance of momentum (eq. 2.25) are tested with the *same* test function ``phi``; the
-interface integrals cancel and the traction balance (eq. 2.29, Paper A eq. 4a) holds weakly
-without an interface term.  The second test function ``psi`` carries the solid kinematics
-``dd/dt = v`` in the solid and the pseudo-solid mesh motion (harmonic or linear-elastic
-extension, Jacobian-stiffened) in the fluid, weighted by a tiny factor so that it does not
-disturb the interface rows.
-
-Quasi-static mode: the solid is at rest, so ``v = 0`` on the solid and on the interface
-(eq. 2.28) and those velocity dofs (about a third of all) are dropped from the Newton system.
-The solid balance is tested with ``psi`` instead, and the fluid momentum rows of the interface
-nodes are added to the ``psi`` rows of the same nodes -- the discrete form of eq. 2.29: solid
-stress + fluid traction = 0 at every interface node, exactly what the shared test function
-gives in transient mode.  The mesh-motion operator is linear in ``d`` with coefficients fixed
-on the reference mesh, so it is assembled once and added to every Jacobian.
+:class:`AleFsiSolver` is an :class:`~fbia.plugins.ale_fsi.forms.AleFsiProblem` with the shared
+:class:`~fbia.plugins.fem.newton.NewtonSolver` and
+:class:`~fbia.plugins.fem.continuation.ArclengthContinuation` of :mod:`fbia.plugins.fem`.
 
 >>> from fbia.plugins.ale_fsi.geometry import build_flow_cell
 >>> from fbia.plugins.ale_fsi.solver import AleFsiSolver, SolverSettings
 >>> solver = AleFsiSolver(build_flow_cell(mesh_size=0.2), SolverSettings())  # doctest: +SKIP
 >>> solver.set_materials({"solid": (400.0, 0.3)})                             # doctest: +SKIP
 >>> report = solver.solve_steady(100.0)                                       # doctest: +SKIP
->>> from fbia.plugins.ale_fsi.postprocess import AleFsiPostprocess
->>> curves = AleFsiPostprocess(solver).interface_curves()                     # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
-
-import numpy as np
-from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
 from ..fem.continuation import ArclengthContinuation
 from ..fem.newton import NewtonFailure, NewtonSolver, StepReport, sparse_direct_solver
-from .geometry import FLUID, solid_regions
+from .forms import AleFsiProblem, SolverSettings
+from .geometry import interface_chains
+from .materials import lame
 
 if TYPE_CHECKING:
     import ngsolve
 
-
-@dataclass(frozen=True)
-class SolverSettings:
-    """Physics and numerics of :class:`AleFsiSolver` (units mm, s, g; stresses in Pa)."""
-
-    fluid_density: float = 1e-3  # g/mm^3
-    fluid_viscosity: float = 1e-3  # g/(mm s)
-    solid_density: float = 1e-3  # g/mm^3
-    material: str = "svk"  # "svk" (eq. 2.15) | "neo_hooke" (eq. 2.18)
-    gravity: tuple[float, float] = (0.0, 0.0)  # mm/s^2, acts on the solid only
-    outflow: str = "horizontal"  # "horizontal" (v_y = 0, traction-free in x) | "do_nothing"
-    mesh_motion: str = "harmonic"  # "harmonic" | "elastic"
-    mesh_stiffening: float = 1.0  # exponent chi of the Jacobian-based stiffening
-    mesh_weight: float = 1e-8  # weight of the mesh-motion operator (a stiffness, Pa)
-    mesh_slip: bool = True  # mesh slides along straight walls/inflow/outflow (eq. 2.24)
-    order: int = 2  # velocity/displacement order (pressure: order - 1)
-    newton_tol: float = 1e-8  # scaled Newton correction
-    newton_max_iter: int = 12  # Jacobian assemblies per Newton solve (chord steps extra)
-    continuation_min_fraction: float = 1.0 / 16.0  # smallest continuation step / first step
-    min_det_f: float = 0.01  # smallest admissible det F (ALE map and solid)
-    min_quality: float = 0.02  # smallest admissible deformed fluid element quality
-    theta: float = 1.0  # one-step-theta
-    threads: int = 1
+__all__ = ["AleFsiSolver", "SolverSettings", "interface_chains", "lame"]
 
 
-def lame(E: float, nu: float) -> tuple[float, float]:
-    """Lame parameters from Young's modulus and Poisson's ratio (thesis eq. 2.16)."""
-    mu = E / (2.0 * (1.0 + nu))
-    lam = nu * E / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    return mu, lam
-
-
-def _stress_pk2(material: str, F: Any, mu: Any, lam: Any) -> Any:
-    """Second Piola-Kirchhoff stress of the plane-strain solid.
-
-    SVK, eq. 2.15: ``S = lam tr(E) I + 2 mu E`` with ``E = (F^T F - I)/2``;
-    neo-Hooke, eq. 2.18: ``S = mu (I - C^-1) + lam ln(J) C^-1`` with ``C = F^T F``.
-    """
-    import ngsolve as ngs
-
-    identity = ngs.Id(2)
-    C = F.trans * F
-    if material == "svk":
-        E = 0.5 * (C - identity)
-        return lam * ngs.Trace(E) * identity + 2.0 * mu * E
-    if material == "neo_hooke":
-        Cinv = ngs.Inv(C)
-        return mu * (identity - Cinv) + lam * ngs.log(ngs.Det(F)) * Cinv
-    raise ValueError(f"unknown material {material!r}")
-
-
-class AleFsiSolver:
-    """Spaces, forms and nonlinear solvers of the monolithic ALE FSI problem on one mesh.
+class AleFsiSolver(AleFsiProblem):
+    """The ALE FSI problem with its solvers (see the module docstring).
 
     Parameters
     ----------
@@ -119,441 +47,17 @@ class AleFsiSolver:
         # machine its spinning threads cost more than they give, so follow ``threads``
         # unless the user has set MKL_NUM_THREADS.
         os.environ.setdefault("MKL_NUM_THREADS", str(max(1, int(settings.threads))))
-        import ngsolve as ngs
-
-        self.ngs = ngs
-        self.mesh = mesh
-        self.settings = s = settings
-        ngs.SetNumThreads(max(1, int(s.threads)))
-        self.solids = solid_regions(mesh)
-        bnds = set(mesh.GetBoundaries())
-        self._has = {b: b in bnds for b in ("outflow", "walls", "obstacle", "inflow")}
-        self._inflow_geometry()
-
-        # -- spaces: velocity and displacement continuous over the whole mesh (see module doc)
-        noslip = "|".join(b for b in ("walls", "obstacle", "solid_fixed") if b in bnds)
-        vx = "|".join(x for x in ("inflow", noslip) if x)
-        vy = vx
-        if s.outflow == "horizontal":
-            vy = "|".join(x for x in (vx, "outflow") if x)
-        elif s.outflow != "do_nothing":
-            raise ValueError(f"unknown outflow condition {s.outflow!r}")
-        V = ngs.VectorH1(mesh, order=s.order, dirichletx=vx, dirichlety=vy)
-        dx_fixed, dy_fixed = self._mesh_dirichlet(bnds)
-        D = ngs.VectorH1(mesh, order=s.order, dirichletx=dx_fixed, dirichlety=dy_fixed)
-        Q = ngs.H1(mesh, order=s.order - 1, definedon=FLUID)
-        self.fes = ngs.FESpace([V, D, Q])
-        self.gfu = ngs.GridFunction(self.fes)
-        self.gfu_old = ngs.GridFunction(self.fes)  # previous time step
-        self.velocity, self.displacement, self.pressure = self.gfu.components
-
-        # -- coefficients that change between runs without recompiling the forms
-        self.inflow_rate = ngs.Parameter(0.0)
-        self.dt = ngs.Parameter(1.0)
-        self._mu = {r: ngs.Parameter(1.0) for r in self.solids}
-        self._lam = {r: ngs.Parameter(1.0) for r in self.solids}
-        self.transient = False
         self.linear_solver = sparse_direct_solver()
-        self._newton = NewtonSolver(self, s.newton_tol, s.newton_max_iter, self.linear_solver)
-        self._continuation = ArclengthContinuation(
-            self, self._newton, self.newton, s.continuation_min_fraction, unit="mm^2/s"
+        self._newton = NewtonSolver(
+            self, settings.newton_tol, settings.newton_max_iter, self.linear_solver
         )
-        self._build_motion()
-        self._build_forms(transient=False)
-        self._det_points = mesh.MapToAllElements(self._check_rule(), ngs.VOL)
-        self._region_of_point = mesh.MaterialCF({FLUID: 1.0}, default=0.0)(self._det_points)[
-            :, 0
-        ].astype(bool)
-        self.materials: dict[str, tuple[float, float]] = {}
-        self._tri_cache: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
-        self._dxd_rate: NDArray[np.float64] | None = None  # see load_direction
+        self._continuation = ArclengthContinuation(
+            self, self._newton, self.newton, settings.continuation_min_fraction, unit="mm^2/s"
+        )
+        super().__init__(mesh, settings)
 
-    # -- set-up ------------------------------------------------------------------------------
-    def _inflow_geometry(self) -> None:
-        """End points, width and inward normal of the (straight) inflow boundary."""
-        ngs = self.ngs
-        mesh = self.mesh
-        verts: set[int] = set()
-        for el in mesh.Elements(ngs.BND):
-            if el.mat == "inflow":
-                verts.update(v.nr for v in el.vertices)
-        if not verts:
-            raise ForwardModelError("mesh has no inflow boundary", "bad_mesh")
-        pts = np.array([mesh.vertices[i].point for i in sorted(verts)])
-        centre = pts.mean(axis=0)
-        # principal direction of the inflow segment
-        _, _, vt = np.linalg.svd(pts - centre)
-        t = vt[0]
-        s = (pts - centre) @ t
-        a, b = centre + s.min() * t, centre + s.max() * t
-        width = float(np.linalg.norm(b - a))
-        if np.max(np.abs((pts - centre) @ vt[1])) > 1e-6 * width:
-            raise ForwardModelError("the inflow boundary is not a straight segment", "bad_mesh")
-        n = np.array([-t[1], t[0]])
-        # inward: towards the fluid's centroid
-        fluid_c = np.array(
-            [ngs.Integrate(c, mesh, definedon=mesh.Materials(FLUID)) for c in (ngs.x, ngs.y)]
-        ) / ngs.Integrate(1.0, mesh, definedon=mesh.Materials(FLUID))
-        if np.dot(fluid_c - centre, n) < 0:
-            n = -n
-        self.inflow_start, self.inflow_width, self.inflow_normal = a, width, n
-        self.inflow_tangent = (b - a) / width
-        self.length_scale = width
-
-    def _mesh_dirichlet(self, bnds: set[str]) -> tuple[str, str]:
-        """Dirichlet boundaries of the x and y displacement (eq. 2.24 with slip, or fixed)."""
-        fixed = ["solid_fixed"] + [b for b in ("obstacle",) if b in bnds]
-        fx, fy = list(fixed), list(fixed)
-        for name in ("inflow", "outflow", "walls"):
-            if name not in bnds:
-                continue
-            # only walls slide: a sliding inflow would distort the prescribed profile
-            slip = self.settings.mesh_slip and name == "walls"
-            direction = self._straight_direction(name) if slip else None
-            if direction == "x":  # horizontal boundary: the mesh may slide in x
-                fy.append(name)
-            elif direction == "y":  # vertical boundary: the mesh may slide in y
-                fx.append(name)
-            else:
-                fx.append(name)
-                fy.append(name)
-        return "|".join(fx), "|".join(fy)
-
-    def _straight_direction(self, name: str) -> str | None:
-        """ "x" if every segment of boundary ``name`` is horizontal, "y" if vertical, else None."""
-        ngs = self.ngs
-        segs = [
-            np.array([self.mesh.vertices[v.nr].point for v in el.vertices])
-            for el in self.mesh.Elements(ngs.BND)
-            if el.mat == name
-        ]
-        d = np.array([s[1] - s[0] for s in segs])
-        scale = np.abs(d).max()
-        if np.all(np.abs(d[:, 1]) <= 1e-10 * scale):
-            return "x"
-        if np.all(np.abs(d[:, 0]) <= 1e-10 * scale):
-            return "y"
-        return None
-
-    @staticmethod
-    def _check_rule() -> Any:
-        import ngsolve as ngs
-
-        pts = [(0, 0), (1, 0), (0, 1), (0.5, 0), (0.5, 0.5), (0, 0.5), (1 / 3, 1 / 3)]
-        return ngs.IntegrationRule(pts, [0.0] * len(pts))
-
-    def _build_forms(self, transient: bool) -> None:
-        """The residual of the coupled problem (thesis eqs. 2.19-2.30) as one nonlinear form.
-
-        Transient: one-step-theta, ``M (x - x_old)/dt + theta A(x) + (1 - theta) A(x_old)``
-        for the viscous, convective and elastic terms, the pressure, the incompressibility and
-        the mesh motion implicit; the ALE convective velocity ``c = v - (d - d_old)/dt``.
-        Quasi-static: the solid at rest, its balance tested with ``psi`` (module docstring).
-        """
-        ngs = self.ngs
-        s = self.settings
-        (v, d, p), (phi, psi, q) = self.fes.TnT()
-        I2 = ngs.Id(2)
-        rho_f, mu_f, rho_s = s.fluid_density, s.fluid_viscosity, s.solid_density
-        v_old, d_old, _ = self.gfu_old.components
-        theta = s.theta if transient else 1.0
-        mesh_velocity = (d - d_old) / self.dt if transient else None
-
-        def kinematics(dd: Any) -> tuple[Any, Any, Any]:
-            F = I2 + ngs.Grad(dd)
-            return F, ngs.Det(F), ngs.Inv(F)
-
-        def fluid_terms(vv: Any, dd: Any) -> Any:
-            """Viscous and convective terms of eq. 2.19a on the reference domain."""
-            F, J, Finv = kinematics(dd)
-            grad_v = ngs.Grad(vv) * Finv  # spatial velocity gradient
-            sigma_v = mu_f * (grad_v + grad_v.trans)  # eq. 2.20-2.21 without the pressure
-            c = vv if mesh_velocity is None else vv - mesh_velocity  # ALE convective velocity
-            return J * ngs.InnerProduct(sigma_v * Finv.trans, ngs.Grad(phi)) + rho_f * J * (
-                ngs.InnerProduct(grad_v * c, phi)
-            )
-
-        F, J, Finv = kinematics(d)
-        fluid = theta * fluid_terms(v, d)
-        fluid += -p * J * ngs.InnerProduct(Finv.trans, ngs.Grad(phi))  # pressure, implicit
-        fluid += -J * ngs.Trace(ngs.Grad(v) * Finv) * q  # eq. 2.19b
-        if transient:
-            fluid += rho_f * J * ngs.InnerProduct((v - v_old) / self.dt, phi)
-            if theta < 1.0:
-                fluid += (1.0 - theta) * fluid_terms(v_old, d_old)
-
-        fluid_cf = fluid.Compile()
-        self._fluid_form = ngs.BilinearForm(self.fes, symmetric=False)
-        self._fluid_form += fluid_cf * ngs.dx(FLUID)
-        form = ngs.BilinearForm(self.fes, symmetric=False)
-        form += fluid_cf * ngs.dx(FLUID)  # the mesh motion is added as a fixed matrix
-        g = ngs.CoefficientFunction(tuple(float(c) for c in s.gravity))
-        for region in self.solids:
-            mu, lam = self._mu[region], self._lam[region]
-
-            def solid_terms(dd: Any, test: Any, mu: Any = mu, lam: Any = lam) -> Any:
-                """First Piola-Kirchhoff stress F S (eq. 2.25) and the body force."""
-                Fd = I2 + ngs.Grad(dd)
-                S = _stress_pk2(s.material, Fd, mu, lam)
-                return ngs.InnerProduct(Fd * S, ngs.Grad(test)) - rho_s * ngs.InnerProduct(g, test)
-
-            if transient:
-                solid = theta * solid_terms(d, phi)
-                # eq. 2.25 and dd/dt = v, both by one-step-theta
-                solid += rho_s * ngs.InnerProduct((v - v_old) / self.dt, phi)
-                v_mid = theta * v + (1.0 - theta) * v_old
-                solid += ngs.InnerProduct((d - d_old) / self.dt - v_mid, psi)
-                if theta < 1.0:
-                    solid += (1.0 - theta) * solid_terms(d_old, phi)
-                bonus = 0
-            else:
-                # at rest: the solid balance in the psi rows (see the module docstring).  NGSolve
-                # picks the quadrature order from the proxies' orders (here only gradients: 2);
-                # +2 gives the order of the transient form (4: the SVK integrand on straight P2
-                # elements exactly), so that both modes solve the same discrete problem.
-                solid = solid_terms(d, psi)
-                bonus = 2
-            form += solid.Compile() * ngs.dx(region, bonus_intorder=bonus)
-        self.form = form
-        self.transient = transient
+    def _on_new_forms(self) -> None:
         self._newton.reset()
-        self._positions: dict[str, Any] | None = None  # CSR positions, after the 1st assembly
-        self._set_free_dofs(transient)
-
-    def _build_motion(self) -> None:
-        """The pseudo-solid mesh-motion operator (linear in d, fixed coefficients), assembled once.
-
-        Harmonic or linear-elastic extension of the displacement into the fluid, stiffened by the
-        inverse reference element area (Jacobian-based stiffening, exponent ``mesh_stiffening``)
-        and weighted by ``mesh_weight`` so that it does not disturb the interface rows.
-        """
-        ngs = self.ngs
-        s = self.settings
-        mesh = self.mesh
-        d, psi = self.fes.TrialFunction()[1], self.fes.TestFunction()[1]
-        area = ngs.GridFunction(ngs.L2(mesh, order=0))
-        vols = np.asarray(ngs.Integrate(1.0, mesh, element_wise=True))
-        area.vec.FV().NumPy()[:] = vols
-        stiff = s.mesh_weight * (float(vols.max()) / area) ** s.mesh_stiffening
-        if s.mesh_motion == "harmonic":
-            motion = stiff * ngs.InnerProduct(ngs.Grad(d), ngs.Grad(psi))
-        elif s.mesh_motion == "elastic":
-            eps_d = ngs.Sym(ngs.Grad(d))
-            motion = stiff * (
-                2.0 * ngs.InnerProduct(eps_d, ngs.Sym(ngs.Grad(psi)))
-                + ngs.Trace(eps_d) * ngs.div(psi)
-            )
-        else:
-            raise ValueError(f"unknown mesh motion {s.mesh_motion!r}")
-        self._area = area
-        self._motion = ngs.BilinearForm(self.fes, symmetric=False)
-        self._motion += motion * ngs.dx(FLUID)
-        self._motion.Assemble()
-
-    def _set_free_dofs(self, transient: bool) -> None:
-        """Free dofs of the Newton system; quasi-static: without the velocity on the solid."""
-        ngs = self.ngs
-        free = np.array(self.fes.FreeDofs(), dtype=bool)
-        r_v, r_d = self.fes.Range(0), self.fes.Range(1)
-        V = self.fes.components[0]
-        solid_v = np.flatnonzero(np.array(V.GetDofs(self.mesh.Materials("|".join(self.solids)))))
-        self._v_solid = r_v.start + solid_v  # velocity dofs of the solid (interface included)
-        if not transient:
-            free[self._v_solid] = False
-        # interface dofs whose displacement is free: their fluid-momentum rows (phi) are added
-        # to their displacement rows (psi) in quasi-static mode
-        iface = np.flatnonzero(np.array(V.GetDofs(self.mesh.Boundaries("interface"))))
-        iface = iface[free[r_d.start + iface]]
-        self._iface_rows = (r_v.start + iface, r_d.start + iface)
-        self._free_np = free
-        self._free = ngs.BitArray(free.tolist())
-
-    # -- parameters and state ----------------------------------------------------------------
-    def set_materials(self, materials: dict[str, tuple[float, float]]) -> None:
-        """Young's modulus (Pa) and Poisson's ratio per solid region (eq. 2.16)."""
-        for region in self.solids:
-            E, nu = materials[region]
-            mu, lam = lame(E, nu)
-            self._mu[region].Set(mu)
-            self._lam[region].Set(lam)
-        self.materials = dict(materials)
-
-    @property
-    def ndof(self) -> int:
-        """Unknowns of the Newton system (quasi-static: without the solid's velocity)."""
-        return int(self._free_np.sum())
-
-    def state(self) -> NDArray[np.float64]:
-        """A copy of the solution vector (velocity, displacement, pressure dofs)."""
-        return np.array(self.gfu.vec.FV().NumPy(), copy=True)
-
-    def set_state(self, vec: NDArray[np.float64] | None) -> None:
-        if vec is None:
-            self.gfu.vec[:] = 0.0
-        else:
-            self.gfu.vec.FV().NumPy()[:] = vec
-
-    def _inflow_profile(self, rate: float) -> Any:
-        """Parabolic inflow with volume rate ``rate`` (mm^2/s): 6 rate/W s(1-s) n_in."""
-        ngs = self.ngs
-        a, w, n = self.inflow_start, self.inflow_width, self.inflow_normal
-        t = self.inflow_tangent
-        s = ((ngs.x - a[0]) * t[0] + (ngs.y - a[1]) * t[1]) / w
-        prof = 6.0 * rate / w * s * (1.0 - s)
-        return ngs.CoefficientFunction((prof * n[0], prof * n[1]))
-
-    def set_inflow(self, rate: float) -> None:
-        """Set the inflow Dirichlet values; every other dof is left untouched (warm starts)."""
-        ngs = self.ngs
-        V = self.fes.components[0]
-        tmp = ngs.GridFunction(V)
-        tmp.Set(self._inflow_profile(rate), definedon=self.mesh.Boundaries("inflow"))
-        dofs = np.flatnonzero(np.array(V.GetDofs(self.mesh.Boundaries("inflow")), dtype=bool))
-        self.velocity.vec.FV().NumPy()[dofs] = tmp.vec.FV().NumPy()[dofs]
-        self.inflow_rate.Set(rate)
-
-    # -- checks ------------------------------------------------------------------------------
-    def min_det_f(self) -> tuple[float, float]:
-        """Smallest det F of the ALE map (fluid) and of the solid deformation.
-
-        Evaluated at the vertices, edge midpoints and centroid of every element, where the
-        quadratic polynomial det F of a P2 displacement takes its characteristic values.
-        """
-        ngs = self.ngs
-        detf = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
-        vals = np.asarray(detf(self._det_points))[:, 0]
-        fl = self._region_of_point
-        return float(vals[fl].min()), float(vals[~fl].min())
-
-    def min_fluid_quality(self) -> float:
-        """Smallest shape quality 4 sqrt(3) A / sum(l^2) of the deformed fluid triangles."""
-        tris, pts = self._fluid_triangles()
-        u = self._vertex_displacement()
-        x = pts + u
-        a, b, c = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-        ab, ac, bc = b - a, c - a, c - b
-        area = 0.5 * (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-        l2 = (ab**2).sum(1) + (ac**2).sum(1) + (bc**2).sum(1)
-        return float(np.min(4.0 * math.sqrt(3.0) * area / l2))
-
-    def _fluid_triangles(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        if self._tri_cache is None:
-            ngs = self.ngs
-            tris = np.array(
-                [
-                    [v.nr for v in el.vertices]
-                    for el in self.mesh.Elements(ngs.VOL)
-                    if el.mat == FLUID
-                ]
-            )
-            pts = np.array([v.point for v in self.mesh.vertices])
-            # orient counter-clockwise in the reference configuration
-            a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
-            cw = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0] < 0
-            tris[cw] = tris[cw][:, [0, 2, 1]]
-            self._tri_cache = (tris, pts)
-        return self._tri_cache
-
-    def _vertex_displacement(self) -> NDArray[np.float64]:
-        """Displacement at the mesh vertices (the first nv dofs of each P2 component)."""
-        nv = self.mesh.nv
-        comps = self.displacement.components
-        return np.c_[comps[0].vec.FV().NumPy()[:nv], comps[1].vec.FV().NumPy()[:nv]]
-
-    def check_state(self, where: str) -> dict[str, float]:
-        """Raise :class:`ForwardModelError` unless the current state is admissible."""
-        s = self.settings
-        x = self.gfu.vec.FV().NumPy()
-        if not np.all(np.isfinite(x)):
-            raise ForwardModelError(f"{where}: the solution contains NaN", "nan")
-        det_fluid, det_solid = self.min_det_f()
-        if det_fluid < s.min_det_f:
-            raise ForwardModelError(
-                f"{where}: ALE map inverted or degenerate "
-                f"(min det F = {det_fluid:.3g} in the fluid)",
-                "ale_jacobian",
-            )
-        if det_solid < s.min_det_f:
-            raise ForwardModelError(
-                f"{where}: solid deformation degenerate (min det F = {det_solid:.3g})",
-                "solid_jacobian",
-            )
-        quality = self.min_fluid_quality()
-        if quality < s.min_quality:
-            raise ForwardModelError(
-                f"{where}: fluid element quality {quality:.3g} below {s.min_quality}",
-                "element_quality",
-            )
-        return {"min_det_f_fluid": det_fluid, "min_det_f_solid": det_solid, "min_quality": quality}
-
-    # -- Newton ------------------------------------------------------------------------------
-    def scales(self) -> NDArray[np.float64]:
-        """Per-dof scales of the Newton correction: velocity, displacement and pressure.
-
-        Each field's largest value, at least a physical floor: the mean inflow speed, its
-        dynamic plus viscous pressure, and for the displacement 1e-6 of the inflow width -- far
-        below any resolvable deformation, yet above the rounding noise of a nearly rigid solid
-        (Turek-Hron CFD1, E = 1e15 Pa, moves 3e-9 mm).
-        """
-        s = self.settings
-        w = self.length_scale
-        u_ref = abs(float(self.inflow_rate.Get())) / w + 1e-9 * w  # mm/s
-        p_ref = s.fluid_density * u_ref**2 + s.fluid_viscosity * u_ref / w + 1e-12
-        x = self.gfu.vec.FV().NumPy()
-        out = np.empty_like(x)
-        for i, floor in enumerate((u_ref, 1e-6 * w, p_ref)):
-            r = self.fes.Range(i)
-            block = np.abs(x[r.start : r.stop])
-            out[r.start : r.stop] = max(float(block.max(initial=0.0)), floor)
-        return out
-
-    def _csr_positions(self) -> dict[str, Any]:
-        """Where the mesh-motion entries and the interface row sums go in the Jacobian's CSR."""
-        if self._positions is None:
-            mat = self.form.mat
-            n = mat.width
-            cols, ptr = (np.asarray(a, dtype=np.int64) for a in mat.CSR()[1:])
-            keys = np.repeat(np.arange(mat.height, dtype=np.int64), np.diff(ptr)) * n + cols
-            order = np.argsort(keys, kind="stable")
-            sorted_keys = keys[order]
-
-            def lookup(wanted: NDArray[np.int64]) -> NDArray[np.int64]:
-                at = np.minimum(np.searchsorted(sorted_keys, wanted), len(keys) - 1)
-                if not np.array_equal(sorted_keys[at], wanted):
-                    raise RuntimeError("ale_fsi: unexpected sparsity pattern of the Jacobian")
-                return order[at]
-
-            mcols, mptr = (np.asarray(a, dtype=np.int64) for a in self._motion.mat.CSR()[1:])
-            mrows = np.repeat(np.arange(self._motion.mat.height, dtype=np.int64), np.diff(mptr))
-            pos = {"motion": lookup(mrows * n + mcols)}
-            if not self.transient:
-                src_rows, dst_rows = self._iface_rows
-                src = np.concatenate([np.arange(ptr[r], ptr[r + 1]) for r in src_rows])
-                shift = np.repeat(dst_rows - src_rows, ptr[src_rows + 1] - ptr[src_rows])
-                pos["iface_src"] = src
-                pos["iface_dst"] = lookup((keys[src] // n + shift) * n + cols[src])
-            self._positions = pos
-        return self._positions
-
-    def residual(self, res: Any) -> None:
-        """The residual of the Newton system at the current state, into ``res``."""
-        with self.ngs.TaskManager():
-            self.form.Apply(self.gfu.vec, res)
-        self._motion.mat.MultAdd(1.0, self.gfu.vec, res)
-        if not self.transient:
-            r = res.FV().NumPy()
-            src, dst = self._iface_rows
-            r[dst] += r[src]
-
-    def assemble_jacobian(self) -> None:
-        """Assemble the consistent Jacobian at the current state into ``self.form.mat``."""
-        with self.ngs.TaskManager():
-            self.form.AssembleLinearization(self.gfu.vec)
-        pos = self._csr_positions()
-        data = self.form.mat.AsVector().FV().NumPy()
-        data[pos["motion"]] += self._motion.mat.AsVector().FV().NumPy()
-        if not self.transient:
-            data[pos["iface_dst"]] += data[pos["iface_src"]]
 
     def newton(self, where: str = "Newton") -> StepReport:
         """Solve the current nonlinear system with :class:`~fbia.plugins.fem.newton.NewtonSolver`
@@ -562,40 +66,6 @@ class AleFsiSolver:
         if not self.transient:
             self.gfu.vec.FV().NumPy()[self._v_solid] = 0.0  # the solid is at rest
         return self._newton.solve(where)
-
-    # -- what NewtonSolver needs (fbia.plugins.fem.newton.NonlinearSystem) ----------------------
-    @property
-    def vector(self) -> Any:
-        return self.gfu.vec
-
-    @property
-    def matrix(self) -> Any:
-        return self.form.mat
-
-    @property
-    def free(self) -> Any:
-        return self._free
-
-    @property
-    def free_mask(self) -> NDArray[np.bool_]:
-        return self._free_np
-
-    def admissible(self) -> bool:
-        """No element of the ALE map or of the solid is inverted (det F > 0)."""
-        return min(self.min_det_f()) > 0.0
-
-    # -- what ArclengthContinuation needs (fbia.plugins.fem.continuation.LoadedSystem) -------
-    @property
-    def load(self) -> float:
-        """The inflow rate (mm^2/s)."""
-        return float(self.inflow_rate.Get())
-
-    def set_load(self, value: float) -> None:
-        self.set_inflow(value)
-
-    def field_blocks(self) -> list[slice]:
-        """Velocity, displacement and pressure dofs."""
-        return [slice(self.fes.Range(i).start, self.fes.Range(i).stop) for i in range(3)]
 
     @property
     def timings(self) -> dict[str, float]:
@@ -646,33 +116,6 @@ class AleFsiSolver:
             rep = self._continuation.follow(rate, where, first)
         rep.converged = True
         return rep
-
-    def load_direction(self) -> NDArray[np.float64]:
-        """Derivative of the state's Dirichlet values with respect to the inflow rate."""
-        if self._dxd_rate is None:
-            x = self.state()
-            rate = float(self.inflow_rate.Get())
-            self.gfu.vec[:] = 0.0
-            self.set_inflow(1.0)
-            self._dxd_rate = self.state()
-            self.set_state(x)
-            self.inflow_rate.Set(rate)
-        return self._dxd_rate
-
-    def failure_note(self) -> str:
-        """Where the current state compresses the solid most (for failure messages)."""
-        ngs = self.ngs
-        detf = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
-        vals = np.asarray(detf(self._det_points))[:, 0]
-        solid = np.flatnonzero(~self._region_of_point)
-        k = solid[np.argmin(vals[solid])]
-        x, y = (float(np.asarray(c(self._det_points)).ravel()[k]) for c in (ngs.x, ngs.y))
-        note = f"the solid is compressed to det F = {vals[k]:.2g} at ({x:.3f}, {y:.3f}) mm"
-        if self.settings.material == "svk" and vals[k] < 1.0 / 3.0:
-            # plane strain SVK under volumetric compression F = s I: P = (lam + mu)(s^2 - 1) s
-            # has its extremum at s^2 = det F = 1/3; below it the material softens
-            note += " (Saint Venant-Kirchhoff softens under compression beyond det F = 1/3)"
-        return note
 
     # -- transient solution (one-step-theta) ----------------------------------------------------
     def solve_transient(
@@ -725,8 +168,6 @@ class AleFsiSolver:
         total.converged = True
         return total
 
-    # -- post-processing ---------------------------------------------------------------------
-
 
 def ramp(t: float, ramp_time: float, steps: int) -> float:
     """Cosine ramp of the inflow in ``steps`` stairs over ``ramp_time`` (Paper A), 0 -> 1."""
@@ -738,54 +179,3 @@ def ramp(t: float, ramp_time: float, steps: int) -> float:
     k = min(int(t // width), steps - 1)
     local = (t - k * width) / width
     return (k + 0.5 * (1.0 - math.cos(math.pi * local))) / steps
-
-
-def interface_chains(mesh: Any, ngs: Any) -> list[list[tuple[int, int]]]:
-    """The interface as chains of ``(boundary element, start vertex)``, solid on the right."""
-    solid_names = set(solid_regions(mesh))
-    pts = np.array([v.point for v in mesh.vertices])
-    edges: dict[tuple[int, int], tuple[int, int]] = {}  # directed (a, b) -> (element, a)
-    solid_tris: dict[frozenset[int], int] = {}
-    for el in mesh.Elements(ngs.VOL):
-        if el.mat in solid_names:
-            vs = [v.nr for v in el.vertices]
-            for i in range(3):
-                solid_tris[frozenset((vs[i], vs[(i + 1) % 3]))] = vs[(i + 2) % 3]
-    for nr, el in enumerate(mesh.Elements(ngs.BND)):
-        if el.mat != "interface":
-            continue
-        a, b = (v.nr for v in el.vertices)
-        opp = solid_tris.get(frozenset((a, b)))
-        if opp is None:
-            raise ForwardModelError("an interface edge touches no solid element", "bad_mesh")
-        t, c = pts[b] - pts[a], pts[opp] - pts[a]
-        solid_left = t[0] * c[1] - t[1] * c[0] > 0
-        start, stop = (b, a) if solid_left else (a, b)  # the solid must lie on the right
-        if (start, stop) in edges or any(s == start for s, _ in edges):
-            raise ForwardModelError("interface edges branch at a vertex", "bad_mesh")
-        edges[(start, stop)] = (nr, start)
-    if not edges:
-        raise ForwardModelError("mesh has no interface edges", "bad_mesh")
-    succ = {s: (t, edges[(s, t)]) for s, t in edges}
-    starts = set(succ) - {t for t, _ in succ.values()}
-    chains: list[list[tuple[int, int]]] = []
-    seen: set[int] = set()
-    for first in sorted(starts, key=lambda i: (pts[i][0], pts[i][1])):
-        chain, v = [], first
-        while v in succ:
-            v, item = succ[v]
-            chain.append(item)
-        chains.append(chain)
-        seen.update(e for e, _ in chain)
-    for first in sorted(succ):  # closed loops
-        if succ[first][1][0] in seen:
-            continue
-        chain, v = [], first
-        while True:
-            v, item = succ[v]
-            chain.append(item)
-            seen.add(item[0])
-            if v == first:
-                break
-        chains.append(chain)
-    return chains

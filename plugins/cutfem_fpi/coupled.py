@@ -160,12 +160,12 @@ def read_flow_cell(path: str | Path) -> FlowCellFile:
     import ngsolve as ngs
 
     from ..ale_fsi.geometry import (
+        interface_chains,
         mesh_arrays,
         mesh_from_arrays,
         read_mesh,
         solid_regions,
     )
-    from ..ale_fsi.solver import interface_chains
 
     where = str(path)
     cell = read_mesh(path)
@@ -258,7 +258,7 @@ class InterfaceSampler:
     def __init__(self, mesh: Any, per_edge: int) -> None:
         import ngsolve as ngs
 
-        from ..ale_fsi.solver import interface_chains
+        from ..ale_fsi.geometry import interface_chains
 
         chains = interface_chains(mesh, ngs)
         if len(chains) != 1:
