@@ -68,6 +68,27 @@ class FitStatistics:
 
 
 @dataclass
+class LMState:
+    """What :meth:`~fbia.iterators.levenberg_marquardt.LevenbergMarquardtIterator.steps`
+    yields after every batch of runs."""
+
+    round: int
+    nfev: int
+    n_failed: int
+    chains: list[dict[str, Any]]
+
+    def __str__(self) -> str:
+        parts = []
+        for c in self.chains:
+            tail = f" [{c['status']}]" if c["status"] else ""
+            parts.append(
+                f"start {c['start']}: it {c['iteration']}, err_res {c['err_res']:.3e}, "
+                f"err_grad {c['err_grad']:.3e}, mu {c['mu']:.2e}{tail}"
+            )
+        return f"round {self.round}, {self.nfev} runs ({self.n_failed} failed): " + "; ".join(parts)
+
+
+@dataclass
 class LMResult(Result):
     """:class:`~fbia.core.problem.Result` of the Levenberg–Marquardt iterator.
 
