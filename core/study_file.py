@@ -105,7 +105,6 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
-from .executors import EXECUTOR_KINDS
 from .interface import Interface
 from .observation import MeasurementPoints, Observation, check_coordinate
 from .parameters import Parameter, Prior
@@ -118,12 +117,15 @@ from .study import (
     SyntheticSpec,
     derived_seed,
 )
+from .study_schema import (
+    ExecutorSection,
+    LikelihoodSection,
+    StudySection,
+    SyntheticSection,
+    parse_section,
+)
 
 __all__ = ["SECTIONS", "load_study"]
-
-#: ``cluster`` values of [executor] (kept in step with fbia.core.dask_executor.CLUSTERS,
-#: which is not imported here so that reading a study file never imports Dask)
-CLUSTERS = ("local", "slurm", "pbs", "sge", "lsf", "htcondor", "moab", "oar")
 
 #: Top-level sections of a study file and what each holds.
 SECTIONS: dict[str, str] = {
@@ -139,30 +141,15 @@ SECTIONS: dict[str, str] = {
     "iterator": "iterator name and options",
     "executor": "serial, processes or dask; workers, time-out, cluster",
 }
+#: Keys of the sections still checked by hand (the others: fbia.core.study_schema).
 _KEYS: dict[str, tuple[str, ...]] = {
-    "study": ("name", "seed", "output"),
     "model": ("name", "options"),
     "measure": ("name", "options"),
     "iterator": ("name", "options"),
     "parameters": ("name", "unit", "bounds", "initial", "prior"),
     "uncertain": ("name", "unit", "bounds", "prior"),
     "observations": ("coordinate", "interface", "points", "noise_std", "name"),
-    "synthetic": ("truth", "coordinates", "noise_std", "noise", "points", "seed"),
-    "likelihood": ("noise_std",),
-    "executor": (
-        "kind",
-        "workers",
-        "keep_runs",
-        "timeout",
-        "isolate",
-        "address",
-        "cluster",
-        "cluster_options",
-    ),
 }
-#: how [synthetic] noise is added (fbia.synthetic_observations): along the normals (Paper A)
-#: or on every coordinate (Paper B eq. 16)
-NOISE_KINDS = ("normal", "isotropic")
 
 
 # -- reading -----------------------------------------------------------------------------------
@@ -382,12 +369,10 @@ class _Reader:
                 "no observations: give [[observations]] (data files) or [synthetic]", self.file
             )
 
-        meta = self.table(raw.get("study", {}), self.where("[study]"))
-        self.keys(meta, _KEYS["study"], self.where("[study]"))
-        name = self.string(meta.get("name", self.path.stem), self.where("[study]", "name"))
-        self.seed = self.integer(meta.get("seed", 0), self.where("[study]", "seed"), minimum=0)
-        out_name = self.string(meta.get("output", "output"), self.where("[study]", "output"))
-        output = self.folder / out_name
+        meta = parse_section(StudySection, raw.get("study", {}), self.where("[study]"))
+        name = meta.name or self.path.stem
+        self.seed = meta.seed
+        output = self.folder / meta.output
 
         self.model_name, model = self.plugin("forward_model", "model")
         try:
@@ -424,13 +409,10 @@ class _Reader:
 
         measure_name, measure = self.plugin("measure", "measure")
 
-        likelihood = self.table(raw.get("likelihood", {}), self.where("[likelihood]"))
-        self.keys(likelihood, _KEYS["likelihood"], self.where("[likelihood]"))
-        noise_std = (
-            self.number(likelihood["noise_std"], self.where("[likelihood]", "noise_std"), True)
-            if "noise_std" in likelihood
-            else None
+        likelihood = parse_section(
+            LikelihoodSection, raw.get("likelihood", {}), self.where("[likelihood]")
         )
+        noise_std = likelihood.noise_std
 
         iterator_name, iterator = (
             self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
@@ -586,12 +568,8 @@ class _Reader:
 
     def read_synthetic(self) -> SyntheticSpec:
         where = self.where("[synthetic]")
-        spec = self.table(self.raw["synthetic"], where)
-        self.keys(spec, _KEYS["synthetic"], where)
-        for key in ("truth", "coordinates"):
-            if key not in spec:
-                raise ConfigError(f"missing key {key!r}", where)
-        truth = self.numbers(spec["truth"], f"{where} truth")
+        spec = parse_section(SyntheticSection, self.raw["synthetic"], where)
+        truth = self.numbers(spec.truth, f"{where} truth")
         self.known(list(truth), f"{where} truth")
         missing = [p.name for p in self.parameters if p.name not in truth]
         if missing:
@@ -601,87 +579,25 @@ class _Reader:
             )
         coords = [
             check_coordinate(c, f"{where} coordinates[{k}]")
-            for k, c in enumerate(self.tables(spec["coordinates"], f"{where} coordinates"))
+            for k, c in enumerate(self.tables(spec.coordinates, f"{where} coordinates"))
         ]
         if not coords:
             raise ConfigError("needs at least one coordinate", f"{where} coordinates")
-        noise = self.number(spec["noise_std"], f"{where} noise_std") if "noise_std" in spec else 0.0
-        if noise < 0:
-            raise ConfigError(f"must not be negative, got {noise:g}", f"{where} noise_std")
-        points = (
-            self.integer(spec["points"], f"{where} points", minimum=1) if "points" in spec else None
-        )
-        seed = (
-            self.integer(spec["seed"], f"{where} seed", minimum=0)
-            if "seed" in spec
-            else derived_seed(self.seed, SYNTHETIC_STREAM)
-        )
-        kind = self.string(spec.get("noise", "normal"), f"{where} noise")
-        if kind not in NOISE_KINDS:
-            raise ConfigError(
-                f"unknown noise {kind!r}; valid: {', '.join(NOISE_KINDS)}", f"{where} noise"
-            )
-        return SyntheticSpec(truth, coords, noise, points, seed, kind)
+        seed = spec.seed if spec.seed is not None else derived_seed(self.seed, SYNTHETIC_STREAM)
+        return SyntheticSpec(truth, coords, spec.noise_std, spec.points, seed, spec.noise)
 
     def read_executor(self) -> ExecutorSpec:
         where = self.where("[executor]")
-        spec = self.table(self.raw.get("executor", {}), where)
-        self.keys(spec, _KEYS["executor"], where)
-        kind = self.string(spec.get("kind", "processes"), f"{where} kind")
-        if kind not in EXECUTOR_KINDS:
-            raise ConfigError(
-                f"unknown executor {kind!r}; valid: {', '.join(EXECUTOR_KINDS)}", f"{where} kind"
-            )
-        workers = (
-            self.integer(spec["workers"], f"{where} workers", minimum=1)
-            if "workers" in spec
-            else None
-        )
-        flags: dict[str, bool | None] = {}
-        for key in ("keep_runs", "isolate"):
-            value = spec.get(key)
-            if value is not None and not isinstance(value, bool):
-                raise ConfigError(f"expected true or false, got {value!r}", f"{where} {key}")
-            flags[key] = value
-        timeout = (
-            self.number(spec["timeout"], f"{where} timeout", positive=True)
-            if "timeout" in spec
-            else None
-        )
-        if timeout is not None and flags["isolate"] is False:
-            raise ConfigError(
-                "a time-out needs isolated runs (only a run in its own process can be "
-                "stopped): drop isolate = false or the timeout",
-                f"{where} isolate",
-            )
-        dask_only = [k for k in ("address", "cluster", "cluster_options") if k in spec]
-        if dask_only and kind != "dask":
-            raise ConfigError(
-                f'{", ".join(dask_only)} only for kind = "dask" (kind is {kind!r})',
-                f"{where} {dask_only[0]}",
-            )
-        address = self.string(spec["address"], f"{where} address") if "address" in spec else None
-        cluster = self.string(spec.get("cluster", "local"), f"{where} cluster")
-        if cluster not in CLUSTERS:
-            raise ConfigError(
-                f"unknown cluster {cluster!r}; valid: {', '.join(CLUSTERS)}", f"{where} cluster"
-            )
-        options = self.table(spec.get("cluster_options", {}), f"{where} cluster_options")
-        if address is not None and (workers is not None or "cluster" in spec or options):
-            raise ConfigError(
-                "a scheduler address names a running cluster: workers, cluster and "
-                "cluster_options do not apply",
-                f"{where} address",
-            )
+        spec = parse_section(ExecutorSection, self.raw.get("executor", {}), where)
         return ExecutorSpec(
-            kind,
-            workers,
-            bool(flags["keep_runs"]),
-            timeout,
-            flags["isolate"],
-            address,
-            cluster,
-            dict(options),
+            spec.kind,
+            spec.workers,
+            bool(spec.keep_runs),
+            spec.timeout,
+            spec.isolate,
+            spec.address,
+            spec.cluster,
+            dict(spec.cluster_options),
         )
 
 

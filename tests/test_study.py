@@ -237,3 +237,51 @@ def test_synthetic_data_noise_is_not_the_likelihood_sigma(tmp_path, monkeypatch)
     write_study(tmp_path, text.replace("[likelihood]\nnoise_std = 0.0005\n", ""))
     study = load_study("study.toml")
     assert noise_levels(study.problem) == [0.03]
+
+
+@pytest.mark.parametrize(
+    ("section", "table", "message"),
+    [
+        ("executor", {"workers": 0}, "[executor] workers: must be at least 1, got 0"),
+        ("executor", {"workers": "2"}, "[executor] workers: expected an integer, got a string"),
+        ("executor", {"timeout": -1}, "[executor] timeout: must be positive, got -1"),
+        ("executor", {"isolate": "yes"}, "[executor] isolate: expected true or false, got 'yes'"),
+        (
+            "executor",
+            {"kind": "dask", "cluster": "k8s"},
+            "[executor] cluster: unknown cluster 'k8s'; valid: local, slurm, pbs",
+        ),
+        (
+            "executor",
+            {"address": "tcp://host:8786"},
+            '[executor] address: address only for kind = "dask" (kind is \'processes\')',
+        ),
+        (
+            "executor",
+            {"timeout": 5.0, "isolate": False},
+            "[executor] isolate: a time-out needs isolated runs",
+        ),
+        ("study", {"seed": 1.5}, "[study] seed: expected an integer, got a number 1.5"),
+        ("study", {"output": ""}, "[study] output: expected a non-empty string"),
+        ("likelihood", {"noise_std": 0.0}, "[likelihood] noise_std: must be positive, got 0.0"),
+        ("likelihood", {"sigma": 0.1}, "[likelihood]: unknown key 'sigma'; valid keys: noise_std"),
+        ("synthetic", {"coordinates": []}, "[synthetic]: missing key 'truth'"),
+        (
+            "synthetic",
+            {"truth": {}, "coordinates": [], "noise": "bogus"},
+            "[synthetic] noise: unknown noise 'bogus'; valid: normal, isotropic",
+        ),
+    ],
+)
+def test_section_schemas_give_one_located_line(section, table, message):
+    from fbia.core import study_schema
+
+    model = {
+        "executor": study_schema.ExecutorSection,
+        "study": study_schema.StudySection,
+        "likelihood": study_schema.LikelihoodSection,
+        "synthetic": study_schema.SyntheticSection,
+    }[section]
+    with pytest.raises(fbia.ConfigError) as info:
+        study_schema.parse_section(model, table, f"study.toml: [{section}]")
+    assert str(info.value).startswith(f"study.toml: {message}")

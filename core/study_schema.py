@@ -1,0 +1,213 @@
+"""Pydantic models of study-file sections, and their errors as one located line each.
+
+A section model states the keys of a TOML table, their types and simple bounds; the reader
+(:mod:`fbia.core.study_file`) adds what depends on other sections (known parameter names,
+files, priors).  :func:`parse_section` turns the first validation error into a
+:class:`~fbia.core.errors.ConfigError` in the form the plugin options use, located at the
+key: ``study.toml: [executor] timeout: must be positive, got -1``.
+
+>>> parse_section(LikelihoodSection, {"noise_std": 0.01}, "study.toml: [likelihood]")
+LikelihoodSection(noise_std=0.01)
+>>> parse_section(LikelihoodSection, {"sigma": 0.01}, "study.toml: [likelihood]")
+Traceback (most recent call last):
+...
+fbia.core.errors.ConfigError: study.toml: [likelihood]: unknown key 'sigma'; valid keys: noise_std
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, TypeVar
+
+import pydantic
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+
+from .errors import ConfigError
+
+__all__ = [
+    "CLUSTERS",
+    "NOISE_KINDS",
+    "ExecutorSection",
+    "LikelihoodSection",
+    "StudySection",
+    "SyntheticSection",
+    "kind_of",
+    "parse_section",
+]
+
+#: ``cluster`` values of [executor] (kept in step with fbia.core.dask_executor.CLUSTERS,
+#: which is not imported here so that reading a study file never imports Dask)
+CLUSTERS = ("local", "slurm", "pbs", "sge", "lsf", "htcondor", "moab", "oar")
+#: how [synthetic] noise is added (fbia.synthetic_observations): along the normals (Paper A)
+#: or on every coordinate (Paper B eq. 16)
+NOISE_KINDS = ("normal", "isotropic")
+
+
+def kind_of(value: Any) -> str:
+    """A TOML value's kind in words: ``a table``, ``an array``, ``a string``, ..."""
+    return {
+        dict: "a table",
+        list: "an array",
+        str: "a string",
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+    }.get(type(value), type(value).__name__)
+
+
+def _number(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"expected a number, got {kind_of(value)} {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _integer(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"expected an integer, got {kind_of(value)} {value!r}")
+    return value
+
+
+def _string(value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise ValueError(f"expected a non-empty string, got {kind_of(value)} {value!r}")
+    return value
+
+
+def _flag(value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise ValueError(f"expected true or false, got {value!r}")
+    return value
+
+
+def _table(value: Any) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise ValueError(f"expected a table, got {kind_of(value)}")
+    return value
+
+
+Number = Annotated[float, BeforeValidator(_number)]
+Integer = Annotated[int, BeforeValidator(_integer)]
+Text = Annotated[str, BeforeValidator(_string)]
+Flag = Annotated[bool, BeforeValidator(_flag)]
+Table = Annotated[dict[str, Any], BeforeValidator(_table)]
+
+
+class Section(BaseModel):
+    """Base of the section models: unknown keys are errors, values are not coerced."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class StudySection(Section):
+    name: Text | None = None
+    seed: Annotated[Integer, Field(ge=0)] = 0
+    output: Text = "output"
+
+
+class LikelihoodSection(Section):
+    noise_std: Annotated[Number, Field(gt=0)] | None = None
+
+
+class SyntheticSection(Section):
+    truth: Table
+    coordinates: Any  # a table or an array of tables: checked by the reader
+    noise_std: Annotated[Number, Field(ge=0)] = 0.0
+    noise: Literal["normal", "isotropic"] = "normal"
+    points: Annotated[Integer, Field(ge=1)] | None = None
+    seed: Annotated[Integer, Field(ge=0)] | None = None
+
+
+class ExecutorSection(Section):
+    kind: Literal["serial", "processes", "dask"] = "processes"
+    workers: Annotated[Integer, Field(ge=1)] | None = None
+    keep_runs: Flag | None = None
+    timeout: Annotated[Number, Field(gt=0)] | None = None
+    isolate: Flag | None = None
+    address: Text | None = None
+    cluster: Literal["local", "slurm", "pbs", "sge", "lsf", "htcondor", "moab", "oar"] = "local"
+    cluster_options: Table = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ExecutorSection:
+        given = self.model_fields_set
+        if self.timeout is not None and self.isolate is False:
+            raise _KeyError(
+                "isolate",
+                "a time-out needs isolated runs (only a run in its own process can be "
+                "stopped): drop isolate = false or the timeout",
+            )
+        dask_only = [k for k in ("address", "cluster", "cluster_options") if k in given]
+        if dask_only and self.kind != "dask":
+            raise _KeyError(
+                dask_only[0],
+                f'{", ".join(dask_only)} only for kind = "dask" (kind is {self.kind!r})',
+            )
+        if self.address is not None and (
+            self.workers is not None or "cluster" in given or self.cluster_options
+        ):
+            raise _KeyError(
+                "address",
+                "a scheduler address names a running cluster: workers, cluster and "
+                "cluster_options do not apply",
+            )
+        return self
+
+
+class _KeyError(ValueError):
+    """A cross-key rule that failed, and the key it is reported at."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(message)
+        self.key = key
+
+
+S = TypeVar("S", bound=Section)
+
+_LITERAL_NAMES = {"kind": "executor", "cluster": "cluster", "noise": "noise"}
+
+
+def parse_section(model: type[S], value: Any, where: str) -> S:
+    """Validate one TOML table; the first problem becomes one located ConfigError."""
+    if not isinstance(value, dict):
+        raise ConfigError(f"expected a table, got {kind_of(value)}", where)
+    valid = list(model.model_fields)
+    unknown = [k for k in value if k not in model.model_fields]
+    if unknown:
+        plural = "s" if len(unknown) > 1 else ""
+        raise ConfigError(
+            f"unknown key{plural} {', '.join(map(repr, unknown))}; valid keys: {', '.join(valid)}",
+            where,
+        )
+    try:
+        return model(**value)
+    except pydantic.ValidationError as exc:
+        err = exc.errors()[0]
+        raise ConfigError(*_message(err, where)) from None
+
+
+def _message(err: Any, where: str) -> tuple[str, str]:
+    """(message, location) of a pydantic error dict."""
+    loc = [str(p) for p in err["loc"] if not str(p).startswith("function-")]
+    key = loc[0] if loc else ""
+    cause = err.get("ctx", {}).get("error")
+    if isinstance(cause, _KeyError):
+        return str(cause), f"{where} {cause.key}"
+    at = f"{where} {key}" if key else where
+    kind, value = err["type"], err.get("input")
+    if kind == "missing":
+        return f"missing key {key!r}", where
+    if kind == "value_error":
+        return str(cause if cause is not None else err["msg"]), at
+    if kind == "greater_than":
+        return f"must be positive, got {value!r}", at
+    if kind == "greater_than_equal":
+        bound = err["ctx"]["ge"]
+        if bound == 0:
+            return f"must not be negative, got {value!r}", at
+        return f"must be at least {bound}, got {value!r}", at
+    if kind == "literal_error":
+        options = err["ctx"]["expected"].replace("'", "").replace(" or ", ", ")
+        return f"unknown {_LITERAL_NAMES.get(key, key)} {value!r}; valid: {options}", at
+    return f"{err['msg']} (got {value!r})", at
