@@ -100,7 +100,7 @@ import hashlib
 import math
 import tomllib
 import typing
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -120,8 +120,13 @@ from .study import (
 from .study_schema import (
     ExecutorSection,
     LikelihoodSection,
+    ObservationSection,
+    ParameterSection,
+    PluginSection,
     StudySection,
     SyntheticSection,
+    UncertainSection,
+    kind_of,
     parse_section,
 )
 
@@ -140,15 +145,6 @@ SECTIONS: dict[str, str] = {
     "likelihood": "noise_std",
     "iterator": "iterator name and options",
     "executor": "serial, processes or dask; workers, time-out, cluster",
-}
-#: Keys of the sections still checked by hand (the others: fbia.core.study_schema).
-_KEYS: dict[str, tuple[str, ...]] = {
-    "model": ("name", "options"),
-    "measure": ("name", "options"),
-    "iterator": ("name", "options"),
-    "parameters": ("name", "unit", "bounds", "initial", "prior"),
-    "uncertain": ("name", "unit", "bounds", "prior"),
-    "observations": ("coordinate", "interface", "points", "noise_std", "name"),
 }
 
 
@@ -204,49 +200,27 @@ class _Reader:
     def where(self, section: str, key: str = "") -> str:
         return f"{self.file}: {section}" + (f" {key}" if key else "")
 
-    def keys(self, table: Mapping[str, Any], valid: Sequence[str], where: str) -> None:
-        unknown = [k for k in table if k not in valid]
-        if unknown:
-            plural = "s" if len(unknown) > 1 else ""
-            raise ConfigError(
-                f"unknown key{plural} {', '.join(map(repr, unknown))}; "
-                f"valid keys: {', '.join(valid)}",
-                where,
-            )
-
     def table(self, value: Any, where: str) -> dict[str, Any]:
         if not isinstance(value, dict):
-            raise ConfigError(f"expected a table, got {_kind(value)}", where)
+            raise ConfigError(f"expected a table, got {kind_of(value)}", where)
         return value
 
     def tables(self, value: Any, where: str) -> list[dict[str, Any]]:
         if isinstance(value, dict):
             return [value]
         if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-            raise ConfigError(f"expected an array of tables, got {_kind(value)}", where)
+            raise ConfigError(f"expected an array of tables, got {kind_of(value)}", where)
         return value
 
     def number(self, value: Any, where: str, positive: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"expected a number, got {_kind(value)} {value!r}", where)
+            raise ConfigError(f"expected a number, got {kind_of(value)} {value!r}", where)
         v = float(value)
         if not math.isfinite(v):
             raise ConfigError(f"expected a finite number, got {value!r}", where)
         if positive and v <= 0:
             raise ConfigError(f"must be positive, got {value!r}", where)
         return v
-
-    def integer(self, value: Any, where: str, minimum: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"expected an integer, got {_kind(value)} {value!r}", where)
-        if minimum is not None and value < minimum:
-            raise ConfigError(f"must be at least {minimum}, got {value}", where)
-        return value
-
-    def string(self, value: Any, where: str) -> str:
-        if not isinstance(value, str) or not value:
-            raise ConfigError(f"expected a non-empty string, got {_kind(value)} {value!r}", where)
-        return value
 
     def numbers(self, value: Any, where: str) -> dict[str, float]:
         table = self.table(value, where)
@@ -263,16 +237,11 @@ class _Reader:
             )
 
     def plugin(self, kind: str, section: str) -> tuple[str, Any]:
-        spec = self.table(self.raw[section], f"{self.file}: [{section}]")
-        self.keys(spec, _KEYS[section], f"{self.file}: [{section}]")
-        if "name" not in spec:
-            raise ConfigError("missing key 'name'", f"{self.file}: [{section}]")
-        name = self.string(spec["name"], self.where(f"[{section}]", "name"))
-        self.registry.get(kind, name, where=self.where(f"[{section}]", "name"))
-        options = self.table(spec.get("options", {}), self.where(f"[{section}.options]"))
-        options = self.prepare_options(kind, name, dict(options), section)
-        obj = self.registry.create(kind, name, options, where=self.where(f"[{section}.options]"))
-        return name, obj
+        spec = parse_section(PluginSection, self.raw[section], f"{self.file}: [{section}]")
+        self.registry.get(kind, spec.name, where=self.where(f"[{section}]", "name"))
+        options = self.prepare_options(kind, spec.name, dict(spec.options), section)
+        where = self.where(f"[{section}.options]")
+        return spec.name, self.registry.create(kind, spec.name, options, where=where)
 
     def prepare_options(
         self, kind: str, name: str, options: dict[str, Any], section: str = ""
@@ -446,39 +415,28 @@ class _Reader:
         return study
 
     def read_parameters(self, section: str) -> list[Parameter]:
+        model: type[ParameterSection | UncertainSection] = (
+            ParameterSection if section == "parameters" else UncertainSection
+        )
         out: list[Parameter] = []
-        for k, spec in enumerate(self.tables(self.raw[section], self.where(f"[[{section}]]"))):
-            label = repr(spec["name"]) if isinstance(spec.get("name"), str) else f"#{k + 1}"
+        for k, raw in enumerate(self.tables(self.raw[section], self.where(f"[[{section}]]"))):
+            label = repr(raw["name"]) if isinstance(raw.get("name"), str) else f"#{k + 1}"
             where = self.where(f"[[{section}]]", label)
-            self.keys(spec, _KEYS[section], where)
-            if "name" not in spec:
-                raise ConfigError("missing key 'name'", where)
-            name = self.string(spec["name"], f"{where} name")
+            spec = parse_section(model, raw, where)
+            name = spec.name
             self.known([name], f"{where} name")
             if any(p.name == name for p in out):
                 raise ConfigError(f"parameter {name!r} is listed twice", where)
-            unit = spec.get("unit", "")
-            if not isinstance(unit, str):
-                raise ConfigError(f"expected a string, got {_kind(unit)}", f"{where} unit")
-            bounds: tuple[float, float] | None = None
-            if "bounds" in spec:
-                b = spec["bounds"]
-                if not isinstance(b, list) or len(b) != 2:
-                    raise ConfigError(f"expected [lower, upper], got {b!r}", f"{where} bounds")
-                bounds = (
-                    self.number(b[0], f"{where} bounds"),
-                    self.number(b[1], f"{where} bounds"),
+            bounds = spec.bounds
+            if bounds is not None and not bounds[0] < bounds[1]:
+                raise ConfigError(
+                    f"lower bound {bounds[0]:g} is not below upper bound {bounds[1]:g}",
+                    f"{where} bounds",
                 )
-                if not bounds[0] < bounds[1]:
-                    raise ConfigError(
-                        f"lower bound {bounds[0]:g} is not below upper bound {bounds[1]:g}",
-                        f"{where} bounds",
-                    )
             prior: Prior | None = None
-            if "prior" in spec:
-                pspec = self.table(spec["prior"], f"{where} prior")
+            if spec.prior is not None:
                 try:
-                    prior = Prior.from_spec(pspec, bounds)
+                    prior = Prior.from_spec(spec.prior, bounds)
                 except ConfigError as err:
                     raise err.located(f"{where} prior") from None
             elif section == "uncertain":
@@ -487,9 +445,8 @@ class _Reader:
                 raise ConfigError(
                     "needs bounds = [lower, upper] (or a prior with finite support)", where
                 )
-            initial = None
-            if "initial" in spec:
-                initial = self.number(spec["initial"], f"{where} initial")
+            initial = getattr(spec, "initial", None)
+            if initial is not None:
                 lo, hi = bounds if bounds is not None else prior.support  # type: ignore[union-attr]
                 if not lo <= initial <= hi:
                     raise ConfigError(
@@ -497,7 +454,7 @@ class _Reader:
                         f"{where} initial",
                     )
             try:
-                out.append(Parameter(name, bounds, prior, unit, initial))
+                out.append(Parameter(name, bounds, prior, spec.unit, initial))
             except ConfigError as err:
                 raise ConfigError(err.reason, where) from None
         if not out:
@@ -507,47 +464,30 @@ class _Reader:
     def read_observations(self) -> list[Observation]:
         out: list[Observation] = []
         specs = self.tables(self.raw["observations"], self.where("[[observations]]"))
-        for k, spec in enumerate(specs):
+        for k, raw in enumerate(specs):
             where = self.where("[[observations]]", f"#{k + 1}")
-            self.keys(spec, _KEYS["observations"], where)
-            coordinate = check_coordinate(
-                self.table(spec.get("coordinate", {}), f"{where} coordinate"),
-                f"{where} coordinate",
-            )
-            if "interface" not in spec and "points" not in spec:
+            spec = parse_section(ObservationSection, raw, where)
+            coordinate = check_coordinate(spec.coordinate, f"{where} coordinate")
+            if spec.interface is None and spec.points is None:
                 raise ConfigError("needs 'interface' (a file), 'points' (a file) or both", where)
             gamma = None
-            if "interface" in spec:
-                file = self.folder / self.string(spec["interface"], f"{where} interface")
+            if spec.interface is not None:
                 try:
-                    gamma = Interface.read(file)
+                    gamma = Interface.read(self.folder / spec.interface)
                 except ConfigError as err:
                     raise err.located(f"{where} interface") from None
                 self.dimension(gamma.dim, f"{where} interface")
             points = None
-            if "points" in spec:
-                file = self.folder / self.string(spec["points"], f"{where} points")
+            if spec.points is not None:
                 try:
-                    points = MeasurementPoints.read(file)
+                    points = MeasurementPoints.read(self.folder / spec.points)
                 except ConfigError as err:
                     raise err.located(f"{where} points") from None
                 self.dimension(points.dim, f"{where} points")
-            noise = spec.get("noise_std")
-            name = spec.get("name", "")
-            if not isinstance(name, str):
-                raise ConfigError(f"expected a string, got {_kind(name)}", f"{where} name")
             try:
                 out.append(
                     Observation(
-                        gamma,
-                        coordinate,
-                        points,
-                        noise_std=(
-                            None
-                            if noise is None
-                            else self.number(noise, f"{where} noise_std", positive=True)
-                        ),
-                        name=name,
+                        gamma, coordinate, points, noise_std=spec.noise_std, name=spec.name
                     )
                 )
             except ConfigError as err:
@@ -621,14 +561,3 @@ def _model_dim(model: Any) -> int | None:
         if isinstance(gamma, Interface):
             return gamma.dim
     return None
-
-
-def _kind(value: Any) -> str:
-    return {
-        dict: "a table",
-        list: "an array",
-        str: "a string",
-        bool: "a boolean",
-        int: "an integer",
-        float: "a number",
-    }.get(type(value), type(value).__name__)

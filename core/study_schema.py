@@ -29,8 +29,12 @@ __all__ = [
     "NOISE_KINDS",
     "ExecutorSection",
     "LikelihoodSection",
+    "ObservationSection",
+    "ParameterSection",
+    "PluginSection",
     "StudySection",
     "SyntheticSection",
+    "UncertainSection",
     "kind_of",
     "parse_section",
 ]
@@ -81,6 +85,18 @@ def _flag(value: Any) -> bool:
     return value
 
 
+def _any_string(value: Any) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"expected a string, got {kind_of(value)}")
+    return value
+
+
+def _pair(value: Any) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise ValueError(f"expected [lower, upper], got {value!r}")
+    return _number(value[0]), _number(value[1])
+
+
 def _table(value: Any) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise ValueError(f"expected a table, got {kind_of(value)}")
@@ -92,12 +108,50 @@ Integer = Annotated[int, BeforeValidator(_integer)]
 Text = Annotated[str, BeforeValidator(_string)]
 Flag = Annotated[bool, BeforeValidator(_flag)]
 Table = Annotated[dict[str, Any], BeforeValidator(_table)]
+Label = Annotated[str, BeforeValidator(_any_string)]
+Pair = Annotated[tuple[float, float], BeforeValidator(_pair)]
 
 
 class Section(BaseModel):
     """Base of the section models: unknown keys are errors, values are not coerced."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class PluginSection(Section):
+    """``[model]``, ``[measure]``, ``[iterator]``: a registered name and its options."""
+
+    name: Text
+    options: Table = Field(default_factory=dict)
+
+
+class ParameterSection(Section):
+    """One ``[[parameters]]`` table (the reader checks names, bounds order and priors)."""
+
+    name: Text
+    unit: Label = ""
+    bounds: Pair | None = None
+    initial: Number | None = None
+    prior: Table | None = None
+
+
+class UncertainSection(Section):
+    """One ``[[uncertain]]`` table."""
+
+    name: Text
+    unit: Label = ""
+    bounds: Pair | None = None
+    prior: Table | None = None
+
+
+class ObservationSection(Section):
+    """One ``[[observations]]`` table (the reader reads the files)."""
+
+    coordinate: Table = Field(default_factory=dict)
+    interface: Text | None = None
+    points: Text | None = None
+    noise_std: Annotated[Number, Field(gt=0)] | None = None
+    name: Label = ""
 
 
 class StudySection(Section):

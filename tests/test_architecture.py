@@ -19,7 +19,6 @@ PACKAGES = ("core", "plugins", "measures", "iterators")
 MAX_LINES = 600
 #: Modules still above MAX_LINES, with the size they may not exceed (shrink, never grow).
 OVERSIZE = {
-    "core/study_file.py": 634,  # parameters, observations, plugin sections: still by hand
     "testing.py": 941,
     "plugins/cutfem_fpi/coupled.py": 711,
 }

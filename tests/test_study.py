@@ -266,6 +266,13 @@ def test_synthetic_data_noise_is_not_the_likelihood_sigma(tmp_path, monkeypatch)
         ("likelihood", {"noise_std": 0.0}, "[likelihood] noise_std: must be positive, got 0.0"),
         ("likelihood", {"sigma": 0.1}, "[likelihood]: unknown key 'sigma'; valid keys: noise_std"),
         ("synthetic", {"coordinates": []}, "[synthetic]: missing key 'truth'"),
+        ("parameters", {"name": "E", "bounds": [1.0]}, "[parameters] bounds: expected [lower, "),
+        ("parameters", {"name": "E", "unit": 3}, "[parameters] unit: expected a string, got an "),
+        ("parameters", {"unit": "Pa"}, "[parameters]: missing key 'name'"),
+        ("uncertain", {"name": "q", "initial": 3.0}, "[uncertain]: unknown key 'initial'; valid "),
+        ("observations", {"noise_std": -1.0}, "[observations] noise_std: must be positive"),
+        ("observations", {"interface": 3}, "[observations] interface: expected a non-empty "),
+        ("model", {"name": "x", "options": 3}, "[model] options: expected a table, got an int"),
         (
             "synthetic",
             {"truth": {}, "coordinates": [], "noise": "bogus"},
@@ -281,6 +288,10 @@ def test_section_schemas_give_one_located_line(section, table, message):
         "study": study_schema.StudySection,
         "likelihood": study_schema.LikelihoodSection,
         "synthetic": study_schema.SyntheticSection,
+        "parameters": study_schema.ParameterSection,
+        "uncertain": study_schema.UncertainSection,
+        "observations": study_schema.ObservationSection,
+        "model": study_schema.PluginSection,
     }[section]
     with pytest.raises(fbia.ConfigError) as info:
         study_schema.parse_section(model, table, f"study.toml: [{section}]")
