@@ -40,7 +40,7 @@ from typing import Any
 from .errors import ConfigError
 from .evaluator import EvaluatorBase, Job, workers_ignore_sigint
 from .isolation import RunOutcome, run_isolated_or_here, run_view
-from .problem import Evaluation, InverseProblem
+from .problem import Evaluable, Evaluation
 
 __all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator"]
 
@@ -58,7 +58,7 @@ CLUSTERS = ("local", *JOBQUEUE_CLUSTERS)
 
 
 def _task(
-    problem: InverseProblem,
+    problem: Evaluable,
     x: dict[str, float],
     workdir: str,
     index: int,
@@ -129,7 +129,7 @@ class DaskEvaluator(EvaluatorBase):
         self.cluster_kind = "scheduler" if address else cluster
         self._cluster: Any = None
         self._token = uuid.uuid4().hex[:8]
-        self._scattered: tuple[InverseProblem, Any] | None = None
+        self._scattered: tuple[Evaluable, Any] | None = None
         self.client: Any = None
         t0 = time.perf_counter()
         try:
@@ -186,13 +186,13 @@ class DaskEvaluator(EvaluatorBase):
         except (OSError, TimeoutError):  # the scheduler is gone: the batch will tell
             return 1
 
-    def _problem_on_cluster(self, problem: InverseProblem) -> Any:
+    def _problem_on_cluster(self, problem: Evaluable) -> Any:
         if self._scattered is None or self._scattered[0] is not problem:
             data = self.client.scatter(run_view(problem), broadcast=True, hash=False)
             self._scattered = (problem, data)
         return self._scattered[1]
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: Evaluable, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         from distributed import KilledWorker, as_completed
 
         data = self._problem_on_cluster(problem)

@@ -52,7 +52,7 @@ from .isolation import (
     run_isolated_or_here,
     run_view,
 )
-from .problem import Evaluation, InverseProblem
+from .problem import Evaluable, Evaluation, InverseProblem
 
 if TYPE_CHECKING:
     from .store import StudyStore
@@ -72,7 +72,7 @@ class Evaluator(Protocol):
     """Evaluates batches of parameter points; results come back in the order of ``points``."""
 
     def evaluate(
-        self, problem: InverseProblem, points: Sequence[Mapping[str, float]]
+        self, problem: Evaluable, points: Sequence[Mapping[str, float]]
     ) -> list[Evaluation]: ...
 
 
@@ -152,7 +152,7 @@ class EvaluatorBase:
 
     # -- the batch ---------------------------------------------------------------------------
     def evaluate(
-        self, problem: InverseProblem, points: Sequence[Mapping[str, float]]
+        self, problem: Evaluable, points: Sequence[Mapping[str, float]]
     ) -> list[Evaluation]:
         requests = [
             (self.count + k, {str(n): float(v) for n, v in x.items()}) for k, x in enumerate(points)
@@ -160,8 +160,13 @@ class EvaluatorBase:
         self.count += len(requests)
         if self.cache is None:
             plan = Plan(to_run=requests)
-        else:
+        elif isinstance(problem, InverseProblem):
             plan = self.cache.plan(problem, requests)
+        else:  # a store keys runs by an inverse problem's model
+            raise ConfigError(
+                f"a study store needs an InverseProblem, not a {type(problem).__name__}",
+                "evaluator",
+            )
         done: dict[int, Evaluation] = dict(plan.reused)
         reused = list(plan.reused.values())
         self.reused.update(plan.reused)
@@ -190,7 +195,7 @@ class EvaluatorBase:
             self.listener.batch_finished()
         return [done[i] for i, _ in requests]
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: Evaluable, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         raise NotImplementedError
 
     # -- folders and records -----------------------------------------------------------------
@@ -277,7 +282,7 @@ class SerialEvaluator(EvaluatorBase):
         super().__init__(workdir, keep_workdirs, on_record, **options)
         self._runner: IsolatedRunner | None = None
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: Evaluable, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         out: dict[int, Evaluation] = {}
         for i, wd, x in jobs:
             if self.isolate:
@@ -300,10 +305,10 @@ class SerialEvaluator(EvaluatorBase):
 
 
 # -- the process pool ----------------------------------------------------------------------------
-_WORKER_PROBLEM: InverseProblem | None = None
+_WORKER_PROBLEM: Evaluable | None = None
 
 
-def _init_worker(problem: InverseProblem) -> None:
+def _init_worker(problem: Evaluable) -> None:
     global _WORKER_PROBLEM
     _WORKER_PROBLEM = problem
     parent = os.getppid()
@@ -400,13 +405,13 @@ class ProcessPoolEvaluator(EvaluatorBase):
         self.workers = n
         self.start_method = start_method
         self._pool: ProcessPoolExecutor | None = None
-        self._pool_problem: InverseProblem | None = None
+        self._pool_problem: Evaluable | None = None
 
     @property
     def slots(self) -> int:
         return self.workers
 
-    def _pool_for(self, problem: InverseProblem) -> ProcessPoolExecutor:
+    def _pool_for(self, problem: Evaluable) -> ProcessPoolExecutor:
         if self._pool is None or self._pool_problem is not problem:
             self._shutdown()
             self._pool = ProcessPoolExecutor(
@@ -418,7 +423,7 @@ class ProcessPoolEvaluator(EvaluatorBase):
             self._pool_problem = problem
         return self._pool
 
-    def _run(self, problem: InverseProblem, jobs: Sequence[Job]) -> dict[int, Evaluation]:
+    def _run(self, problem: Evaluable, jobs: Sequence[Job]) -> dict[int, Evaluation]:
         done: dict[int, Evaluation] = {}
         try:
             todo = list(jobs)
@@ -454,7 +459,7 @@ class ProcessPoolEvaluator(EvaluatorBase):
         return done
 
     def _round(
-        self, problem: InverseProblem, jobs: Sequence[Job], done: dict[int, Evaluation]
+        self, problem: Evaluable, jobs: Sequence[Job], done: dict[int, Evaluation]
     ) -> list[Job]:
         """Submit ``jobs``; record each as it finishes; return those lost to a dead worker."""
         pool = self._pool_for(problem)

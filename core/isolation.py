@@ -48,7 +48,7 @@ from .errors import ConfigError
 from .interface import Interface
 from .observation import CoordinateKey
 from .parameters import Parameter
-from .problem import Evaluation, InverseProblem
+from .problem import Evaluable, Evaluation
 
 __all__ = [
     "IsolatedRunner",
@@ -98,7 +98,7 @@ def worker_label() -> str:
 
 
 def evaluate_here(
-    problem: InverseProblem, x: dict[str, float], workdir: str, index: int
+    problem: Evaluable, x: dict[str, float], workdir: str, index: int
 ) -> RunOutcome:
     """Evaluate in this process; the solution object is dropped, its interfaces travel with
     the record (for the store) and its field files are kept as artifacts."""
@@ -112,7 +112,7 @@ def evaluate_here(
     return RunOutcome(ev, worker_label(), artifacts, interfaces)
 
 
-def run_view(problem: InverseProblem) -> InverseProblem:
+def run_view(problem: Evaluable) -> Evaluable:
     """The problem as a worker needs it to evaluate runs, to be sent to other processes.
 
     A run needs the model, the measure, the observations and the fixed inputs, not the
@@ -188,7 +188,7 @@ class IsolatedRunner:
         self._proc: subprocess.Popen[bytes] | None = None
         self._jobs: int | None = None
         self._answers: int | None = None
-        self._problem: InverseProblem | None = None
+        self._problem: Evaluable | None = None
 
     @property
     def pid(self) -> int | None:
@@ -213,7 +213,7 @@ class IsolatedRunner:
         self._problem = None
         _send(job_w, ("init", list(sys.path)))
 
-    def _load(self, problem: InverseProblem) -> str | None:
+    def _load(self, problem: Evaluable) -> str | None:
         """Start the helper if none runs and give it ``problem`` unless it has it; returns the
         helper's message if it cannot load the problem (e.g. cannot import the model)."""
         if self._proc is not None and self._problem is problem:
@@ -241,7 +241,7 @@ class IsolatedRunner:
 
     def run(
         self,
-        problem: InverseProblem,
+        problem: Evaluable,
         x: dict[str, float],
         workdir: str,
         index: int,
@@ -260,7 +260,7 @@ class IsolatedRunner:
 
     def _run(
         self,
-        problem: InverseProblem,
+        problem: Evaluable,
         x: dict[str, float],
         workdir: str,
         index: int,
@@ -368,7 +368,7 @@ def thread_runner() -> IsolatedRunner:
 
 
 def run_isolated_or_here(
-    problem: InverseProblem,
+    problem: Evaluable,
     x: dict[str, float],
     workdir: str,
     index: int,
@@ -389,7 +389,7 @@ def _die_with_parent() -> None:
 
 
 def _child(
-    problem: InverseProblem, x: dict[str, float], workdir: str, index: int, out: int
+    problem: Evaluable, x: dict[str, float], workdir: str, index: int, out: int
 ) -> None:
     """In the forked child: run, send the outcome, exit without cleanup of the helper's state
     (status 0 with an outcome sent; 1 if the run raised SystemExit or the like)."""
@@ -431,7 +431,7 @@ def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
 
 def _helper_main() -> None:  # pragma: no cover - runs in the helper process
     jobs, answers = int(sys.argv[1]), int(sys.argv[2])
-    problem: InverseProblem | None = None
+    problem: Evaluable | None = None
     while True:
         message = _recv(jobs)
         if message is None:  # the caller closed the pipe or died

@@ -22,7 +22,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -79,6 +79,39 @@ class Evaluation:
             "workdir": self.workdir,
             "diagnostics": _jsonable(self.diagnostics),
         }
+
+
+@runtime_checkable
+class Evaluable(Protocol):
+    """What an evaluator runs: an :class:`InverseProblem`, or the residual function of
+    ``fbia.least_squares`` dressed as one.  ``parameters`` and ``uncertain`` (their priors)
+    are what a worker may leave behind (:func:`fbia.core.isolation.run_view`)."""
+
+    parameters: Sequence[Parameter]
+    uncertain: Sequence[Parameter]
+
+    def evaluate(
+        self,
+        x: Mapping[str, float],
+        workdir: str | Path | None = None,
+        index: int = 0,
+        keep_solution: bool = True,
+    ) -> Evaluation: ...
+
+
+class ProblemLike(Evaluable, Protocol):
+    """A problem with named parameters in a box: what the Levenberg-Marquardt iterator needs
+    (:class:`InverseProblem`, or ``fbia.least_squares``'s
+    :class:`~fbia.iterators.least_squares.ResidualFunctionProblem`)."""
+
+    @property
+    def names(self) -> list[str]: ...
+
+    @property
+    def lower(self) -> NDArray[np.float64]: ...
+
+    @property
+    def upper(self) -> NDArray[np.float64]: ...
 
 
 @dataclass

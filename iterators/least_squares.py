@@ -16,7 +16,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError, ForwardModelError
-from ..core.evaluator import Evaluator
+from ..core.evaluator import Evaluator, SerialEvaluator
+from ..core.iteration import drain
+from ..core.parameters import Parameter
 from ..core.problem import Evaluation
 from .levenberg_marquardt import LevenbergMarquardtIterator
 from .lm_result import LMResult
@@ -52,8 +54,8 @@ class ResidualFunctionProblem:
         self.upper = upper
         self.args = tuple(args)
         self.kwargs = dict(kwargs or {})
-        self.parameters: list[Any] = []
-        self.uncertain: list[Any] = []
+        self.parameters: Sequence[Parameter] = []  # no priors: nothing for run_view to drop
+        self.uncertain: Sequence[Parameter] = []
 
     def evaluate(
         self,
@@ -141,9 +143,10 @@ def least_squares(
         LevenbergMarquardtIterator.Options.parse(opts, where="least_squares")
     )
     problem = ResidualFunctionProblem(fun, labels, lower, upper, args, kwargs)
-    result = iterator.run(problem, evaluator)  # type: ignore[arg-type]
-    assert isinstance(result, LMResult)
-    return result
+    if evaluator is not None:
+        return drain(iterator.steps(problem, evaluator))
+    with SerialEvaluator() as own:
+        return drain(iterator.steps(problem, own))
 
 
 def _bounds(bounds: tuple[ArrayLike, ArrayLike] | None, n: int) -> tuple[FloatArray, FloatArray]:

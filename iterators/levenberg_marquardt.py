@@ -68,7 +68,7 @@ from ..core.errors import ConfigError
 from ..core.evaluator import Evaluator
 from ..core.iteration import IteratorBase
 from ..core.options import PluginOptions
-from ..core.problem import Evaluation
+from ..core.problem import Evaluation, ProblemLike
 from .lm_core import LMChain, LMSettings, Outcome, PaperChain, err_res_of
 from .lm_result import FitStatistics, LMResult, LMState, compare_starts
 from .lm_robust import RobustChain
@@ -239,7 +239,9 @@ class LevenbergMarquardtIterator(IteratorBase):
     options: LMOptions
 
     # -- the iteration ----------------------------------------------------------------------
-    def steps(self, problem: Any, evaluator: Evaluator) -> Generator[LMState, None, LMResult]:
+    def steps(
+        self, problem: ProblemLike, evaluator: Evaluator
+    ) -> Generator[LMState, None, LMResult]:
         """Run the chains; yield an :class:`LMState` after every batch; return the result.
 
         ``problem`` is an :class:`~fbia.InverseProblem` (or anything with ``names``,
