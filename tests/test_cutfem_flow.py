@@ -104,8 +104,9 @@ def test_interface_mass_balance_and_conservation() -> None:
     (net interface flux zero to round-off) and inflow = outflow to round-off."""
     import ngsolve as ngs
 
-    from fbia.plugins.cutfem_fpi.coupled import channel_mesh, signed_distance_levelset
+    from fbia.plugins.cutfem_fpi.coupled import signed_distance_levelset
     from fbia.plugins.cutfem_fpi.flow import CutFlow, FlowSettings
+    from fbia.plugins.cutfem_fpi.meshes import channel_mesh
 
     ngs.SetNumThreads(1)
     mesh = channel_mesh(2.0, 1.0, 0.08)
@@ -173,7 +174,8 @@ def test_nodal_level_set_geometry_converges_at_third_order() -> None:
     import xfem
     from xfem.lsetcurv import LevelSetMeshAdaptation
 
-    from fbia.plugins.cutfem_fpi.coupled import NodalLevelSet, channel_mesh
+    from fbia.plugins.cutfem_fpi.coupled import NodalLevelSet
+    from fbia.plugins.cutfem_fpi.meshes import channel_mesh
 
     curve = _half_disc()
     x, y = curve[:, 0], curve[:, 1]
@@ -202,8 +204,9 @@ def test_a_new_level_set_cutting_the_same_elements_reuses_the_system() -> None:
     the cut elements (rebuilt system)."""
     import ngsolve as ngs
 
-    from fbia.plugins.cutfem_fpi.coupled import NodalLevelSet, channel_mesh
+    from fbia.plugins.cutfem_fpi.coupled import NodalLevelSet
     from fbia.plugins.cutfem_fpi.flow import CutFlow, FlowSettings
+    from fbia.plugins.cutfem_fpi.meshes import channel_mesh
 
     ngs.SetNumThreads(1)
     mesh = channel_mesh(2.0, 1.0, 0.1)

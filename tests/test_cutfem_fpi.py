@@ -127,7 +127,8 @@ def test_curved_biofilm_mesh_follows_the_outline_spline() -> None:
     import shapely
 
     from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
-    from fbia.plugins.cutfem_fpi.coupled import InterfaceSampler, biofilm_mesh
+    from fbia.plugins.cutfem_fpi.coupled import InterfaceSampler
+    from fbia.plugins.cutfem_fpi.meshes import biofilm_mesh
 
     outline = np.array(DEFAULT_OUTLINE)
     fine = InterfaceSampler(biofilm_mesh(outline, True, 0.01, 3), 4).reference

@@ -99,7 +99,7 @@ def _extension_errors(h: float) -> tuple[float, float]:
     import ngsolve as ngs
 
     from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
-    from fbia.plugins.cutfem_fpi.coupled import biofilm_mesh
+    from fbia.plugins.cutfem_fpi.meshes import biofilm_mesh
     from fbia.plugins.cutfem_fpi.skeleton import Skeleton, SkeletonSettings
 
     mesh = biofilm_mesh(DEFAULT_OUTLINE, True, h)

@@ -347,14 +347,9 @@ class CutFemFpiForwardModel(Configurable):
             os.environ.setdefault("MKL_NUM_THREADS", str(self.options.threads))
             import ngsolve as ngs
 
-            from .coupled import (
-                CouplingSettings,
-                PoroFsiSolver,
-                biofilm_mesh,
-                channel_mesh,
-                read_flow_cell,
-            )
+            from .coupled import CouplingSettings, PoroFsiSolver
             from .flow import FlowSettings
+            from .meshes import biofilm_mesh, channel_mesh, read_flow_cell
             from .skeleton import SkeletonSettings
 
             o = self.options
