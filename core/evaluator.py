@@ -463,12 +463,16 @@ class ProcessPoolEvaluator(EvaluatorBase):
     ) -> list[Job]:
         """Submit ``jobs``; record each as it finishes; return those lost to a dead worker."""
         pool = self._pool_for(problem)
-        with workers_ignore_sigint():  # the pool starts its processes on submit
-            futures: dict[Future[RunOutcome], Job] = {
-                pool.submit(_run_in_worker, x, str(wd), i, self.timeout, self.isolate): (i, wd, x)
-                for i, wd, x in jobs
-            }
+        futures: dict[Future[RunOutcome], Job] = {}
         lost: list[Job] = []
+        with workers_ignore_sigint():  # the pool starts its processes on submit
+            for k, (i, wd, x) in enumerate(jobs):
+                try:
+                    fut = pool.submit(_run_in_worker, x, str(wd), i, self.timeout, self.isolate)
+                except BrokenProcessPool:  # a worker died while the batch was being submitted:
+                    lost = list(jobs[k:])  # these never started and run in the next round
+                    break
+                futures[fut] = (i, wd, x)
         for fut in as_completed(futures):
             i, wd, x = job = futures[fut]
             try:

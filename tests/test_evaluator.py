@@ -244,3 +244,36 @@ def test_progress_lines_bar_and_log_follow_the_batch(tmp_path, capsys):
     assert all(
         r["worker"] == f"{socket.gethostname()}:{os.getpid()}" for r in records if not r["reused"]
     )
+
+
+def test_a_worker_that_dies_while_the_batch_is_submitted_costs_only_its_own_run(
+    pool, monkeypatch
+):
+    """Issue 14, defect 2: submitting the rest of a batch after a worker died raised
+    BrokenProcessPool out of evaluate.  Submissions are slowed down here so that the run that
+    kills its worker (E = 780 Pa, submitted second) dies before the batch is submitted."""
+    import time as _time
+
+    real_pool_for = pool._pool_for
+
+    def slow_pool(problem):
+        executor = real_pool_for(problem)
+        submit = executor.submit
+        calls = {"n": 0}
+
+        def slow_submit(*args, **kwargs):
+            calls["n"] += 1
+            if calls["n"] == 3:
+                _time.sleep(3.0)  # the killer runs and takes the pool down meanwhile
+            return submit(*args, **kwargs)
+
+        monkeypatch.setattr(executor, "submit", slow_submit)
+        return executor
+
+    monkeypatch.setattr(pool, "_pool_for", slow_pool)
+    batch = [POINTS[0], {"E": 780.0, "nu": 0.2}, POINTS[1], POINTS[2], POINTS[3]]
+    records = pool.evaluate(PROBLEM, batch)
+    assert [r.status for r in records] == ["ok", "failed", "ok", "ok", "ok"]
+    assert records[1].message.startswith("the worker process died during this run")
+    monkeypatch.undo()
+    assert [r.status for r in pool.evaluate(PROBLEM, POINTS[:2])] == ["ok", "ok"]
