@@ -30,9 +30,9 @@ lint: $(STAMP)
 # installed, through a tree of symlinks (the repository root is the package).
 typecheck: $(STAMP)
 	@rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/fbia
-	@for d in core plugins measures iterators; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
+	@for d in core plugins measures iterators testing; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
 	@ln -s ../../../__init__.py $(TYPECHECK)/fbia/__init__.py
-	@for f in testing.py pytest_plugin.py; do ln -s ../../../$$f $(TYPECHECK)/fbia/$$f; done
+	@for f in pytest_plugin.py; do ln -s ../../../$$f $(TYPECHECK)/fbia/$$f; done
 	MYPYPATH=$(TYPECHECK) $(BIN)/mypy -p fbia
 
 pytest: $(STAMP)

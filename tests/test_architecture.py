@@ -15,16 +15,14 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("core", "plugins", "measures", "iterators")
+PACKAGES = ("core", "plugins", "measures", "iterators", "testing")
 MAX_LINES = 600
 #: Modules still above MAX_LINES, with the size they may not exceed (shrink, never grow).
-OVERSIZE = {
-    "testing.py": 941,
-}
+OVERSIZE: dict[str, int] = {}
 
 
 def package_files() -> list[Path]:
-    files = [ROOT / "__init__.py", ROOT / "testing.py", ROOT / "pytest_plugin.py"]
+    files = [ROOT / "__init__.py", ROOT / "pytest_plugin.py"]
     for d in PACKAGES:
         files += sorted((ROOT / d).rglob("*.py"))
     return files

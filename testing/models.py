@@ -1,0 +1,180 @@
+"""Conformance of forward models: solves, fails cleanly, pickles, keeps its workdir."""
+
+from __future__ import annotations
+
+import copy
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.errors import ForwardModelError
+from ..core.interface import Interface
+from ..core.observation import Solution, coordinate_key
+from .errors import ConformanceError, _fail
+
+
+def check_forward_model(
+    model: Any,
+    parameters: Mapping[str, float],
+    coordinates: Sequence[Mapping[str, float]],
+    tmp_path: str | Path,
+    failing_parameters: Mapping[str, float] | None = None,
+    rtol: float = 1e-8,
+) -> Solution:
+    """Prove that ``model`` honours the forward-model protocol at ``parameters``.
+
+    Checks that
+
+    * ``parameter_names()`` is a sequence of distinct strings containing every key of
+      ``parameters``;
+    * ``solve(parameters, coordinates, workdir)`` returns an :class:`fbia.Solution` with an
+      :class:`fbia.Interface` for every requested coordinate, all of one dimension, with finite
+      vertices and unit normals;
+    * ``solve`` leaves its inputs and the current directory unchanged;
+    * the model is deterministic and independent of the order of the coordinates: a second run
+      in a fresh working folder, with a copy of the parameters and the coordinates reversed,
+      gives the same interfaces (same connectivity, vertices equal to ``rtol`` times the
+      interface's size);
+    * with ``failing_parameters`` (a run known to fail), ``solve`` raises
+      :class:`fbia.ForwardModelError` with a message, and nothing else.
+
+    Returns the first :class:`fbia.Solution`.
+    """
+
+    tmp_path = Path(tmp_path)
+    names = model.parameter_names()
+    if isinstance(names, str) or not all(isinstance(n, str) for n in names):
+        raise _fail(model, f"parameter_names() must be a sequence of str, got {names!r}")
+    if len(set(names)) != len(list(names)):
+        raise _fail(model, f"parameter_names() repeats a name: {list(names)}")
+    unknown = [k for k in parameters if k not in names]
+    if unknown:
+        raise _fail(
+            model,
+            f"the test parameters {unknown} are not in parameter_names() = {list(names)}",
+        )
+    if not coordinates:
+        raise ValueError("check_forward_model needs at least one coordinate")
+
+    def solve(params: Mapping[str, float], coords: Sequence[Mapping[str, float]], run: str) -> Any:
+        tmp_path.mkdir(parents=True, exist_ok=True)
+        workdir = Path(tempfile.mkdtemp(prefix=f"{run}_", dir=tmp_path))  # fresh and empty
+        params_before, coords_before = copy.deepcopy(dict(params)), copy.deepcopy(list(coords))
+        cwd = os.getcwd()
+        try:
+            return model.solve(params, coords, workdir)
+        finally:
+            if os.getcwd() != cwd:
+                os.chdir(cwd)
+                raise _fail(model, f"solve() changed the current directory (run {run!r})")
+            if dict(params) != params_before or list(coords) != coords_before:
+                raise _fail(model, "solve() modified the parameters or coordinates it was given")
+
+    try:
+        first = solve(parameters, coordinates, "run_a")
+    except ConformanceError:
+        raise
+    except ForwardModelError as exc:
+        raise _fail(model, f"the example run at {dict(parameters)} failed: {exc}") from exc
+    except Exception as exc:
+        raise _fail(
+            model,
+            f"the run at {dict(parameters)} raised {type(exc).__name__}: {exc} (a failed run "
+            "must raise fbia.ForwardModelError)",
+        ) from exc
+    if not isinstance(first, Solution):
+        raise _fail(model, f"solve() must return fbia.Solution, got {type(first).__name__}")
+    dims = set()
+    for c in coordinates:
+        key = coordinate_key(c)
+        gamma = first.interfaces.get(key)
+        if not isinstance(gamma, Interface):
+            raise _fail(
+                model,
+                f"solve() returned {type(gamma).__name__} instead of an Interface for the "
+                f"requested coordinate {dict(c)}",
+            )
+        if not (
+            np.all(np.isfinite(gamma.normals))
+            and np.allclose(np.linalg.norm(gamma.normals, axis=1), 1.0)
+        ):
+            raise _fail(model, f"the interface at {dict(c)} has non-finite or non-unit normals")
+        dims.add(gamma.dim)
+    if len(dims) != 1:
+        raise _fail(model, f"solve() mixes interface dimensions {sorted(dims)}")
+    if not isinstance(first.diagnostics, Mapping):
+        raise _fail(model, "Solution.diagnostics must be a mapping")
+
+    again = solve(copy.deepcopy(dict(parameters)), list(reversed(coordinates)), "run_b")
+    for c in coordinates:
+        a = first.interface(c)
+        try:
+            b = again.interface(c)
+        except KeyError:
+            raise _fail(
+                model, f"with the coordinates reversed, no interface for {dict(c)}"
+            ) from None
+        if a.dim != b.dim or a.cells.shape != b.cells.shape or not np.array_equal(a.cells, b.cells):
+            raise _fail(
+                model,
+                f"two runs with equal inputs give different meshes at {dict(c)} "
+                f"({a!r} vs {b!r}); coordinates in reversed order in the second run",
+            )
+        lo, hi = a.bounds
+        scale = float(np.max(hi - lo)) or 1.0
+        dev = float(np.max(np.abs(a.vertices - b.vertices)))
+        if dev > rtol * scale:
+            raise _fail(
+                model,
+                f"two runs with equal inputs differ at {dict(c)} by {dev:.3g} mm "
+                f"(> {rtol:g} x size {scale:.3g} mm); coordinates in reversed order in the "
+                "second run",
+            )
+
+    if failing_parameters is not None:
+        try:
+            solve(failing_parameters, coordinates, "run_fail")
+        except ForwardModelError as exc:
+            if not str(exc).strip():
+                raise _fail(model, "ForwardModelError without a message") from exc
+        except ConformanceError:
+            raise
+        except Exception as exc:
+            raise _fail(
+                model,
+                f"a failing run raised {type(exc).__name__}: {exc} instead of "
+                "fbia.ForwardModelError",
+            ) from exc
+        else:
+            raise _fail(
+                model, f"the run at {dict(failing_parameters)} was expected to fail but did not"
+            )
+    return first
+
+
+def example_run(cls: type) -> tuple[dict[str, float], list[dict[str, float]]]:
+    """``cls.example_parameters()`` checked: (parameters, coordinates) of a cheap run."""
+    hook = getattr(cls, "example_parameters", None)
+    if hook is None:
+        raise _fail(
+            cls,
+            "provides no example_parameters(); every forward model needs a classmethod "
+            "example_parameters() -> (parameters, coordinates) of a cheap successful run",
+        )
+    out = hook()
+    try:
+        params, coords = out
+        params = {str(k): float(v) for k, v in dict(params).items()}
+        coords = [{str(k): float(v) for k, v in dict(c).items()} for c in coords]
+    except (TypeError, ValueError) as exc:
+        raise _fail(
+            cls,
+            f"example_parameters() must return (dict of floats, list of coordinate dicts): {exc}",
+        ) from exc
+    if not coords:
+        raise _fail(cls, "example_parameters() returns no coordinates")
+    return params, coords
