@@ -100,9 +100,9 @@ import hashlib
 import math
 import tomllib
 import typing
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from .errors import ConfigError
 from .interface import Interface
@@ -126,11 +126,15 @@ from .study_schema import (
     StudySection,
     SyntheticSection,
     UncertainSection,
+    as_number,
+    as_table,
     kind_of,
     parse_section,
 )
 
 __all__ = ["SECTIONS", "load_study"]
+
+T = TypeVar("T")
 
 #: Top-level sections of a study file and what each holds.
 SECTIONS: dict[str, str] = {
@@ -201,9 +205,7 @@ class _Reader:
         return f"{self.file}: {section}" + (f" {key}" if key else "")
 
     def table(self, value: Any, where: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise ConfigError(f"expected a table, got {kind_of(value)}", where)
-        return value
+        return _checked(as_table, value, where)
 
     def tables(self, value: Any, where: str) -> list[dict[str, Any]]:
         if isinstance(value, dict):
@@ -212,15 +214,8 @@ class _Reader:
             raise ConfigError(f"expected an array of tables, got {kind_of(value)}", where)
         return value
 
-    def number(self, value: Any, where: str, positive: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"expected a number, got {kind_of(value)} {value!r}", where)
-        v = float(value)
-        if not math.isfinite(v):
-            raise ConfigError(f"expected a finite number, got {value!r}", where)
-        if positive and v <= 0:
-            raise ConfigError(f"must be positive, got {value!r}", where)
-        return v
+    def number(self, value: Any, where: str) -> float:
+        return _checked(as_number, value, where)
 
     def numbers(self, value: Any, where: str) -> dict[str, float]:
         table = self.table(value, where)
@@ -539,6 +534,14 @@ class _Reader:
             spec.cluster,
             dict(spec.cluster_options),
         )
+
+
+def _checked(check: Callable[[Any], T], value: Any, where: str) -> T:
+    """A value through a section-schema check, its complaint as a located ConfigError."""
+    try:
+        return check(value)
+    except ValueError as exc:
+        raise ConfigError(str(exc), where) from None
 
 
 def _is_path_type(annotation: Any) -> bool:

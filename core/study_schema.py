@@ -35,6 +35,8 @@ __all__ = [
     "StudySection",
     "SyntheticSection",
     "UncertainSection",
+    "as_number",
+    "as_table",
     "kind_of",
     "parse_section",
 ]
@@ -59,7 +61,7 @@ def kind_of(value: Any) -> str:
     }.get(type(value), type(value).__name__)
 
 
-def _number(value: Any) -> float:
+def as_number(value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"expected a number, got {kind_of(value)} {value!r}")
     if not math.isfinite(value):
@@ -94,20 +96,20 @@ def _any_string(value: Any) -> str:
 def _pair(value: Any) -> tuple[float, float]:
     if not isinstance(value, list) or len(value) != 2:
         raise ValueError(f"expected [lower, upper], got {value!r}")
-    return _number(value[0]), _number(value[1])
+    return as_number(value[0]), as_number(value[1])
 
 
-def _table(value: Any) -> dict[str, Any]:
+def as_table(value: Any) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise ValueError(f"expected a table, got {kind_of(value)}")
     return value
 
 
-Number = Annotated[float, BeforeValidator(_number)]
+Number = Annotated[float, BeforeValidator(as_number)]
 Integer = Annotated[int, BeforeValidator(_integer)]
 Text = Annotated[str, BeforeValidator(_string)]
 Flag = Annotated[bool, BeforeValidator(_flag)]
-Table = Annotated[dict[str, Any], BeforeValidator(_table)]
+Table = Annotated[dict[str, Any], BeforeValidator(as_table)]
 Label = Annotated[str, BeforeValidator(_any_string)]
 Pair = Annotated[tuple[float, float], BeforeValidator(_pair)]
 

@@ -190,7 +190,13 @@ class RobustChain(LMChain):
                 return True
             return False
 
+        sharpen = False  # go on to phase 2 at x: a central-difference J, no step
         while True:
+            if sharpen:
+                central, sharpen, radius = True, False, math.inf
+                J, frozen = yield from self._central_jacobian(x, r)
+                self._set_point(x, r, J)
+                self._record(x, r, True, "central-difference Jacobian")
             assert self.J is not None
             J = self.J
             g = J.T @ r
@@ -203,11 +209,7 @@ class RobustChain(LMChain):
                     return
                 if final(status, message):
                     return
-                central = True
-                J, frozen = yield from self._central_jacobian(x, r)
-                self._set_point(x, r, J)
-                self._record(x, r, True, "central-difference Jacobian")
-                radius = math.inf
+                sharpen = True
                 continue
             if not np.any(free):
                 self._stop(
@@ -230,7 +232,6 @@ class RobustChain(LMChain):
                 else:  # MINPACK: a multiple of the scaled length of x
                     radius = first_radius * (float(np.linalg.norm(D * x)) or 1.0)
             rr = float(r @ r)
-            sharpen = False
             while True:  # find a step that reduces ‖r‖
                 full, self.mu = lm_step(J, r, D, free, radius=radius, mu_guess=self.mu)
                 p = within_bounds(x, full, r, J, self.lower, self.upper)
@@ -300,12 +301,7 @@ class RobustChain(LMChain):
                         return
                     sharpen = True
                     break
-            if sharpen:  # phase 2 from x, without a step
-                central = True
-                J, frozen = yield from self._central_jacobian(x, r)
-                self._set_point(x, r, J)
-                self._record(x, r, True, "central-difference Jacobian")
-                radius = math.inf
+            if sharpen:
                 continue
             # the step is taken
             assert rt is not None
