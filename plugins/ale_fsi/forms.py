@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core.errors import ForwardModelError
+from .boundaries import InflowSegment, mesh_dirichlet
 from .checks import StateChecks
 from .geometry import FLUID, solid_regions
 from .materials import lame, stress_pk2
@@ -100,7 +100,8 @@ class AleFsiProblem:
         self.solids = solid_regions(mesh)
         bnds = set(mesh.GetBoundaries())
         self._has = {b: b in bnds for b in ("outflow", "walls", "obstacle", "inflow")}
-        self._inflow_geometry()
+        self.inflow = InflowSegment.of(mesh)
+        self.length_scale = self.inflow.width
 
         # -- spaces: velocity and displacement continuous over the whole mesh (see module doc)
         noslip = "|".join(b for b in ("walls", "obstacle", "solid_fixed") if b in bnds)
@@ -111,7 +112,7 @@ class AleFsiProblem:
         elif s.outflow != "do_nothing":
             raise ValueError(f"unknown outflow condition {s.outflow!r}")
         V = ngs.VectorH1(mesh, order=s.order, dirichletx=vx, dirichlety=vy)
-        dx_fixed, dy_fixed = self._mesh_dirichlet(bnds)
+        dx_fixed, dy_fixed = mesh_dirichlet(mesh, s.mesh_slip)
         D = ngs.VectorH1(mesh, order=s.order, dirichletx=dx_fixed, dirichlety=dy_fixed)
         Q = ngs.H1(mesh, order=s.order - 1, definedon=FLUID)
         self.fes = ngs.FESpace([V, D, Q])
@@ -136,72 +137,6 @@ class AleFsiProblem:
         self._dxd_rate: NDArray[np.float64] | None = None  # see load_direction
 
     # -- set-up ------------------------------------------------------------------------------
-    def _inflow_geometry(self) -> None:
-        """End points, width and inward normal of the (straight) inflow boundary."""
-        ngs = self.ngs
-        mesh = self.mesh
-        verts: set[int] = set()
-        for el in mesh.Elements(ngs.BND):
-            if el.mat == "inflow":
-                verts.update(v.nr for v in el.vertices)
-        if not verts:
-            raise ForwardModelError("mesh has no inflow boundary", "bad_mesh")
-        pts = np.array([mesh.vertices[i].point for i in sorted(verts)])
-        centre = pts.mean(axis=0)
-        # principal direction of the inflow segment
-        _, _, vt = np.linalg.svd(pts - centre)
-        t = vt[0]
-        s = (pts - centre) @ t
-        a, b = centre + s.min() * t, centre + s.max() * t
-        width = float(np.linalg.norm(b - a))
-        if np.max(np.abs((pts - centre) @ vt[1])) > 1e-6 * width:
-            raise ForwardModelError("the inflow boundary is not a straight segment", "bad_mesh")
-        n = np.array([-t[1], t[0]])
-        # inward: towards the fluid's centroid
-        fluid_c = np.array(
-            [ngs.Integrate(c, mesh, definedon=mesh.Materials(FLUID)) for c in (ngs.x, ngs.y)]
-        ) / ngs.Integrate(1.0, mesh, definedon=mesh.Materials(FLUID))
-        if np.dot(fluid_c - centre, n) < 0:
-            n = -n
-        self.inflow_start, self.inflow_width, self.inflow_normal = a, width, n
-        self.inflow_tangent = (b - a) / width
-        self.length_scale = width
-
-    def _mesh_dirichlet(self, bnds: set[str]) -> tuple[str, str]:
-        """Dirichlet boundaries of the x and y displacement (eq. 2.24 with slip, or fixed)."""
-        fixed = ["solid_fixed"] + [b for b in ("obstacle",) if b in bnds]
-        fx, fy = list(fixed), list(fixed)
-        for name in ("inflow", "outflow", "walls"):
-            if name not in bnds:
-                continue
-            # only walls slide: a sliding inflow would distort the prescribed profile
-            slip = self.settings.mesh_slip and name == "walls"
-            direction = self._straight_direction(name) if slip else None
-            if direction == "x":  # horizontal boundary: the mesh may slide in x
-                fy.append(name)
-            elif direction == "y":  # vertical boundary: the mesh may slide in y
-                fx.append(name)
-            else:
-                fx.append(name)
-                fy.append(name)
-        return "|".join(fx), "|".join(fy)
-
-    def _straight_direction(self, name: str) -> str | None:
-        """ "x" if every segment of boundary ``name`` is horizontal, "y" if vertical, else None."""
-        ngs = self.ngs
-        segs = [
-            np.array([self.mesh.vertices[v.nr].point for v in el.vertices])
-            for el in self.mesh.Elements(ngs.BND)
-            if el.mat == name
-        ]
-        d = np.array([s[1] - s[0] for s in segs])
-        scale = np.abs(d).max()
-        if np.all(np.abs(d[:, 1]) <= 1e-10 * scale):
-            return "x"
-        if np.all(np.abs(d[:, 0]) <= 1e-10 * scale):
-            return "y"
-        return None
-
     @staticmethod
     def _check_rule() -> Any:
         import ngsolve as ngs
@@ -360,21 +295,12 @@ class AleFsiProblem:
         else:
             self.gfu.vec.FV().NumPy()[:] = vec
 
-    def _inflow_profile(self, rate: float) -> Any:
-        """Parabolic inflow with volume rate ``rate`` (mm^2/s): 6 rate/W s(1-s) n_in."""
-        ngs = self.ngs
-        a, w, n = self.inflow_start, self.inflow_width, self.inflow_normal
-        t = self.inflow_tangent
-        s = ((ngs.x - a[0]) * t[0] + (ngs.y - a[1]) * t[1]) / w
-        prof = 6.0 * rate / w * s * (1.0 - s)
-        return ngs.CoefficientFunction((prof * n[0], prof * n[1]))
-
     def set_inflow(self, rate: float) -> None:
         """Set the inflow Dirichlet values; every other dof is left untouched (warm starts)."""
         ngs = self.ngs
         V = self.fes.components[0]
         tmp = ngs.GridFunction(V)
-        tmp.Set(self._inflow_profile(rate), definedon=self.mesh.Boundaries("inflow"))
+        tmp.Set(self.inflow.profile(rate), definedon=self.mesh.Boundaries("inflow"))
         dofs = np.flatnonzero(np.array(V.GetDofs(self.mesh.Boundaries("inflow")), dtype=bool))
         self.velocity.vec.FV().NumPy()[dofs] = tmp.vec.FV().NumPy()[dofs]
         self.inflow_rate.Set(rate)

@@ -434,10 +434,6 @@ class PoroFsiSolver:
         bc = self.bg.BoundaryCF({"inflow": inflow}, default=wall)
         fs, ss = self.flow_settings, sk.settings
         change = math.inf
-        # Newton rates are learned afresh for each load level and material
-        sk._newton_rate = 0.0
-        if self.flow is not None:
-            self.flow._newton_rate = 0.0
         for it in range(1, cs.max_iter + 1):
             at = f"{where}, coupling iteration {it}"
             rel = cs.inexact * change / self.height

@@ -32,7 +32,6 @@ reference configuration, where ``J F^-1 k F^-T`` is the Kozeny-Carman ``K`` of e
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -41,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
-from ..fem.newton import sparse_direct_solver
+from ..fem.newton import NewtonFailure, NewtonSolver, sparse_direct_solver
 
 
 @dataclass(frozen=True)
@@ -51,7 +50,7 @@ class SkeletonSettings:
     kappa: float = 100.0  # bulk modulus of psi_vol, eq. 13a [Pa]
     eta: float = 1.0  # penalty of psi_pen, eq. 13b [Pa]
     order: int = 2
-    newton_tol: float = 1e-10  # relative residual
+    newton_tol: float = 1e-10  # update relative to the largest displacement
     newton_max_iter: int = 25
 
 
@@ -148,8 +147,19 @@ class Skeleton:
         darcy += kozeny_carman(Jh, self.porosity, phi0) * ngs.grad(pp) * ngs.grad(ww) * ngs.dx
         self._darcy = darcy
         self._darcy_inverse: Any = None
-        self._inverse: Any = None  # factorisation of the Newton matrix, analysed once
-        self._newton_rate = 0.0  # C of e_(k+1) <= C e_k^2, the largest seen so far
+        self._free = np.array(self.X.FreeDofs(), dtype=bool)
+        self._nd = self.D.ndof  # the displacement dofs come first
+        pts = np.array([v.point for v in self.mesh.vertices])
+        self._length = float(np.max(np.ptp(pts, axis=0)))  # extent of the mesh [mm]
+        self._violation: ForwardModelError | None = None  # why the last state was rejected
+        self._newton = NewtonSolver(
+            self,
+            s.newton_tol,
+            s.newton_max_iter,
+            sparse_direct_solver(),
+            max_halvings=8,
+            inadmissible="skeleton_admissible",
+        )
         self._check_points: Any = None
         self.J = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
 
@@ -172,63 +182,66 @@ class Skeleton:
             p.vec.data += self._darcy_inverse * res
 
     def solve(self, where: str = "skeleton", tol: float | None = None) -> int:
-        """Newton from the current state; returns the number of iterations.
+        """Newton from the current state with the shared
+        :class:`~fbia.plugins.fem.newton.NewtonSolver`; returns the number of iterations.
 
-        Stops when the energy norm of the Newton correction, or, once the quadratic rate
-        ``C`` (``e_(k+1) <= C e_k^2``) has been seen, twice what it predicts for the next
-        correction, falls below ``tol`` (default ``settings.newton_tol``) times that of the
-        first one.  Steps are damped to stay admissible (:meth:`_step`).  The sparsity
-        pattern never changes, so the factorisation is analysed once and only refactored.
+        Converged when the update (max norm; displacements relative to the largest
+        displacement, porosities absolute), or the error left that the contraction of the
+        last updates predicts, is below ``tol`` (default ``settings.newton_tol``).  Updates
+        are halved, up to 8 times, until the state is admissible (0 < phi < 1, J > 0): the
+        penalty and volumetric energies (eq. 13) are barriers at J phi = 0 and
+        J (1 - phi) = 0, which a full Newton step can jump.  The sparsity pattern never
+        changes, so the factorisation is analysed once and only refactored.
         """
-        ngs = self.ngs
-        s = self.settings
-        tol = s.newton_tol if tol is None else tol
-        res = self.gfx.vec.CreateVector()
-        du = self.gfx.vec.CreateVector()
-        r0 = None
-        rn_old = math.inf
-        for it in range(1, s.newton_max_iter + 1):
-            with ngs.TaskManager():
-                self.form.Apply(self.gfx.vec, res)
-                self.form.AssembleLinearization(self.gfx.vec)
-                if self._inverse is None:
-                    self._inverse = self.form.mat.Inverse(
-                        self.X.FreeDofs(), inverse=sparse_direct_solver()
-                    )
-                else:
-                    self._inverse.Update()
-                du.data = self._inverse * res
-            rn = float(np.sqrt(abs(ngs.InnerProduct(du, res))))
-            if not math.isfinite(rn):
-                raise ForwardModelError(f"{where}: Newton produced NaN", "skeleton_newton")
-            r0 = rn if r0 is None else r0
-            damped = self._step(du, where)
-            if it >= 2 and rn < 0.1 * r0 and not damped:  # quadratic: e_(k+1) <= C e_k^2
-                self._newton_rate = max(self._newton_rate, rn / rn_old**2)
-            predicted = 2.0 * self._newton_rate * rn**2 if self._newton_rate else math.inf
-            if min(rn, predicted) <= tol * max(r0, 1e-300) or rn < 1e-14:
-                return it
-            rn_old = rn
-        raise ForwardModelError(
-            f"{where}: skeleton Newton did not converge in {s.newton_max_iter} iterations",
-            "skeleton_newton",
-        )
+        self._violation = None
+        try:
+            return self._newton.solve(where, tol).iterations
+        except NewtonFailure as fail:
+            if fail.reason == "skeleton_admissible" and self._violation is not None:
+                raise ForwardModelError(
+                    f"{where}: every damped Newton update is inadmissible: {self._violation}",
+                    self._violation.reason,
+                ) from fail
+            prefix = "" if "skeleton" in where else "skeleton: "
+            raise ForwardModelError(f"{prefix}{fail}", "skeleton_newton") from fail
 
-    def _step(self, du: Any, where: str) -> bool:
-        """``x -= alpha du`` with the largest ``alpha`` in 1, 1/2, ..., 1/256 that keeps the
-        state admissible (0 < phi < 1, J > 0): the penalty and volumetric energies (eq. 13)
-        are barriers at J phi = 0 and J (1 - phi) = 0, which a full Newton step can jump.
-        Returns whether the step was damped; raises when no step length is admissible."""
-        x0 = self.gfx.vec.CreateVector()
-        x0.data = self.gfx.vec
-        alpha = 1.0
-        for _ in range(9):
-            self.gfx.vec.data = x0 - alpha * du
-            phi, J = self._ranges()
-            if np.all(np.isfinite(phi)) and 0.0 < phi.min() and phi.max() < 1.0 and J.min() > 0:
-                return alpha < 1.0
-            alpha *= 0.5
-        self.check(where)
+    # -- the nonlinear system (fbia.plugins.fem.newton.NonlinearSystem) ------------------------
+    @property
+    def vector(self) -> Any:
+        return self.gfx.vec
+
+    @property
+    def matrix(self) -> Any:
+        return self.form.mat
+
+    @property
+    def free(self) -> Any:
+        return self.X.FreeDofs()
+
+    @property
+    def free_mask(self) -> NDArray[np.bool_]:
+        return self._free
+
+    def residual(self, res: Any) -> None:
+        with self.ngs.TaskManager():
+            self.form.Apply(self.gfx.vec, res)
+
+    def assemble_jacobian(self) -> None:
+        with self.ngs.TaskManager():
+            self.form.AssembleLinearization(self.gfx.vec)
+
+    def scales(self) -> NDArray[np.float64]:
+        out = np.ones(len(self._free))  # porosities: absolute
+        d = self.gfx.vec.FV().NumPy()[: self._nd]
+        out[: self._nd] = max(float(np.max(np.abs(d), initial=0.0)), self._length * 1e-12)
+        return out
+
+    def admissible(self) -> bool:
+        try:
+            self.check("skeleton")
+        except ForwardModelError as err:
+            self._violation = err
+            return False
         return True
 
     def _ranges(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

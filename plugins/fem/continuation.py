@@ -174,7 +174,7 @@ class ArclengthContinuation:
                 raise ForwardModelError(
                     f"{where}: no steady state -- the branch of steady states turns back at a "
                     f"limit point near {lam0 + mu_max * jump:.4g} {self.unit} (continuation from "
-                     f"{lam0:g} {self.unit}); there {self.system.failure_note()}",
+                    f"{lam0:g} {self.unit}); there {self.system.failure_note()}",
                     "limit_point",
                 )
             z, t = np.append(x_new[free] / scale, mu_new), t_new

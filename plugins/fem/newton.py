@@ -14,14 +14,17 @@ The iteration (what ``ale_fsi`` needs, stiff coupled systems solved to a toleran
   and one back-substitution); its update is taken if it is below 0.1 and at most a quarter of
   the previous one, else the Jacobian is assembled afresh at the same point.  A solve that
   starts after a converged one tries the old factorisation the same way (a warm start);
-* an update that leads to an inadmissible state (an inverted element) is halved, up to 5
-  times;
+* an update that leads to an inadmissible state (an inverted element, a porosity outside
+  (0, 1)) is halved, up to ``max_halvings`` times (default 5);
 * at most ``max_jacobians`` Jacobians are assembled; updates that diverge (1e3 times the
   first) or stagnate (less than 10x in three Jacobians) end the solve early.
 
 Failures raise :class:`NewtonFailure` with a reason tag (``newton_divergence``,
-``linear_solver``, ``ale_jacobian``, ``newton_nan``), which the plugins turn into
-:class:`fbia.ForwardModelError`.
+``linear_solver``, ``newton_nan``, and the ``inadmissible`` tag the solver is given, e.g.
+``ale_jacobian``), which the plugins turn into :class:`fbia.ForwardModelError`.
+
+Used by ``ale_fsi`` (the monolithic ALE FSI system) and by ``cutfem_fpi`` (the cut
+Navier-Stokes/Darcy flow and the poroelastic skeleton).
 """
 
 from __future__ import annotations
@@ -112,15 +115,29 @@ class NewtonSolver:
         Jacobian assemblies per solve (chord steps are extra).
     linear_solver
         NGSolve's name of the sparse direct solver (``pardiso``, ``umfpack``, ``sparsecholesky``).
+    max_halvings
+        How often an update that leads to an inadmissible state is halved before the solve
+        fails.
+    inadmissible
+        The reason tag of that failure (what an inadmissible state means for the system).
     """
 
     def __init__(
-        self, system: NonlinearSystem, tol: float, max_jacobians: int, linear_solver: str
+        self,
+        system: NonlinearSystem,
+        tol: float,
+        max_jacobians: int,
+        linear_solver: str,
+        *,
+        max_halvings: int = 5,
+        inadmissible: str = "ale_jacobian",
     ) -> None:
         self.system = system
         self.tol = tol
         self.max_jacobians = max_jacobians
         self.linear_solver = linear_solver
+        self.max_halvings = max_halvings
+        self.inadmissible = inadmissible
         #: seconds spent assembling and solving, summed over every solve
         self.timings = {"assembly": 0.0, "solve": 0.0}
         #: the factorised Jacobian (None until the first factorisation)
@@ -134,8 +151,10 @@ class NewtonSolver:
         self.chord_ok = False
 
     # -- the iteration -------------------------------------------------------------------------
-    def solve(self, where: str = "Newton") -> StepReport:
-        """Solve ``residual = 0`` from the current state; raises :class:`NewtonFailure`."""
+    def solve(self, where: str = "Newton", tol: float | None = None) -> StepReport:
+        """Solve ``residual = 0`` from the current state to the scaled update ``tol``
+        (default: the solver's); raises :class:`NewtonFailure`."""
+        tol = self.tol if tol is None else tol
         system = self.system
         rep = StepReport()
         vec = system.vector
@@ -174,7 +193,7 @@ class NewtonSolver:
                 step = du.FV().NumPy()
                 x0 = x_np.copy()
                 factor = 1.0
-                for _ in range(6):
+                for _ in range(self.max_halvings + 1):
                     x_np[:] = x0 - factor * step
                     if system.admissible():
                         break
@@ -182,11 +201,12 @@ class NewtonSolver:
                 else:
                     x_np[:] = x0
                     raise NewtonFailure(
-                        f"{where}: every damped update inverts elements", "ale_jacobian"
+                        f"{where}: every damped update leads to an inadmissible state",
+                        self.inadmissible,
                     )
                 contraction = norm / rep.norms[-2] if len(rep.norms) > 1 else 1.0
                 left = norm * contraction / (1.0 - contraction) if contraction < 0.5 else norm
-                if factor == 1.0 and (norm <= self.tol or (norm <= 1e-3 and left <= self.tol)):
+                if factor == 1.0 and (norm <= tol or (norm <= 1e-3 and left <= tol)):
                     rep.converged = True
                     break
                 if refine and not chord and norm <= 1e-6 and contraction > 0.25:
