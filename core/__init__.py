@@ -2,11 +2,12 @@
 
 from . import parameters as priors
 from .errors import ConfigError, FbiaError, ForwardModelError, MeasureError, PluginError
-from .evaluator import Evaluator, ProcessPoolEvaluator, SerialEvaluator
+from .evaluator import BatchEvaluator, Evaluator
 from .executors import make_evaluator
 from .hookspecs import hookimpl
 from .interface import Interface
 from .iteration import InverseIterator, IteratorBase
+from .local_executors import ProcessPoolEvaluator, SerialEvaluator
 from .observation import (
     Coordinate,
     MeasurementPoints,
@@ -26,6 +27,7 @@ __all__ = [
     "Coordinate",
     "Discrepancy",
     "Evaluation",
+    "BatchEvaluator",
     "Evaluator",
     "FbiaError",
     "ForwardModel",

@@ -38,11 +38,14 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
-from .evaluator import EvaluatorBase, Job, workers_ignore_sigint
-from .isolation import RunOutcome, run_isolated_or_here, run_view
+from .evaluator import BatchEvaluator, Job
+from .isolation import RunOutcome, isolation_mode, run_isolated_or_here, run_view
+from .local_executors import workers_ignore_sigint
 from .problem import Evaluable, Evaluation
 
-__all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator"]
+__all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator", "DaskExecutor"]
+
+Finish = Callable[[RunOutcome], Evaluation]
 
 #: ``cluster`` names of dask-jobqueue and their classes
 JOBQUEUE_CLUSTERS = {
@@ -76,8 +79,9 @@ def _task(
     return outcome
 
 
-class DaskEvaluator(EvaluatorBase):
-    """Runs each batch as Dask tasks, one task per forward run.
+class DaskExecutor:
+    """Runs each batch as Dask tasks, one task per forward run (a back end of
+    :class:`~fbia.core.evaluator.BatchEvaluator`).
 
     Parameters
     ----------
@@ -91,15 +95,11 @@ class DaskEvaluator(EvaluatorBase):
     cluster_options
         Keyword arguments of the cluster class, passed through (for ``"local"``: those of
         ``distributed.LocalCluster``, e.g. ``memory_limit``).
-    workdir, keep_workdirs, on_record
-        As for :class:`~fbia.ProcessPoolEvaluator`; ``workdir`` must be visible to the workers.
     connect_timeout
         Seconds to wait for the scheduler at ``address``.
-    store, retry_failed, timeout, isolate, listener
+    timeout, isolate
         See :mod:`fbia.core.evaluator`; ``isolate`` defaults to True here.
     """
-
-    isolate_by_default = True
 
     def __init__(
         self,
@@ -107,11 +107,9 @@ class DaskEvaluator(EvaluatorBase):
         workers: int | None = None,
         cluster: str = "local",
         cluster_options: Mapping[str, Any] | None = None,
-        workdir: str | Path | None = None,
-        keep_workdirs: bool | None = None,
-        on_record: Callable[[Evaluation], None] | None = None,
         connect_timeout: float = 30.0,
-        **options: Any,
+        timeout: float | None = None,
+        isolate: bool | None = None,
     ) -> None:
         try:
             import distributed
@@ -123,7 +121,8 @@ class DaskEvaluator(EvaluatorBase):
             raise ConfigError(f"unknown cluster {cluster!r}; valid: {', '.join(CLUSTERS)}")
         if workers is not None and workers < 1:
             raise ConfigError(f"workers must be at least 1, got {workers}")
-        super().__init__(workdir, keep_workdirs, on_record, **options)
+        self.isolate = isolation_mode(timeout, isolate, default=True)
+        self.timeout = timeout
         cluster_options = dict(cluster_options or {})
         self.address = address
         self.cluster_kind = "scheduler" if address else cluster
@@ -135,7 +134,7 @@ class DaskEvaluator(EvaluatorBase):
         try:
             self._connect(distributed, address, workers, cluster, cluster_options, connect_timeout)
         except BaseException:
-            self.close()  # a temporary run folder, a half-started cluster
+            self.close()  # a half-started cluster
             raise
         #: seconds taken to start (or reach) the cluster
         self.startup_time = time.perf_counter() - t0
@@ -192,7 +191,7 @@ class DaskEvaluator(EvaluatorBase):
             self._scattered = (problem, data)
         return self._scattered[1]
 
-    def _run(self, problem: Evaluable, jobs: Sequence[Job]) -> dict[int, Evaluation]:
+    def run(self, problem: Evaluable, jobs: Sequence[Job], finish: Finish) -> dict[int, Evaluation]:
         from distributed import KilledWorker, as_completed
 
         data = self._problem_on_cluster(problem)
@@ -228,7 +227,7 @@ class DaskEvaluator(EvaluatorBase):
                     message = f"{type(exc).__name__}: {exc}"
                     outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
                 fut.release()
-                done[i] = self._finish(outcome)
+                done[i] = finish(outcome)
         except BaseException:  # Ctrl-C or a bug: stop the tasks instead of waiting for them
             self.client.cancel(list(futures), force=True)
             raise
@@ -239,8 +238,10 @@ class DaskEvaluator(EvaluatorBase):
         import distributed
 
         return {
-            **super().describe(),
             "kind": "dask",
+            "workers": self.slots,
+            "timeout": self.timeout,
+            "isolate": self.isolate,
             "cluster": self.cluster_kind,
             "scheduler": self.client.scheduler.address if self.client.scheduler else None,
             "dask": dask.__version__,
@@ -255,7 +256,54 @@ class DaskEvaluator(EvaluatorBase):
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
-        super().close()
+
+
+class DaskEvaluator(BatchEvaluator):
+    """A :class:`~fbia.core.evaluator.BatchEvaluator` with a :class:`DaskExecutor`.
+
+    Parameters
+    ----------
+    address, workers, cluster, cluster_options, connect_timeout, timeout, isolate
+        The executor's (:class:`DaskExecutor`).
+    workdir, keep_workdirs, on_record, store, retry_failed, listener
+        The front part's (:class:`~fbia.core.evaluator.BatchEvaluator`); ``workdir`` must be
+        visible to the workers.
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int | None = None,
+        cluster: str = "local",
+        cluster_options: Mapping[str, Any] | None = None,
+        workdir: str | Path | None = None,
+        keep_workdirs: bool | None = None,
+        on_record: Callable[[Evaluation], None] | None = None,
+        connect_timeout: float = 30.0,
+        *,
+        timeout: float | None = None,
+        isolate: bool | None = None,
+        **front: Any,
+    ) -> None:
+        executor = DaskExecutor(
+            address, workers, cluster, cluster_options, connect_timeout, timeout, isolate
+        )
+        try:
+            super().__init__(executor, workdir, keep_workdirs, on_record, **front)
+        except BaseException:
+            executor.close()
+            raise
+        self.dask = executor
+
+    @property
+    def client(self) -> Any:
+        """The Dask client."""
+        return self.dask.client
+
+    @property
+    def startup_time(self) -> float:
+        """Seconds taken to start (or reach) the cluster."""
+        return self.dask.startup_time
 
 
 def _jobqueue_cluster(kind: str, options: Mapping[str, Any]) -> Any:

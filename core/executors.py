@@ -1,7 +1,7 @@
 """Executors by name: the factory behind ``[executor] kind = ...`` in a study file.
 
-It sits apart from :mod:`fbia.core.evaluator` because the Dask executor builds on the
-evaluators there: evaluator <- dask_executor <- executors, with no arrow back.
+It sits above the evaluators it chooses from: evaluator (the front part) <- local_executors,
+dask_executor (front + executor) <- executors, with no arrow back.
 """
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ from __future__ import annotations
 from typing import Any
 
 from .errors import ConfigError
-from .evaluator import Evaluator, ProcessPoolEvaluator, SerialEvaluator
+from .evaluator import Evaluator
+from .local_executors import ProcessPoolEvaluator, SerialEvaluator
 
 #: The executors :func:`make_evaluator` knows.
 EXECUTOR_KINDS = ("serial", "processes", "dask")

@@ -52,6 +52,7 @@ from .problem import Evaluable, Evaluation
 
 __all__ = [
     "IsolatedRunner",
+    "isolation_mode",
     "RunOutcome",
     "evaluate_here",
     "run_isolated_or_here",
@@ -97,9 +98,7 @@ def worker_label() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def evaluate_here(
-    problem: Evaluable, x: dict[str, float], workdir: str, index: int
-) -> RunOutcome:
+def evaluate_here(problem: Evaluable, x: dict[str, float], workdir: str, index: int) -> RunOutcome:
     """Evaluate in this process; the solution object is dropped, its interfaces travel with
     the record (for the store) and its field files are kept as artifacts."""
     ev = problem.evaluate(x, workdir=workdir, index=index, keep_solution=True)
@@ -359,6 +358,24 @@ class IsolatedRunner:
 _LOCAL = threading.local()
 
 
+#: why a time-out cannot go with ``isolate = false`` (the one place this rule is written)
+TIMEOUT_NEEDS_ISOLATION = (
+    "a time-out needs isolated runs (only a run in its own process can be stopped): "
+    "drop isolate = false or the timeout"
+)
+
+
+def isolation_mode(timeout: float | None, isolate: bool | None, default: bool) -> bool:
+    """Whether runs go to child processes: ``isolate`` if given, else whenever there is a
+    ``timeout``, else ``default``; a ConfigError for a time-out that is not positive or a
+    time-out with ``isolate = False``."""
+    if timeout is not None and not timeout > 0:
+        raise ConfigError(f"timeout must be a positive number of seconds, got {timeout}")
+    if timeout is not None and isolate is False:
+        raise ConfigError(TIMEOUT_NEEDS_ISOLATION)
+    return bool(isolate) if isolate is not None else (timeout is not None or default)
+
+
 def thread_runner() -> IsolatedRunner:
     """The runner of the calling thread (pool and Dask workers keep one per thread)."""
     runner = getattr(_LOCAL, "runner", None)
@@ -388,9 +405,7 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
 
 
-def _child(
-    problem: Evaluable, x: dict[str, float], workdir: str, index: int, out: int
-) -> None:
+def _child(problem: Evaluable, x: dict[str, float], workdir: str, index: int, out: int) -> None:
     """In the forked child: run, send the outcome, exit without cleanup of the helper's state
     (status 0 with an outcome sent; 1 if the run raised SystemExit or the like)."""
     code = 1

@@ -14,7 +14,8 @@ from __future__ import annotations
 from collections.abc import Callable, Generator, Iterator
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
-from .evaluator import Evaluator, SerialEvaluator
+from .evaluator import Evaluator
+from .local_executors import SerialEvaluator
 from .options import Configurable
 from .problem import InverseProblem, Result
 

@@ -481,9 +481,7 @@ class _Reader:
                 self.dimension(points.dim, f"{where} points")
             try:
                 out.append(
-                    Observation(
-                        gamma, coordinate, points, noise_std=spec.noise_std, name=spec.name
-                    )
+                    Observation(gamma, coordinate, points, noise_std=spec.noise_std, name=spec.name)
                 )
             except ConfigError as err:
                 raise ConfigError(err.reason, where) from None

@@ -23,6 +23,7 @@ import pydantic
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from .errors import ConfigError
+from .isolation import isolation_mode
 
 __all__ = [
     "CLUSTERS",
@@ -188,12 +189,10 @@ class ExecutorSection(Section):
     @model_validator(mode="after")
     def _consistent(self) -> ExecutorSection:
         given = self.model_fields_set
-        if self.timeout is not None and self.isolate is False:
-            raise _KeyError(
-                "isolate",
-                "a time-out needs isolated runs (only a run in its own process can be "
-                "stopped): drop isolate = false or the timeout",
-            )
+        try:  # the executors' own rule
+            isolation_mode(self.timeout, self.isolate, default=False)
+        except ConfigError as exc:
+            raise _KeyError("isolate", exc.reason) from None
         dask_only = [k for k in ("address", "cluster", "cluster_options") if k in given]
         if dask_only and self.kind != "dask":
             raise _KeyError(

@@ -16,8 +16,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError, ForwardModelError
-from ..core.evaluator import Evaluator, SerialEvaluator
+from ..core.evaluator import Evaluator
 from ..core.iteration import drain
+from ..core.local_executors import SerialEvaluator
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation
 from .levenberg_marquardt import LevenbergMarquardtIterator

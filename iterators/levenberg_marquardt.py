@@ -79,7 +79,6 @@ FloatArray = NDArray[np.float64]
 _ROBUST_ONLY = ("ftol", "xtol", "gtol", "scaling", "speculative", "final_jacobian")
 
 
-
 class _StopRequested(Exception):
     """Thrown into a running :meth:`LevenbergMarquardtIterator.steps` by its ``stop``."""
 

@@ -44,7 +44,6 @@ pytest loads only the fixtures of :mod:`fbia.pytest_plugin` at start-up; this mo
 trimesh, the fbia sub-modules) is imported when a test uses it.
 """
 
-
 from __future__ import annotations
 
 from .errors import ConformanceError

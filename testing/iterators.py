@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.evaluator import SerialEvaluator
+from ..core.local_executors import SerialEvaluator
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..core.registry import forward_model

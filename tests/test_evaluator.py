@@ -119,16 +119,16 @@ def test_injected_faults_with_a_time_out_leave_the_pool_working(pool):
     # 16 runs, 4 with faults: a failure, a hang past the 1 s time-out, two os._exit; each
     # worker runs its runs in a child process, so the pool itself is never broken
     problem = toy_problem(fault_rate=0.2)
-    pool.timeout, pool.isolate = 1.0, True
+    pool.executor.timeout, pool.executor.isolate = 1.0, True
     try:
         records = pool.evaluate(problem, FAULT_GRID)
         check_injected_faults(records, timeout=1.0)
-        workers = set(pool._pool._processes)
+        workers = set(pool.executor._pool._processes)
         clean = [r.x for r in records if r.ok][:2]
         assert [r.status for r in pool.evaluate(problem, clean)] == ["ok", "ok"]
-        assert set(pool._pool._processes) == workers  # the same worker processes
+        assert set(pool.executor._pool._processes) == workers  # the same worker processes
     finally:
-        pool.timeout, pool.isolate = None, False
+        pool.executor.timeout, pool.executor.isolate = None, False
 
 
 def test_serial_isolated_runs_survive_hangs_and_exits(tmp_path):
@@ -153,7 +153,7 @@ def test_ctrl_c_stops_the_workers_at_once_and_keeps_the_finished_records(pool):
 
     def on_record(record: fbia.Evaluation) -> None:
         stored.append(record)
-        workers.extend(pool._pool._processes.values())
+        workers.extend(pool.executor._pool._processes.values())
         timers.append(threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT)))
         timers[-1].start()
 
@@ -246,15 +246,13 @@ def test_progress_lines_bar_and_log_follow_the_batch(tmp_path, capsys):
     )
 
 
-def test_a_worker_that_dies_while_the_batch_is_submitted_costs_only_its_own_run(
-    pool, monkeypatch
-):
+def test_a_worker_that_dies_while_the_batch_is_submitted_costs_only_its_own_run(pool, monkeypatch):
     """Issue 14, defect 2: submitting the rest of a batch after a worker died raised
     BrokenProcessPool out of evaluate.  Submissions are slowed down here so that the run that
     kills its worker (E = 780 Pa, submitted second) dies before the batch is submitted."""
     import time as _time
 
-    real_pool_for = pool._pool_for
+    real_pool_for = pool.executor._pool_for
 
     def slow_pool(problem):
         executor = real_pool_for(problem)
@@ -270,7 +268,7 @@ def test_a_worker_that_dies_while_the_batch_is_submitted_costs_only_its_own_run(
         monkeypatch.setattr(executor, "submit", slow_submit)
         return executor
 
-    monkeypatch.setattr(pool, "_pool_for", slow_pool)
+    monkeypatch.setattr(pool.executor, "_pool_for", slow_pool)
     batch = [POINTS[0], {"E": 780.0, "nu": 0.2}, POINTS[1], POINTS[2], POINTS[3]]
     records = pool.evaluate(PROBLEM, batch)
     assert [r.status for r in records] == ["ok", "failed", "ok", "ok", "ok"]
