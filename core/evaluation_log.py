@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import Any, TextIO
 
-from .problem import Evaluation, _jsonable
+from .problem import Evaluation, jsonable
 
 __all__ = ["EvaluationLog"]
 
@@ -39,7 +39,7 @@ class EvaluationLog:
         self.records.append(record)
         if self._fh is None:
             raise ValueError(f"evaluation log {self.path} is closed")
-        line = json.dumps(_jsonable({**record.to_dict(), **extra}), allow_nan=False, default=str)
+        line = json.dumps(jsonable({**record.to_dict(), **extra}), allow_nan=False, default=str)
         self._fh.write(line + "\n")
         self._fh.flush()
 

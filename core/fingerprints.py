@@ -33,7 +33,7 @@ import numpy as np
 
 from .observation import coordinate_key
 from .options import plugin_options
-from .problem import InverseProblem, _jsonable
+from .problem import InverseProblem, jsonable
 
 __all__ = [
     "canonical",
@@ -49,7 +49,7 @@ __all__ = [
 
 def canonical(value: Any) -> str:
     """JSON with sorted keys and exact floats (``repr``): equal text means equal content."""
-    return json.dumps(_jsonable(value), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return json.dumps(jsonable(value), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
 def _sha(text: str) -> str:
@@ -72,7 +72,7 @@ def _class_version(obj: Any) -> dict[str, str]:
 
 def _options(obj: Any) -> dict[str, Any]:
     """A plugin's options; a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
-    out = dict(_jsonable(plugin_options(obj)))  # inf and nan as strings, as canonical() does
+    out = dict(jsonable(plugin_options(obj)))  # inf and nan as strings, as canonical() does
     opts = getattr(obj, "options", None)
     for key in out:
         value = getattr(opts, key, None)

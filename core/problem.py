@@ -73,11 +73,11 @@ class Evaluation:
             "message": self.message,
             # NaN/inf (an "error" record of a measure that returned them) as strings, so
             # that Result.save (allow_nan=False) never fails on a record.
-            "residuals": None if self.residuals is None else _jsonable(self.residuals),
-            "distances": _jsonable(self.distances),
+            "residuals": None if self.residuals is None else jsonable(self.residuals),
+            "distances": jsonable(self.distances),
             "time": self.time,
             "workdir": self.workdir,
-            "diagnostics": _jsonable(self.diagnostics),
+            "diagnostics": jsonable(self.diagnostics),
         }
 
 
@@ -292,7 +292,7 @@ class InverseProblem:
             missing = [c for c in coords if coordinate_key(c) not in solution.interfaces]
             if missing:
                 raise _PluginBug(f"forward model returned no interface for coordinate(s) {missing}")
-            ev.diagnostics = dict(solution.diagnostics)
+            ev.diagnostics = jsonable(dict(solution.diagnostics))  # storable, whatever it holds
             if keep_solution:  # kept when the measure fails too: the forward run succeeded
                 ev.solution = solution
             ev.residuals, ev.distances = self.discrepancy(solution)
@@ -332,23 +332,29 @@ class _PluginBug(Exception):
     pass
 
 
-def _jsonable(value: Any) -> Any:
-    """Numpy arrays, paths and dataclasses turned into plain JSON types."""
+def jsonable(value: Any) -> Any:
+    """``value`` in plain JSON types: numpy scalars and arrays, paths, dataclasses and sets
+    converted; NaN and infinities as the strings ``"nan"``, ``"inf"``, ``"-inf"``; any other
+    object as its ``repr``.  Total: whatever a plugin puts in ``diagnostics`` can be stored."""
     if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
+    if isinstance(value, (set, frozenset)):
+        return sorted((jsonable(v) for v in value), key=repr)
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, np.integer, np.bool_)):
-        return value.item()
+        return jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return jsonable(value.item())
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
     if isinstance(value, Path):
         return str(value)
     if is_dataclass(value) and not isinstance(value, type):
-        return _jsonable(asdict(value))
-    return value
+        return jsonable(asdict(value))
+    return repr(value)
 
 
 @dataclass
@@ -398,9 +404,9 @@ class Result:
             "nfev": self.nfev,
             "n_failed": self.n_failed,
             "iterator": self.iterator,
-            "history": _jsonable(self.history),
-            "info": _jsonable(self.info),
-            "provenance": _jsonable(self.provenance),
+            "history": jsonable(self.history),
+            "info": jsonable(self.info),
+            "provenance": jsonable(self.provenance),
             "evaluations": [e.to_dict() for e in self.evaluations],
         }
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core.problem import Result, _jsonable
+from ..core.problem import Result, jsonable
 
 FloatArray = NDArray[np.float64]
 
@@ -179,5 +179,5 @@ class GpSmcResult(Result):
         for name in ("design", "surrogate", "check", "posterior", "smc"):
             value = getattr(self, name)
             parts[name] = None if value is None else asdict(value)
-        out["info"] = {**out["info"], **_jsonable(parts)}
+        out["info"] = {**out["info"], **jsonable(parts)}
         return out

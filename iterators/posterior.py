@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core.errors import ConfigError
 from ..core.parameters import Parameter, Prior
-from ..core.problem import _jsonable
+from ..core.problem import jsonable
 from .gp_smc_result import FloatArray, GpSmcResult, LaplaceApproximation, ParticlePosterior
 from .gp_surrogate import GpSurrogate
 from .smc import SmcResult, systematic_resample
@@ -237,7 +237,7 @@ def save_posterior(result: GpSmcResult, folder: str | Path) -> tuple[Path, Path]
         "seconds": result.seconds,
     }
     js = folder / "posterior.json"
-    js.write_text(json.dumps(_jsonable(meta), indent=1, default=str))
+    js.write_text(json.dumps(jsonable(meta), indent=1, default=str))
     return npz, js
 
 

@@ -64,6 +64,9 @@ class ToyMoundForwardModel(fbia.Configurable):
         fault_rate: float = Field(
             0.0, ge=0, lt=1, description="fraction of inputs with an injected fault [-]"
         )
+        odd_diagnostics: bool = Field(
+            False, description="diagnostics with NaN, inf and objects JSON does not know"
+        )
 
     def parameter_names(self) -> Sequence[str]:
         return ("E", "nu", "inflow_rate")
@@ -106,7 +109,17 @@ class ToyMoundForwardModel(fbia.Configurable):
         for c in coordinates:
             q = c.get("inflow_rate", parameters.get("inflow_rate", self.options.inflow_rate))
             pairs.append((c, fbia.Interface.polyline(toy_curve(E, nu, q))))
-        return fbia.Solution.from_pairs(pairs, diagnostics={"E": E})
+        diagnostics: dict[str, Any] = {"E": E}
+        if self.options.odd_diagnostics:
+            diagnostics.update(
+                nan=np.float64("nan"),
+                inf=np.float32("inf"),
+                values=np.array([1.0, np.nan, -np.inf]),
+                where=Path(workdir),
+                kinds={"b", "a"},
+                solver=object(),
+            )
+        return fbia.Solution.from_pairs(pairs, diagnostics=diagnostics)
 
 
 def injected_fault(E: float, nu: float, rate: float) -> str | None:

@@ -272,3 +272,26 @@ def test_a_file_option_counts_by_its_content_not_its_folder(tmp_path):
     (tmp_path / "b" / "cell.msh").write_text("mesh v2")
     assert _options(Model(tmp_path / "b" / "cell.msh")) != a
     assert _options(Model(None)) == {"mesh_file": None}
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_diagnostics_with_nan_and_foreign_objects_are_stored_and_reused(tmp_path, isolate):
+    """Issue 14, defect 3: NaN numpy floats or objects JSON does not know in a model's
+    diagnostics crashed the study when the run was stored, at every resume again."""
+    problem = _problem(odd_diagnostics=True)
+    path = tmp_path / "store.sqlite"
+    with StudyStore(path) as s, fbia.SerialEvaluator(store=s, isolate=isolate) as ev:
+        first = ev.evaluate(problem, POINTS[:2])
+    assert [r.status for r in first] == ["ok", "ok"]
+    d = first[0].diagnostics
+    assert (d["nan"], d["inf"], d["values"], d["kinds"]) == (
+        "nan",
+        "inf",
+        [1.0, "nan", "-inf"],
+        ["a", "b"],
+    )
+    assert d["solver"].startswith("<object object")
+    with StudyStore(path) as s, fbia.SerialEvaluator(store=s) as ev:
+        again = ev.evaluate(problem, POINTS[:2])
+        assert ev.reused == {0, 1}
+    assert [r.diagnostics for r in again] == [r.diagnostics for r in first]
