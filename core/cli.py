@@ -14,11 +14,13 @@ of the same problem is reused, none is run again; ``--fresh`` starts over, ``--r
 runs stored failures again, ``--address`` sends the runs to a running Dask scheduler.
 
 Exit status: 0 done (``fbia run``: the result, converged or not, is written; its status is in
-the report); 1 a forward run failed (``fbia forward``, or ``fbia run`` without an iterator), or
-a file could not be written; 2 bad input (study file, data files, plugin
-names, options, arguments; a store made for a different problem): one line
-``fbia: error: <message>`` on stderr, no traceback;
-130 interrupted by Ctrl-C, after saving what was computed.
+the report); 1 a forward run failed (``fbia forward``, or ``fbia run`` without an iterator),
+a file could not be written, or the study store could not be read or written (a full disk, a
+read-only or damaged store: one line naming the file and what to do); 2 bad input (study
+file, data files, plugin names, options, arguments; a store made for a different problem):
+one line ``fbia: error: <message>`` on stderr, no traceback;
+130 interrupted by Ctrl-C, 143 terminated by SIGTERM (a batch system's wall-time limit), both
+after saving what was computed.
 """
 
 from __future__ import annotations
@@ -26,11 +28,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from .errors import ConfigError
+from .errors import ConfigError, Terminated
 
 PROG = "fbia"
 
@@ -113,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command is None:
             _parser().print_help()
             return 2
+        _terminate_like_ctrl_c()
         command = {
             "validate": _validate,
             "forward": _forward,
@@ -124,11 +129,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(str(exc), 2)
     except ConfigError as exc:  # includes PluginError
         return _fail(str(exc), 2)
+    except Terminated:
+        print(f"{PROG}: terminated (SIGTERM); what was computed is saved", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted; what was computed is saved", file=sys.stderr)
         return 130
     except OSError as exc:  # e.g. an output folder that cannot be written
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc), 1)
+
+
+def _terminate_like_ctrl_c() -> None:
+    """SIGTERM raises :class:`~fbia.core.errors.Terminated` (a KeyboardInterrupt): the study
+    stops its workers and saves what was computed, as on Ctrl-C."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM ends at once
+        raise Terminated
+
+    signal.signal(signal.SIGTERM, handler)
 
 
 def _fail(message: str, status: int) -> int:

@@ -41,6 +41,12 @@ class PluginError(ConfigError):
     """A plugin that cannot be registered or found (duplicate or unknown name)."""
 
 
+class StoreError(FbiaError, OSError):
+    """The study store cannot be read or written (a full disk, a read-only or corrupted
+    file); the message names the file and what to do, in one line.  What the store held
+    before stays as it was: SQLite rolls back the transaction that failed."""
+
+
 class ForwardModelError(FbiaError, RuntimeError):
     """A forward run failed; ``reason`` is a short machine-readable tag."""
 
@@ -51,3 +57,8 @@ class ForwardModelError(FbiaError, RuntimeError):
 
 class MeasureError(FbiaError, RuntimeError):
     """A discrepancy could not be computed for a simulated interface (e.g. a ray missed it)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (what a batch system sends at its wall-time limit), raised like Ctrl-C so that
+    a study stops its workers and saves what was computed."""

@@ -57,7 +57,7 @@ class Interface:
         if len(c) == 0:
             raise ConfigError("interface has no elements")
         if not np.all(np.isfinite(v)):
-            raise ConfigError("interface vertices contain NaN or infinite coordinates")
+            raise NonFiniteInterfaceError("interface vertices contain NaN or infinite coordinates")
         if c.min() < 0 or c.max() >= len(v):
             raise ConfigError("interface cells refer to vertices that do not exist")
         v.setflags(write=False)
@@ -360,6 +360,11 @@ class Interface:
         )
         meshio.Mesh(pts, [(kind, self._cells)]).write(path)
         return path
+
+
+class NonFiniteInterfaceError(ConfigError):
+    """Interface vertices with NaN or infinite coordinates: bad data when read from a file,
+    a failed (diverged) run when a forward model makes them."""
 
 
 def read_csv_table(path: Path, min_cols: int, max_cols: int) -> FloatArray:

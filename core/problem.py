@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ConfigError, ForwardModelError, MeasureError
+from .interface import NonFiniteInterfaceError
 from .observation import Observation, Solution, coordinate_key
 from .options import plugin_options
 from .parameters import Parameter
@@ -292,7 +293,7 @@ class InverseProblem:
             missing = [c for c in coords if coordinate_key(c) not in solution.interfaces]
             if missing:
                 raise _PluginBug(f"forward model returned no interface for coordinate(s) {missing}")
-            ev.diagnostics = jsonable(dict(solution.diagnostics))  # storable, whatever it holds
+            ev.diagnostics = jsonable(dict(solution.diagnostics), lenient=True)  # always storable
             if keep_solution:  # kept when the measure fails too: the forward run succeeded
                 ev.solution = solution
             ev.residuals, ev.distances = self.discrepancy(solution)
@@ -300,6 +301,12 @@ class InverseProblem:
                 raise _PluginBug("the measure returned NaN or infinite values")
         except ForwardModelError as exc:
             ev.status, ev.message = "failed", str(exc) or type(exc).__name__
+        except NonFiniteInterfaceError:  # from the model's interfaces: its solve diverged
+            ev.status = "failed"
+            ev.message = (
+                "the forward model returned an interface with NaN or infinite coordinates "
+                "(a diverged solve?)"
+            )
         except MeasureError as exc:
             ev.status, ev.message = "measure_failed", str(exc)
         except Exception as exc:  # a plugin bug: recorded with its type, never silent
@@ -332,20 +339,21 @@ class _PluginBug(Exception):
     pass
 
 
-def jsonable(value: Any) -> Any:
+def jsonable(value: Any, lenient: bool = False) -> Any:
     """``value`` in plain JSON types: numpy scalars and arrays, paths, dataclasses and sets
-    converted; NaN and infinities as the strings ``"nan"``, ``"inf"``, ``"-inf"``; any other
-    object as its ``repr``.  Total: whatever a plugin puts in ``diagnostics`` can be stored."""
+    converted; NaN and infinities as the strings ``"nan"``, ``"inf"``, ``"-inf"``.  Any other
+    object is left as it is (JSON then refuses it), or with ``lenient`` written as its
+    ``repr``: whatever a plugin puts in ``diagnostics`` can be stored."""
     if isinstance(value, Mapping):
-        return {str(k): jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v, lenient) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
+        return [jsonable(v, lenient) for v in value]
     if isinstance(value, (set, frozenset)):
-        return sorted((jsonable(v) for v in value), key=repr)
+        return sorted((jsonable(v, lenient) for v in value), key=repr)
     if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
+        return jsonable(value.tolist(), lenient)
     if isinstance(value, np.generic):
-        return jsonable(value.item())
+        return jsonable(value.item(), lenient)
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
     if value is None or isinstance(value, (bool, int, float, str)):
@@ -353,8 +361,8 @@ def jsonable(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     if is_dataclass(value) and not isinstance(value, type):
-        return jsonable(asdict(value))
-    return repr(value)
+        return jsonable(asdict(value), lenient)
+    return repr(value) if lenient else value
 
 
 @dataclass

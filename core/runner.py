@@ -7,7 +7,6 @@ when it has none) and writes the output folder, resuming from its store;
 
 from __future__ import annotations
 
-import shutil
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -15,8 +14,10 @@ from pathlib import Path
 from typing import Any
 
 from . import report
+from .errors import ConfigError, Terminated
 from .evaluation_log import EvaluationLog
 from .iteration import drain
+from .output_folder import OutputLock, clear_runs
 from .plots import plot_evaluations, plot_interfaces
 from .problem import Evaluation, InverseProblem, Result
 from .progress import RunProgress, log_to_file
@@ -56,9 +57,21 @@ def forward_study(
 def _forward(
     study: Study, values: Mapping[str, float] | None, out: Path, echo: Echo, started: str
 ) -> Result:
-    problem = study.problem
     x = study.start_point(values)
-    out.mkdir(parents=True, exist_ok=True)
+    if (out / STORE_NAME).exists():
+        raise ConfigError(
+            f"holds a study ({STORE_NAME}): a forward run writes its own evaluations.jsonl "
+            "and result.json and would replace the study's; give --output another folder",
+            str(out),
+        )
+    with OutputLock(out, "fbia forward"):
+        return _forward_locked(study, x, out, echo, started)
+
+
+def _forward_locked(
+    study: Study, x: dict[str, float], out: Path, echo: Echo, started: str
+) -> Result:
+    problem = study.problem
     with EvaluationLog(out / "evaluations.jsonl") as log:
         ev = problem.evaluate(x, workdir=out / "run", index=0, keep_solution=True)
         log.append(ev)
@@ -135,11 +148,9 @@ def run_study(
         return _forward(study, None, out, echo, started)
     problem = study.problem
     executor = study.executor.with_workers(workers).with_address(address)
-    out.mkdir(parents=True, exist_ok=True)
-    store = StudyStore(out / STORE_NAME, fresh=fresh)
-    try:
+    with OutputLock(out, "fbia run"), StudyStore(out / STORE_NAME, fresh=fresh) as store:
         if fresh:
-            shutil.rmtree(out / "runs", ignore_errors=True)
+            clear_runs(out / "runs")
         store.bind(problem)
         with log_to_file(out / "fbia.log") as logger:
 
@@ -150,8 +161,6 @@ def run_study(
             return _run_stored(
                 study, problem, executor, store, out, started, say, retry_failed, fresh
             )
-    finally:
-        store.close()
 
 
 @dataclass
@@ -204,18 +213,7 @@ def _run_stored(
     try:
         result = _evaluate(session, executor, log, listener, retry_failed)
     except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
-        interrupted = isinstance(exc, KeyboardInterrupt)
-        store.end_session("interrupted" if interrupted else "error")
-        partial = _partial(
-            study,
-            log,
-            "interrupted" if interrupted else "error",
-            "stopped by the user (Ctrl-C)"
-            if interrupted
-            else f"the iterator stopped with {type(exc).__name__}: {exc}",
-        )
-        log.close()
-        session.finish(partial, quiet=True)
+        _save_partial(session, log, exc)
         raise
     store.end_session("done")
     log.close()
@@ -234,6 +232,33 @@ def _run_stored(
     result.info.setdefault("files", files)
     session.finish(result)
     return result
+
+
+def _save_partial(session: _Session, log: EvaluationLog, exc: BaseException) -> None:
+    """After Ctrl-C or an error: close the session and write the partial result, as far as
+    the machine lets us (a full disk may refuse each step); never raises, so the first
+    error is the one the user sees."""
+    interrupted = isinstance(exc, KeyboardInterrupt)
+    status = "interrupted" if interrupted else "error"
+    if isinstance(exc, Terminated):
+        message = "stopped by SIGTERM (e.g. a batch system's wall-time limit)"
+    elif interrupted:
+        message = "stopped by the user (Ctrl-C)"
+    else:
+        message = f"the iterator stopped with {type(exc).__name__}: {exc}"
+    steps: list[tuple[str, Callable[[], None]]] = [
+        ("closing the session in the store", lambda: session.store.end_session(status)),
+        ("closing the evaluation log", log.close),
+        (
+            "writing the partial result",
+            lambda: session.finish(_partial(session.study, log, status, message), quiet=True),
+        ),
+    ]
+    for what, step in steps:
+        try:
+            step()
+        except Exception as err:
+            session.echo(f"warning: {what} failed: {' '.join(str(err).split())}")
 
 
 def _evaluate(

@@ -56,7 +56,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import ConfigError, MeasureError
+from .errors import ConfigError, MeasureError, StoreError
 from .fingerprints import (
     canonical,
     comparison_key,
@@ -70,7 +70,9 @@ from .fingerprints import (
 )
 from .interface import Interface
 from .observation import CoordinateKey, Solution, coordinate_key
+from .output_folder import is_fbia_store
 from .problem import Evaluation, InverseProblem
+from .store_db import connect
 from .store_migration import migrate
 
 __all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
@@ -207,19 +209,23 @@ class StudyStore:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock: IO[str] | None = self._take_lock() if lock else None
-        if fresh:  # under the lock: no other run is using the file
+        if fresh and self.path.exists():  # under the lock: no other run is using the file
+            if not is_fbia_store(self.path):
+                self._release_lock()
+                raise ConfigError(
+                    "--fresh deletes only an fbia study store, and this file is none (or is "
+                    "damaged): move it away yourself",
+                    str(self.path),
+                )
             for suffix in ("", "-wal", "-shm"):
                 Path(f"{self.path}{suffix}").unlink(missing_ok=True)
         try:
-            self._db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=False)
+            self._db = connect(self.path)  # SQLite errors are one-line StoreErrors
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
             self._open_format()
-        except sqlite3.DatabaseError as exc:
-            self._release_lock()
-            raise ConfigError(f"not a readable fbia store ({exc})", str(self.path)) from None
-        except ConfigError:
-            self._release_lock()
+        except BaseException:
+            self.close()
             raise
         #: the model key the store is tied to (None until the first :meth:`bind`)
         self.hash: str | None = self._meta("model_key")
@@ -273,10 +279,12 @@ class StudyStore:
         self._db.execute("BEGIN IMMEDIATE")
         try:
             yield self._db
+            self._db.execute("COMMIT")  # may fail too (a full disk): then roll back
         except BaseException:
-            self._db.execute("ROLLBACK")
+            if self._db.in_transaction:
+                with contextlib.suppress(StoreError):
+                    self._db.execute("ROLLBACK")
             raise
-        self._db.execute("COMMIT")
 
     def _meta(self, key: str) -> str | None:
         row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()

@@ -64,6 +64,7 @@ class ToyMoundForwardModel(fbia.Configurable):
         fault_rate: float = Field(
             0.0, ge=0, lt=1, description="fraction of inputs with an injected fault [-]"
         )
+        nan_above: float = Field(math.inf, description="E above which NaN coordinates [Pa]")
         odd_diagnostics: bool = Field(
             False, description="diagnostics with NaN, inf and objects JSON does not know"
         )
@@ -108,7 +109,10 @@ class ToyMoundForwardModel(fbia.Configurable):
         pairs = []
         for c in coordinates:
             q = c.get("inflow_rate", parameters.get("inflow_rate", self.options.inflow_rate))
-            pairs.append((c, fbia.Interface.polyline(toy_curve(E, nu, q))))
+            curve = toy_curve(E, nu, q)
+            if E > self.options.nan_above:
+                curve[len(curve) // 2, 1] = np.nan  # a diverged solve
+            pairs.append((c, fbia.Interface.polyline(curve)))
         diagnostics: dict[str, Any] = {"E": E}
         if self.options.odd_diagnostics:
             diagnostics.update(

@@ -209,9 +209,7 @@ def test_posterior_files_round_trip(runs, tmp_path):
     np.testing.assert_array_equal(data["particles"], result.posterior.particles)
     np.testing.assert_allclose(data["weights"].sum(), 1.0)
     np.testing.assert_array_equal(data["theta"], result.posterior.particles[:, 2:])
-    np.testing.assert_allclose(
-        data["log_posterior"], result.posterior.log_posterior
-    )
+    np.testing.assert_allclose(data["log_posterior"], result.posterior.log_posterior)
     assert data["design"].shape == (288, 3) and data["train_mask"].sum() == 256
     meta = data["meta"]
     assert meta["x_map"] == result.x and meta["gp"]["kernel"] == "matern32"
@@ -249,9 +247,7 @@ def test_arviz_reads_the_posterior(runs, tmp_path):
     assert isinstance(idata, arviz.InferenceData)
     assert set(idata.posterior.data_vars) == {"E", "nu", "inflow_rate"}
     # Equally weighted draws from the particles keep the weighted mean.
-    assert float(idata.posterior["E"].mean()) == pytest.approx(
-        result.posterior.mean[0], rel=0.02
-    )
+    assert float(idata.posterior["E"].mean()) == pytest.approx(result.posterior.mean[0], rel=0.02)
 
 
 def test_hpd_mass_of_map_truth_and_a_far_point(runs):

@@ -254,7 +254,7 @@ def test_synthetic_data_noise_is_not_the_likelihood_sigma(tmp_path, monkeypatch)
         (
             "executor",
             {"address": "tcp://host:8786"},
-            '[executor] address: address only for kind = "dask" (kind is \'processes\')',
+            "[executor] address: address only for kind = \"dask\" (kind is 'processes')",
         ),
         (
             "executor",
