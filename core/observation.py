@@ -126,7 +126,8 @@ class Observation:
     Parameters
     ----------
     interface
-        The observed (segmented) interface; needed by the ``cpp`` and ``rkhs`` measures.
+        The observed (segmented) interface; needed by the ``cpp`` and ``rkhs`` measures.  Its
+        coordinates, like the points', must be below ``MAX_COORDINATE`` (1e9 mm) in magnitude.
     coordinate
         Which state it is, e.g. ``{"inflow_rate": 100.0}``.
     points
@@ -156,6 +157,8 @@ class Observation:
             pts = MeasurementPoints(pts.points, np.asarray(self.directions, dtype=float))
         object.__setattr__(self, "points", pts)
         object.__setattr__(self, "directions", None)
+        if self.interface is not None:
+            check_coordinates(self.interface.vertices, "observed interface vertices")
         if self.interface is None and pts is None:
             raise ConfigError("an observation needs an interface, measurement points or both")
         if self.interface is not None and pts is not None and self.interface.dim != pts.dim:

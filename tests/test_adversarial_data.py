@@ -6,7 +6,8 @@ sizes, headers that are not headers, values that are not finite or not of a sane
 goes through the readers (``Interface.read`` for ``x, y[, curve]``, ``MeasurementPoints.read``
 for ``x, y[, z][, dx, dy[, dz]]``) and must give a ``ConfigError`` naming the file and the
 line; a representative subset goes through ``fbia run`` on a small study, which must exit
-with status 2 and print exactly one line.
+with status 2 and print exactly one line.  Coordinates around 1e300 handed to the measures
+through the Python API give ``MeasureError``/``ConfigError``, not ``IndexError``.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from _studies import edit, write_study
 
 import fbia
 from fbia.core.cli import main
-from fbia.core.data_files import MAX_LINE_CHARS, read_csv_table
+from fbia.core.data_files import MAX_COORDINATE, MAX_LINE_CHARS, read_csv_table
+from fbia.measures._geometry import ElementGeometry, closest_points
 
 FBIA = Path(sys.executable).parent / "fbia"
 
@@ -153,6 +155,41 @@ def test_huge_3d_surface_is_rejected_on_read(tmp_path):
         fbia.Interface.surface(v, [[0, 1, 2]]).write(path)
     with pytest.raises(fbia.ConfigError, match=rf"^{path}: vertex coordinates reach 1e\+300"):
         fbia.Interface.read(path)
+
+
+# -- the measures, through the Python API (defect 16) ----------------------------------------
+
+
+def _curve(scale: float, lift: float = 0.0) -> fbia.Interface:
+    x = np.linspace(0.0, 1.0, 5)
+    return fbia.Interface.polyline(np.c_[x * scale, 0.1 * x + lift])
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.parametrize("scale", [1e300, 1e160, 10 * MAX_COORDINATE])
+@pytest.mark.parametrize("measure", ["cpp", "ray", "rkhs"])
+def test_huge_simulated_interfaces_give_measure_error(measure, scale):
+    x = np.linspace(0.2, 0.8, 3)
+    observation = fbia.Observation(_curve(1.0), points=np.c_[x, 0.1 * x])
+    with pytest.raises(fbia.MeasureError, match=f"^{measure} measure: .* beyond the bound"):
+        fbia.measure(measure).residuals(_curve(scale, lift=0.5), observation)
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+def test_huge_observed_interfaces_are_config_errors():
+    with pytest.raises(fbia.ConfigError, match="observed interface vertices reach 1e\\+300"):
+        fbia.Observation(_curve(1e300))
+    with pytest.raises(fbia.ConfigError, match="measurement points reach 1e\\+300"):
+        fbia.Observation(_curve(1.0), points=[[0.5, 1e300]])
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+def test_closest_points_guards_the_kd_tree_no_neighbour_index():
+    """cKDTree answers 'no neighbour' with index n when squared distances overflow: this was
+    the IndexError of defect 16; below the measures' bound it cannot happen, so guard it."""
+    geometry = ElementGeometry(_curve(1e300))
+    with pytest.raises(fbia.MeasureError, match="no closest point found"):
+        closest_points(geometry, np.array([[1e300, -1e300]]))
 
 
 # -- the command line --------------------------------------------------------------------------
