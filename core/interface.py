@@ -23,10 +23,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .data_files import check_coordinates, read_csv_table
 from .errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+
+#: The columns of an interface CSV file (2-D), with or without a header row.
+CSV_LAYOUTS = (("x", "y"), ("x", "y", "curve"))
 
 _SURFACE_SUFFIXES = {".stl", ".ply", ".obj", ".vtk", ".vtu", ".off", ".msh", ".xdmf", ".glb"}
 
@@ -271,7 +275,11 @@ class Interface:
         """Read an interface: CSV for 2-D, any meshio/trimesh surface format for 3-D.
 
         CSV: one point per row, columns ``x, y`` and an optional third column ``curve`` (an
-        integer id that separates several polylines); a header row is optional.
+        integer id that separates several polylines); a header row is optional and, if there,
+        is ``x, y`` or ``x, y, curve``.  The file is read by
+        :func:`fbia.core.data_files.read_csv_table`: strict UTF-8, no row skipped in silence,
+        every coordinate finite and below ``MAX_COORDINATE`` (1e9 mm) in magnitude; the same
+        bound holds for the vertices of a surface file.
         """
         path = Path(path)
         if not path.is_file():
@@ -293,7 +301,7 @@ class Interface:
 
     @classmethod
     def _read_csv(cls, path: Path) -> Interface:
-        rows = read_csv_table(path, min_cols=2, max_cols=3)
+        rows = read_csv_table(path, CSV_LAYOUTS)
         if rows.shape[1] == 2:
             curves = [rows]
         else:
@@ -322,7 +330,9 @@ class Interface:
             tris = [b.data for b in mesh.cells if b.type == "triangle"]
             if not tris:
                 raise ConfigError("mesh file has no triangle cells", str(path))
-            return cls.surface(np.asarray(mesh.points, dtype=float)[:, :3], np.vstack(tris))
+            points = np.asarray(mesh.points, dtype=float)
+            check_coordinates(points, "vertex coordinates", str(path))
+            return cls.surface(points[:, :3], np.vstack(tris))
         except ConfigError:
             raise
         except Exception:
@@ -332,6 +342,7 @@ class Interface:
                 tm: Any = trimesh.load(path, force="mesh", process=False)
             except Exception as exc:
                 raise ConfigError(f"cannot read surface: {exc}", str(path)) from None
+            check_coordinates(np.asarray(tm.vertices, dtype=float), "vertex coordinates", str(path))
             return cls.surface(tm.vertices, tm.faces)
 
     def write(self, path: str | Path) -> Path:
@@ -365,37 +376,3 @@ class Interface:
 class NonFiniteInterfaceError(ConfigError):
     """Interface vertices with NaN or infinite coordinates: bad data when read from a file,
     a failed (diverged) run when a forward model makes them."""
-
-
-def read_csv_table(path: Path, min_cols: int, max_cols: int) -> FloatArray:
-    """Read a numeric CSV table with an optional header; one-line errors name file and row."""
-    rows: list[list[float]] = []
-    with Path(path).open(newline="") as fh:
-        for lineno, raw in enumerate(csv.reader(fh), start=1):
-            cells = [c.strip() for c in raw if c.strip() != ""]
-            if not cells or cells[0].startswith("#"):
-                continue
-            try:
-                values = [float(c) for c in cells]
-            except ValueError:
-                if not rows and lineno == 1 or not rows and all(_is_word(c) for c in cells):
-                    continue  # header
-                raise ConfigError(f"row {lineno}: not a number in {raw!r}", str(path)) from None
-            if not min_cols <= len(values) <= max_cols:
-                raise ConfigError(
-                    f"row {lineno}: expected {min_cols} to {max_cols} columns, got {len(values)}",
-                    str(path),
-                )
-            if not all(np.isfinite(values)):
-                raise ConfigError(f"row {lineno}: NaN or infinite value", str(path))
-            rows.append(values)
-    if not rows:
-        raise ConfigError("no data rows", str(path))
-    widths = {len(r) for r in rows}
-    if len(widths) != 1:
-        raise ConfigError(f"rows have different column counts {sorted(widths)}", str(path))
-    return np.asarray(rows, dtype=float)
-
-
-def _is_word(cell: str) -> bool:
-    return any(ch.isalpha() for ch in cell)

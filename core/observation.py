@@ -22,8 +22,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .data_files import check_coordinates, read_csv_table
 from .errors import ConfigError
-from .interface import Interface, read_csv_table
+from .interface import Interface
+
+#: The columns of a measurement-point CSV file, with or without a header row.
+POINT_LAYOUTS = (
+    ("x", "y"),
+    ("x", "y", "z"),
+    ("x", "y", "dx", "dy"),
+    ("x", "y", "z", "dx", "dy", "dz"),
+)
 
 Coordinate = Mapping[str, float]
 CoordinateKey = tuple[tuple[str, float], ...]
@@ -58,8 +67,7 @@ class MeasurementPoints:
         p = np.array(self.points, dtype=float)
         if p.ndim != 2 or p.shape[1] not in (2, 3) or len(p) == 0:
             raise ConfigError(f"measurement points must have shape (n, 2) or (n, 3), got {p.shape}")
-        if not np.all(np.isfinite(p)):
-            raise ConfigError("measurement points contain NaN or infinite values")
+        check_coordinates(p, "measurement points")
         object.__setattr__(self, "points", p)
         if self.directions is not None:
             d = np.array(self.directions, dtype=float)
@@ -83,25 +91,23 @@ class MeasurementPoints:
 
     @classmethod
     def read(cls, path: str | Path) -> MeasurementPoints:
-        """CSV with columns ``x, y[, z]`` or ``x, y[, z], dx, dy[, dz]`` (header optional)."""
+        """CSV with columns ``x, y[, z]`` or ``x, y[, z], dx, dy[, dz]``.
+
+        A header row is optional and, if there, names one of these layouts; the file is read
+        by :func:`fbia.core.data_files.read_csv_table` (strict UTF-8, no row skipped in
+        silence, values finite and below ``MAX_COORDINATE`` in magnitude).
+        """
         path = Path(path)
         if not path.is_file():
             raise ConfigError("file not found", str(path))
-        table = read_csv_table(path, min_cols=2, max_cols=6)
-        ncol = table.shape[1]
+        table = read_csv_table(path, POINT_LAYOUTS)  # 2, 3, 4 or 6 columns
+        dim = {2: 2, 3: 3, 4: 2, 6: 3}[table.shape[1]]
         try:
-            if ncol in (2, 3):
+            if table.shape[1] == dim:
                 return cls(table)
-            if ncol == 4:
-                return cls(table[:, :2], table[:, 2:])
-            if ncol == 6:
-                return cls(table[:, :3], table[:, 3:])
+            return cls(table[:, :dim], table[:, dim:])
         except ConfigError as err:
             raise err.located(str(path)) from None
-        raise ConfigError(
-            f"measurement points need 2, 3, 4 or 6 columns (x, y[, z][, dx, dy[, dz]]), got {ncol}",
-            str(path),
-        )
 
     def write(self, path: str | Path) -> Path:
         path = Path(path)
@@ -120,7 +126,8 @@ class Observation:
     Parameters
     ----------
     interface
-        The observed (segmented) interface; needed by the ``cpp`` and ``rkhs`` measures.
+        The observed (segmented) interface; needed by the ``cpp`` and ``rkhs`` measures.  Its
+        coordinates, like the points', must be below ``MAX_COORDINATE`` (1e9 mm) in magnitude.
     coordinate
         Which state it is, e.g. ``{"inflow_rate": 100.0}``.
     points
@@ -150,6 +157,8 @@ class Observation:
             pts = MeasurementPoints(pts.points, np.asarray(self.directions, dtype=float))
         object.__setattr__(self, "points", pts)
         object.__setattr__(self, "directions", None)
+        if self.interface is not None:
+            check_coordinates(self.interface.vertices, "observed interface vertices")
         if self.interface is None and pts is None:
             raise ConfigError("an observation needs an interface, measurement points or both")
         if self.interface is not None and pts is not None and self.interface.dim != pts.dim:

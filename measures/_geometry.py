@@ -26,7 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ..core.errors import ConfigError
+from ..core.data_files import MAX_COORDINATE
+from ..core.errors import ConfigError, MeasureError
 from ..core.interface import Interface
 from ..core.observation import Observation
 
@@ -131,7 +132,10 @@ def geometry_of(
 
 
 def check_dimensions(measure: str, simulated: Interface, observation: Observation) -> None:
-    """ConfigError if ``simulated`` is no Interface or differs from the observation in dim."""
+    """ConfigError if ``simulated`` is no Interface or differs from the observation in dim;
+    MeasureError if a simulated coordinate's magnitude reaches ``MAX_COORDINATE`` (1e9 mm):
+    distances, their squares and products would lose all precision or overflow (observed
+    data is held to the same bound when it is read or an Observation is made)."""
     if not isinstance(simulated, Interface):
         raise ConfigError(
             f"the simulated interface must be an fbia.Interface, got {type(simulated).__name__}",
@@ -142,6 +146,13 @@ def check_dimensions(measure: str, simulated: Interface, observation: Observatio
             f"simulated interface is {simulated.dim}-D but observation "
             f"{observation.label()!r} is {observation.dim}-D",
             f"{measure} measure",
+        )
+    largest = float(np.max(np.abs(simulated.vertices)))
+    if not largest < MAX_COORDINATE:
+        raise MeasureError(
+            f"{measure} measure: the simulated interface has a coordinate of magnitude "
+            f"{largest:.3g} mm, beyond the bound {MAX_COORDINATE:.0e} mm of any flow cell "
+            "(a diverged forward run?)"
         )
 
 
@@ -317,6 +328,12 @@ def closest_points(geom: ElementGeometry, query: FloatArray, k: int = 8) -> Clos
     dc, idx = geom.tree.query(q, k=k)
     dc = dc.reshape(n, k)
     idx = idx.reshape(n, k)
+    if np.any(idx >= m):  # cKDTree's "no neighbour": distances overflowed or were NaN
+        row = int(np.flatnonzero(np.any(idx >= m, axis=1))[0])
+        raise MeasureError(
+            f"no closest point found for the point {q[row].tolist()}: coordinates too large "
+            "(or not finite) for float64 distances"
+        )
     owner = np.repeat(np.arange(n), k)
     d2, cp, region = _closest_pairs(geom, q[owner], idx.ravel())
     best = _best_per_owner(owner, d2, n)

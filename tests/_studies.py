@@ -164,7 +164,7 @@ BAD_CASES = [
     (
         "nan-in-data",
         edit("data/observed_100.csv", "data/with_nan.csv"),
-        "study.toml: [[observations]] #1 interface: data/with_nan.csv: row 4: NaN or infinite "
+        "study.toml: [[observations]] #1 interface: data/with_nan.csv: line 4: NaN or infinite "
         "value",
     ),
     (

@@ -86,7 +86,7 @@ def test_a_real_subprocess_prints_one_line_and_no_traceback(study_file):
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert proc.stderr == (
-        "fbia: error: study.toml: [[observations]] #1 interface: data/with_nan.csv: row 4: "
+        "fbia: error: study.toml: [[observations]] #1 interface: data/with_nan.csv: line 4: "
         "NaN or infinite value\n"
     )
 

@@ -216,15 +216,15 @@ def test_file_errors_name_the_file(tmp_path):
         Interface.read(odd)
     nan = tmp_path / "nan.csv"
     nan.write_text("x,y\n0,0\n1,nan\n2,0\n")
-    with pytest.raises(fbia.ConfigError, match=rf"^{nan}: row 3: NaN or infinite value$"):
+    with pytest.raises(fbia.ConfigError, match=rf"^{nan}: line 3: NaN or infinite value$"):
         Interface.read(nan)
     text = tmp_path / "text.csv"
     text.write_text("x,y\n0,0\n1,one\n")
-    with pytest.raises(fbia.ConfigError, match=rf"^{text}: row 3: not a number"):
+    with pytest.raises(fbia.ConfigError, match=rf"^{text}: line 3: .one. is not a number"):
         Interface.read(text)
     wide = tmp_path / "wide.csv"
     wide.write_text("0,0,0,0\n1,1,0,0\n")
-    with pytest.raises(fbia.ConfigError, match=rf"^{wide}: row 1: expected 2 to 3 columns, got 4"):
+    with pytest.raises(fbia.ConfigError, match=rf"^{wide}: line 1: expected 2 or 3 columns \("):
         Interface.read(wide)
     dup = tmp_path / "dup.csv"
     dup.write_text("0,0\n1,1\n1,1\n2,0\n")
@@ -232,7 +232,7 @@ def test_file_errors_name_the_file(tmp_path):
         Interface.read(dup)
     empty = tmp_path / "empty.csv"
     empty.write_text("x,y\n")
-    with pytest.raises(fbia.ConfigError, match=rf"^{empty}: no data rows$"):
+    with pytest.raises(fbia.ConfigError, match=rf"^{empty}: no data rows after the header"):
         Interface.read(empty)
     broken = tmp_path / "broken.stl"
     broken.write_text("this is not a mesh\n")
@@ -272,10 +272,10 @@ def test_measurement_points_read_2_3_4_6_columns(tmp_path, text, dim, directions
 def test_measurement_points_errors_name_file_and_row(tmp_path):
     path = tmp_path / "mp.csv"
     path.write_text("x,y,dx,dy\n0,1,0,1\n2,nan,0,1\n")
-    with pytest.raises(fbia.ConfigError, match=rf"^{path}: row 3: NaN or infinite value$"):
+    with pytest.raises(fbia.ConfigError, match=rf"^{path}: line 3: NaN or infinite value$"):
         fbia.MeasurementPoints.read(path)
     path.write_text("0,1,2,3,4\n")
-    with pytest.raises(fbia.ConfigError, match=rf"^{path}: measurement points need 2, 3, 4 or 6"):
+    with pytest.raises(fbia.ConfigError, match=rf"^{path}: line 1: expected 2, 3, 4 or 6 columns"):
         fbia.MeasurementPoints.read(path)
     path.write_text("0,1,0,0\n")
     with pytest.raises(fbia.ConfigError, match=rf"^{path}: measurement direction 0 is zero$"):
