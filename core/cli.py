@@ -74,7 +74,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="a parameter value (repeatable); default: 'initial', else mid-bounds",
     )
-    f.add_argument("--output", metavar="DIR", help="output folder (default: <output>/forward)")
+    f.add_argument(
+        "--output", metavar="DIR", type=_folder, help="output folder (default: <output>/forward)"
+    )
 
     r = sub.add_parser("run", help="run the study and write its output folder")
     r.add_argument("study", metavar="FILE", help="study file (TOML)")
@@ -84,7 +86,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="N",
         help="worker processes (overrides [executor]; 1 runs serially)",
     )
-    r.add_argument("--output", metavar="DIR", help="output folder (default: the study's)")
+    r.add_argument(
+        "--output", metavar="DIR", type=_folder, help="output folder (default: the study's)"
+    )
     r.add_argument(
         "--fresh",
         action="store_true",
@@ -135,8 +139,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted; what was computed is saved", file=sys.stderr)
         return 130
+    except MemoryError:
+        return _fail(
+            "out of memory (lower the sizes in the study file); what was computed is saved", 1
+        )
     except OSError as exc:  # e.g. an output folder that cannot be written
         return _fail(f"{exc.strerror or exc}: {exc.filename}" if exc.filename else str(exc), 1)
+
+
+def _folder(text: str) -> str:
+    """An ``--output`` folder: not empty (which would write into the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("needs a folder name, got an empty one")
+    return text
 
 
 def _terminate_like_ctrl_c() -> None:

@@ -184,6 +184,9 @@ def load_study(path: str | Path, registry: Registry | None = None, build: bool =
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"TOML syntax error: {exc}", file) from None
+    except RecursionError:  # tomllib recurses once per level of nesting
+        message = "TOML nested too deeply (arrays or tables in one another)"
+        raise ConfigError(message, file) from None
     study = _Reader(path, raw, registry or default_registry()).read(text, raw_bytes)
     if build:
         _ = study.problem

@@ -100,6 +100,15 @@ def _pair(value: Any) -> tuple[float, float]:
     return as_number(value[0]), as_number(value[1])
 
 
+def _folder(value: str) -> str:
+    if not value.strip():
+        raise ValueError('an empty folder name (give a folder, e.g. "output")')
+    bad = next((c for c in value if ord(c) < 32 or ord(c) == 127), None)
+    if bad is not None:
+        raise ValueError(f"a control character ({bad!r}) in the folder name {value!r}")
+    return value
+
+
 def as_table(value: Any) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise ValueError(f"expected a table, got {kind_of(value)}")
@@ -112,6 +121,7 @@ Text = Annotated[str, BeforeValidator(_string)]
 Flag = Annotated[bool, BeforeValidator(_flag)]
 Table = Annotated[dict[str, Any], BeforeValidator(as_table)]
 Label = Annotated[str, BeforeValidator(_any_string)]
+Folder = Annotated[str, BeforeValidator(lambda v: _folder(_string(v)))]
 Pair = Annotated[tuple[float, float], BeforeValidator(_pair)]
 
 
@@ -160,7 +170,7 @@ class ObservationSection(Section):
 class StudySection(Section):
     name: Text | None = None
     seed: Annotated[Integer, Field(ge=0)] = 0
-    output: Text = "output"
+    output: Folder = "output"
 
 
 class LikelihoodSection(Section):
@@ -172,7 +182,7 @@ class SyntheticSection(Section):
     coordinates: Any  # a table or an array of tables: checked by the reader
     noise_std: Annotated[Number, Field(ge=0)] = 0.0
     noise: Literal["normal", "isotropic"] = "normal"
-    points: Annotated[Integer, Field(ge=1)] | None = None
+    points: Annotated[Integer, Field(ge=1, le=10_000_000)] | None = None
     seed: Annotated[Integer, Field(ge=0)] | None = None
 
 

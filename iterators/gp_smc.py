@@ -61,6 +61,7 @@ from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter, Prior
 from ..core.problem import Evaluation, InverseProblem, Result
+from ..core.resources import check_memory
 from .gp_smc_result import (
     DesignRuns,
     GpSmcResult,
@@ -212,11 +213,26 @@ class GpSmcIterator(IteratorBase):
         return {"n_train": 16, "n_particles": 200, "n_rejuvenation": 2, "zeta": 0.8, "seed": 0}
 
     # -- the algorithm ----------------------------------------------------------------------
+    def _check_memory(self, n_x: int) -> None:
+        """Refuse sizes the machine cannot hold, before any run: the GP's kernel matrices
+        (a few n^2 doubles), the cross-covariance of n_particles with the design and the
+        particle arrays."""
+        o = self.options
+        n = o.n_train + o.n_test
+        need = 8.0 * (4.0 * n * n + o.n_particles * n + 30.0 * o.n_particles * (n_x + 1))
+        check_memory(
+            need,
+            f"n_train = {o.n_train}, n_particles = {o.n_particles}",
+            "gp_smc options",
+            "lower n_train or n_particles",
+        )
+
     def steps(
         self, problem: InverseProblem, evaluator: Evaluator
     ) -> Generator[GpSmcState, None, GpSmcResult]:
         opts = self.options
         run = _Run(problem, evaluator, self._inputs(problem), time.perf_counter())
+        self._check_memory(run.n_x)
         if opts.mode == "surrogate":
             design = yield from self._design_stage(run)
             if int((design.train_mask & design.ok).sum()) < 2:

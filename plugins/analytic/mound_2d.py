@@ -66,7 +66,9 @@ class AnalyticMound2DForwardModel(MoundModel):
         channel_length: float = Field(2.0, gt=0, description="channel length L [mm]")
         centre: float = Field(1.0, description="x of the footprint centre x0 [mm]")
         width: float = Field(0.8, gt=0, description="footprint width w of the mound [mm]")
-        n_points: int = Field(101, ge=5, description="vertices of the interface polyline [-]")
+        n_points: int = Field(
+            101, ge=5, le=10_000_000, description="vertices of the interface polyline [-]"
+        )
 
         @model_validator(mode="after")
         def _check_footprint(self) -> Self:

@@ -68,7 +68,7 @@ class AnalyticMound3DForwardModel(MoundModel):
         length: float = Field(0.8, gt=0, description="footprint length 2a along the flow [mm]")
         width: float = Field(0.8, gt=0, description="footprint width 2b across the flow [mm]")
         n_rings: int = Field(
-            8, ge=2, description="rings of vertices from crest to rim; 6 n^2 triangles [-]"
+            8, ge=2, le=1000, description="rings of vertices from crest to rim; 6 n^2 triangles [-]"
         )
 
         @model_validator(mode="after")

@@ -1,0 +1,74 @@
+"""Issue 14, defects 13 and 14: sizes the machine cannot hold and odd input are one line
+with exit status 2, before anything runs; nothing is written where it was not asked."""
+
+from __future__ import annotations
+
+import pytest
+from _studies import write_study
+
+import fbia
+from fbia.core.cli import main
+
+
+@pytest.fixture
+def study_file(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return write_study(tmp_path)
+
+
+def _error(capsys) -> str:
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("fbia: error: "), err
+    return err[0]
+
+
+def _edit(study_file, old: str, new: str) -> None:
+    text = study_file.read_text()
+    assert old in text
+    study_file.write_text(text.replace(old, new))
+
+
+def test_deeply_nested_toml(study_file, capsys):
+    study_file.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    assert main(["validate", "study.toml"]) == 2
+    assert "TOML nested too deeply" in _error(capsys)
+
+
+@pytest.mark.parametrize(
+    ("output", "message"),
+    [('""', "a non-empty string"), ('"out\\u0000put"', "a control character")],
+)
+def test_a_bad_output_folder_in_the_study_file(study_file, capsys, output, message):
+    _edit(study_file, 'output = "out"', f"output = {output}")
+    assert main(["run", "study.toml"]) == 2
+    line = _error(capsys)
+    assert "[study] output" in line and message in line
+
+
+def test_an_empty_output_on_the_command_line_writes_nothing(study_file, capsys, tmp_path):
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(["run", "study.toml", "--output", ""]) == 2
+    assert "--output: needs a folder name" in _error(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_gp_smc_sizes_beyond_the_memory_are_refused_before_any_run(study_file, capsys, tmp_path):
+    _edit(
+        study_file,
+        'name = "levenberg_marquardt"\noptions = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }',
+        'name = "gp_smc"\noptions = { n_train = 16, n_particles = 100000000000 }',
+    )
+    assert main(["run", "study.toml"]) == 2
+    line = _error(capsys)
+    assert "gp_smc options: n_train = 16, n_particles = 100000000000 needs about" in line
+    assert "lower n_train or n_particles" in line
+    assert not (tmp_path / "out" / "runs").exists()
+
+
+@pytest.mark.parametrize(
+    ("model", "option", "value"),
+    [("analytic_mound_2d", "n_points", 10**9), ("analytic_mound_3d", "n_rings", 10**6)],
+)
+def test_model_sizes_have_upper_bounds(model, option, value):
+    with pytest.raises(fbia.ConfigError, match=option):
+        fbia.forward_model(model, **{option: value})
