@@ -6,6 +6,7 @@ there); :func:`fbia.core.runner.run_study` runs it.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -32,6 +33,21 @@ SYNTHETIC_STREAM, ITERATOR_STREAM = 0, 1
 def derived_seed(seed: int, stream: int) -> int:
     """A 32-bit seed for one consumer of randomness, derived from the study's seed."""
     return int(np.random.SeedSequence(seed, spawn_key=(stream,)).generate_state(1)[0])
+
+
+_SCHEDULER = re.compile(r"((tcp|tls|ucx|ws|wss)://)?(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}/?")
+
+
+def check_scheduler_address(address: str, where: str) -> str:
+    """A Dask scheduler address (``tcp://HOST:PORT``; also ``tls://``, ``ucx://``, ``ws://``,
+    ``wss://``, or ``HOST:PORT``), else a one-line ConfigError at ``where``."""
+    if not _SCHEDULER.fullmatch(address.strip()):
+        raise ConfigError(
+            f"{address!r} is not a Dask scheduler address: expected tcp://HOST:PORT "
+            "(or tls://HOST:PORT with TLS set up)",
+            where,
+        )
+    return address.strip()
 
 
 @dataclass(frozen=True)
@@ -70,6 +86,7 @@ class ExecutorSpec:
         """The command line's ``--address``: the runs go to that Dask scheduler."""
         if not address:
             return self
+        check_scheduler_address(address, "--address")
         return replace(
             self, kind="dask", address=address, workers=None, cluster="local", cluster_options={}
         )

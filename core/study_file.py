@@ -115,6 +115,7 @@ from .study import (
     ExecutorSpec,
     Study,
     SyntheticSpec,
+    check_scheduler_address,
     derived_seed,
 )
 from .study_schema import (
@@ -525,6 +526,8 @@ class _Reader:
     def read_executor(self) -> ExecutorSpec:
         where = self.where("[executor]")
         spec = parse_section(ExecutorSection, self.raw.get("executor", {}), where)
+        if spec.address is not None:
+            check_scheduler_address(spec.address, f"{where} address")
         return ExecutorSpec(
             spec.kind,
             spec.workers,

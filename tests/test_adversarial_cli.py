@@ -72,3 +72,21 @@ def test_gp_smc_sizes_beyond_the_memory_are_refused_before_any_run(study_file, c
 def test_model_sizes_have_upper_bounds(model, option, value):
     with pytest.raises(fbia.ConfigError, match=option):
         fbia.forward_model(model, **{option: value})
+
+
+@pytest.mark.parametrize("address", ["not a url", "tcp://", "http://10.0.0.5:8786", "tcp://h:port"])
+def test_a_bad_scheduler_address_is_one_line(study_file, capsys, address):
+    assert main(["run", "study.toml", "--address", address]) == 2
+    assert "is not a Dask scheduler address" in _error(capsys)
+    _edit(study_file, 'kind = "serial"', f'kind = "dask"\naddress = "{address}"')
+    assert main(["validate", "study.toml"]) == 2
+    assert "[executor] address: " in _error(capsys)
+
+
+@pytest.mark.parametrize(
+    "address", ["tcp://10.0.0.5:8786", "tls://node-1.cluster:8786", "[::1]:8786"]
+)
+def test_good_scheduler_addresses_pass(address):
+    from fbia.core.study import check_scheduler_address
+
+    assert check_scheduler_address(address, "--address") == address
