@@ -446,6 +446,17 @@ def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
 
 def _helper_main() -> None:  # pragma: no cover - runs in the helper process
     jobs, answers = int(sys.argv[1]), int(sys.argv[2])
+    running: list[int] = []  # the child of the run under way
+    try:
+        _serve(jobs, answers, running)
+    except (BrokenPipeError, ConnectionResetError):  # the caller is gone (killed, e.g. during
+        for pid in running:  # start-up): stop the run and exit silently, no traceback
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
+    os._exit(0)  # nothing left to flush to a caller that may be gone
+
+
+def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no cover - helper
     problem: Evaluable | None = None
     while True:
         message = _recv(jobs)
@@ -470,6 +481,7 @@ def _helper_main() -> None:  # pragma: no cover - runs in the helper process
                 for fd in (pipe_r, jobs, answers):
                     os.close(fd)
                 _child(problem, x, workdir, index, pipe_w)
+            running[:] = [pid]
             os.close(pipe_w)
             with contextlib.suppress(OSError):  # also done by the child: no race with a kill
                 os.setpgid(pid, pid)
@@ -477,6 +489,7 @@ def _helper_main() -> None:  # pragma: no cover - runs in the helper process
             data = _collect(jobs, pipe_r, pid)
             os.close(pipe_r)
             _, status = os.waitpid(pid, 0)
+            running.clear()
             if data is not None and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
                 _send(answers, ("done", data))
             else:
