@@ -12,12 +12,19 @@ Three ways to get workers, chosen by the options (the study file's ``[executor]`
 
 * ``address``: connect to a running scheduler (``dask scheduler`` + ``dask worker`` started by
   hand or by a batch script).  The working folders must lie on a file system the workers share.
+  Dask's protocol is unauthenticated unless TLS is configured (Dask's ``security``): whoever
+  reaches the scheduler's port can run code on its workers, so start it on a trusted network
+  or with TLS.
 * ``cluster = "local"`` (default): a ``distributed.LocalCluster`` of ``workers`` processes with
   one thread each, started for the study and closed with it.
 * ``cluster = "slurm" | "pbs" | "sge" | "lsf" | "htcondor" | "moab" | "oar"``: a
-  ``dask-jobqueue`` cluster (``pip install dask-jobqueue``) built from ``cluster_options``,
-  passed through unchanged (``cores``, ``memory``, ``walltime``, ``queue``, ``account``,
-  ``job_extra_directives``, ...), scaled to ``workers`` workers.
+  ``dask-jobqueue`` cluster (``pip install dask-jobqueue``) built from ``cluster_options``
+  (``cores``, ``memory``, ``walltime``, ``queue``, ``account``, ``job_extra_directives``,
+  ...), scaled to ``workers`` workers.
+
+``cluster_options`` are checked against an allow-list (:mod:`fbia.core.cluster_options`): the
+options that run code (``preload``, ``job_script_prologue``, ``python``, ...) or bind network
+interfaces (``host``, ``interface``, ...) are refused.
 
 Every run is a task that evaluates in a child process of the worker (:mod:`fbia.core.isolation`,
 ``isolate = True`` by default here): a time-out kills that child, not the worker, and a run that
@@ -37,11 +44,13 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .cluster_options import check_cluster_options
 from .errors import ConfigError
 from .evaluator import BatchEvaluator, Job
 from .isolation import RunOutcome, isolation_mode, run_isolated_or_here, run_view
 from .local_executors import workers_ignore_sigint
 from .problem import Evaluable, Evaluation
+from .resources import check_workers
 
 __all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator", "DaskExecutor"]
 
@@ -93,8 +102,9 @@ class DaskExecutor:
     cluster
         ``"local"`` or a dask-jobqueue kind (see :data:`JOBQUEUE_CLUSTERS`).
     cluster_options
-        Keyword arguments of the cluster class, passed through (for ``"local"``: those of
-        ``distributed.LocalCluster``, e.g. ``memory_limit``).
+        Keyword arguments of the cluster class (for ``"local"``: those of
+        ``distributed.LocalCluster``, e.g. ``memory_limit``), from an allow-list
+        (:mod:`fbia.core.cluster_options`).
     connect_timeout
         Seconds to wait for the scheduler at ``address``.
     timeout, isolate
@@ -124,6 +134,10 @@ class DaskExecutor:
         self.isolate = isolation_mode(timeout, isolate, default=True)
         self.timeout = timeout
         cluster_options = dict(cluster_options or {})
+        try:
+            check_cluster_options(cluster, cluster_options)
+        except ConfigError as exc:
+            raise ConfigError(f"cluster_options: {exc.reason}") from None
         self.address = address
         self.cluster_kind = "scheduler" if address else cluster
         self._cluster: Any = None
@@ -159,6 +173,7 @@ class DaskExecutor:
             except OSError as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
         elif cluster == "local":
+            check_workers(workers or os.cpu_count() or 1, "dask executor (local cluster)")
             settings: dict[str, Any] = {
                 "n_workers": workers or os.cpu_count() or 1,
                 "threads_per_worker": 1,

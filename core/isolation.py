@@ -41,10 +41,11 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from .errors import ConfigError
+from .errors import ConfigError, Terminated
 from .interface import Interface
 from .observation import CoordinateKey
 from .parameters import Parameter
@@ -100,8 +101,27 @@ def worker_label() -> str:
 
 def evaluate_here(problem: Evaluable, x: dict[str, float], workdir: str, index: int) -> RunOutcome:
     """Evaluate in this process; the solution object is dropped, its interfaces travel with
-    the record (for the store) and its field files are kept as artifacts."""
-    ev = problem.evaluate(x, workdir=workdir, index=index, keep_solution=True)
+    the record (for the store) and its field files are kept as artifacts.
+
+    A model that raises SystemExit (``sys.exit``) or KeyboardInterrupt itself gives a failed
+    record, the same under every executor; a real Ctrl-C (SIGINT to this process while the
+    run is under way) still raises KeyboardInterrupt and stops the study.
+    """
+    t0 = time.perf_counter()
+    with _sigint_watch() as signalled:
+        try:
+            ev = problem.evaluate(x, workdir=workdir, index=index, keep_solution=True)
+        except Terminated:  # SIGTERM to the study (fbia.core.cli): always real
+            raise
+        except (SystemExit, KeyboardInterrupt) as exc:
+            if signalled:
+                raise
+            seconds = time.perf_counter() - t0
+            return RunOutcome.unfinished(
+                index, x, workdir, escaped_message(exc), seconds=seconds, worker=worker_label()
+            )
+    if signalled:  # a Ctrl-C that the model caught and turned into a record
+        raise KeyboardInterrupt
     artifacts: dict[str, str] = {}
     interfaces = None
     if ev.solution is not None:
@@ -109,6 +129,42 @@ def evaluate_here(problem: Evaluable, x: dict[str, float], workdir: str, index: 
         interfaces = dict(ev.solution.interfaces)
         ev.solution = None
     return RunOutcome(ev, worker_label(), artifacts, interfaces)
+
+
+def escaped_message(exc: BaseException) -> str:
+    """The message of a failed record whose model raised SystemExit or KeyboardInterrupt."""
+    if isinstance(exc, SystemExit):
+        what = f"SystemExit({exc.code!r}) (sys.exit or exit() in the model or a library it calls)"
+    else:
+        what = "KeyboardInterrupt, with no Ctrl-C to the study"
+    return (
+        f"the forward model raised {what}: a run may not end its process; a failed run "
+        "raises fbia.ForwardModelError"
+    )
+
+
+@contextlib.contextmanager
+def _sigint_watch() -> Iterator[list[int]]:
+    """A list that gets an entry when SIGINT arrives during the block: what tells a real
+    Ctrl-C from a KeyboardInterrupt the model raised.  Only where SIGINT raises
+    KeyboardInterrupt at all (the main thread, with a Python handler): elsewhere (a pool
+    worker ignores SIGINT, an isolated run's child dies of it, a Dask task runs in a thread)
+    every KeyboardInterrupt comes from the model."""
+    seen: list[int] = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield seen
+        return
+
+    def handler(signum: int, frame: Any) -> Any:
+        seen.append(signum)
+        return previous(signum, frame)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_view(problem: Evaluable) -> Evaluable:
@@ -446,6 +502,17 @@ def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
 
 def _helper_main() -> None:  # pragma: no cover - runs in the helper process
     jobs, answers = int(sys.argv[1]), int(sys.argv[2])
+    running: list[int] = []  # the child of the run under way
+    try:
+        _serve(jobs, answers, running)
+    except (BrokenPipeError, ConnectionResetError):  # the caller is gone (killed, e.g. during
+        for pid in running:  # start-up): stop the run and exit silently, no traceback
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
+    os._exit(0)  # nothing left to flush to a caller that may be gone
+
+
+def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no cover - helper
     problem: Evaluable | None = None
     while True:
         message = _recv(jobs)
@@ -470,6 +537,7 @@ def _helper_main() -> None:  # pragma: no cover - runs in the helper process
                 for fd in (pipe_r, jobs, answers):
                     os.close(fd)
                 _child(problem, x, workdir, index, pipe_w)
+            running[:] = [pid]
             os.close(pipe_w)
             with contextlib.suppress(OSError):  # also done by the child: no race with a kill
                 os.setpgid(pid, pid)
@@ -477,6 +545,7 @@ def _helper_main() -> None:  # pragma: no cover - runs in the helper process
             data = _collect(jobs, pipe_r, pid)
             os.close(pipe_r)
             _, status = os.waitpid(pid, 0)
+            running.clear()
             if data is not None and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
                 _send(answers, ("done", data))
             else:

@@ -36,6 +36,7 @@ from .isolation import (
     run_view,
 )
 from .problem import Evaluable, Evaluation
+from .resources import check_workers
 
 __all__ = [
     "PoolExecutor",
@@ -84,17 +85,34 @@ class SerialExecutor:
 _WORKER_PROBLEM: Evaluable | None = None
 
 
-def _init_worker(problem: Evaluable) -> None:
+def _init_worker(problem: Evaluable, parent: int, direct: bool) -> None:
+    """Set up a pool worker.  ``parent`` is the study's process id, read by the study itself:
+    a worker that read it with ``os.getppid()`` after its study was killed during the pool's
+    start-up would watch the wrong process and never end.  ``direct``: the study is the
+    worker's parent (``spawn``, ``fork``), not the ``forkserver`` process."""
     global _WORKER_PROBLEM
+    if not _parent_alive(parent, direct):  # the study is gone already: end now
+        os._exit(1)
     _WORKER_PROBLEM = problem
-    parent = os.getppid()
 
     def watch() -> None:  # a worker whose study was killed (SIGKILL) ends itself
-        while os.getppid() == parent:
-            time.sleep(1.0)
+        while _parent_alive(parent, direct):
+            time.sleep(0.5)
         os._exit(1)
 
     threading.Thread(target=watch, daemon=True).start()
+
+
+def _parent_alive(parent: int, direct: bool) -> bool:
+    if direct:  # race-free: an orphan's parent is init or a subreaper, never the study again
+        return os.getppid() == parent
+    try:
+        os.kill(parent, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - a process of another user took the pid
+        return False
+    return True
 
 
 #: Written in a run's folder when a worker starts it and removed when it ends: after a worker
@@ -165,6 +183,7 @@ class PoolExecutor:
         n = workers if workers is not None else (os.cpu_count() or 1)
         if n < 1:
             raise ConfigError(f"workers must be at least 1, got {workers}")
+        check_workers(n, "processes executor")
         if start_method not in multiprocessing.get_all_start_methods():
             raise ConfigError(
                 f"unknown start method {start_method!r}; valid: "
@@ -186,7 +205,7 @@ class PoolExecutor:
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context(self.start_method),
                 initializer=_init_worker,
-                initargs=(run_view(problem),),
+                initargs=(run_view(problem), os.getpid(), self.start_method != "forkserver"),
             )
             self._pool_problem = problem
         return self._pool

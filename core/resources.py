@@ -18,10 +18,13 @@ import os
 
 from .errors import ConfigError
 
-__all__ = ["available_memory", "check_memory"]
+__all__ = ["WORKER_BYTES", "available_memory", "check_memory", "check_workers"]
 
 #: the share of the available memory one allocation may plan to take
 SHARE = 0.8
+
+#: the least memory one worker process takes (Python with numpy and fbia imported), bytes
+WORKER_BYTES = 100e6
 
 
 def available_memory() -> float | None:
@@ -51,4 +54,15 @@ def check_memory(nbytes: float, what: str, where: str, hint: str = "") -> None:
         f"{what} needs about {nbytes / 1e9:.3g} GB of memory; this machine has "
         f"{available / 1e9:.3g} GB available{tail}",
         where,
+    )
+
+
+def check_workers(workers: int, where: str) -> None:
+    """Refuse more local worker processes than the memory can start (each takes at least
+    :data:`WORKER_BYTES` before it runs a model)."""
+    check_memory(
+        workers * WORKER_BYTES,
+        f"{workers} worker processes",
+        where,
+        "lower workers (each worker process needs at least 0.1 GB before it runs a model)",
     )

@@ -22,6 +22,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import pydantic
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+from .cluster_options import check_cluster_options
 from .errors import ConfigError
 from .isolation import isolation_mode
 
@@ -209,6 +210,10 @@ class ExecutorSection(Section):
                 dask_only[0],
                 f'{", ".join(dask_only)} only for kind = "dask" (kind is {self.kind!r})',
             )
+        try:  # a study file never runs code or opens the network
+            check_cluster_options(self.cluster, self.cluster_options)
+        except ConfigError as exc:
+            raise _KeyError("cluster_options", exc.reason) from None
         if self.address is not None and (
             self.workers is not None or "cluster" in given or self.cluster_options
         ):

@@ -9,9 +9,12 @@ on ``x`` in [0, 1], with ``h = 0.1 * inflow_rate / 100`` [mm]: closed form, so e
 evaluation has an exact expected value.  Its options make it fail on purpose:
 ``fail_above`` (ForwardModelError when E exceeds it), ``bug_above`` (RuntimeError),
 ``die_above`` (``os._exit`` of the process running it), ``interrupt_above``
-(KeyboardInterrupt, as Ctrl-C during a run).  With ``rendezvous`` (a file path),
-a dying run first creates that file, and a run with E below ``wait_below`` waits for the file
-and then 0.5 s more: so the two are under way together when the worker dies.
+(a real SIGINT to its own process, as Ctrl-C during a run), ``exit_above`` (``sys.exit`` with
+status ``round(10 nu)``) and ``raise_interrupt_above`` (a KeyboardInterrupt raised by the
+model itself, with no signal).  With ``rendezvous`` (a file path),
+a run with E below ``wait_below`` creates ``<file>.waiting`` and waits for the file and then
+0.5 s more, and a dying run first waits for ``<file>.waiting`` (when ``wait_below`` is set)
+and creates the file: so the two are under way together when the worker dies.
 
 Injected faults for the evaluation engine (``fault_rate``): a fraction of the inputs, chosen
 by a hash of (E, nu) (:func:`injected_fault`), fails (ForwardModelError), hangs (starts a
@@ -25,7 +28,9 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import signal
 import subprocess
+import sys
 import time
 from collections.abc import Generator, Mapping, Sequence
 from pathlib import Path
@@ -57,6 +62,10 @@ class ToyMoundForwardModel(fbia.Configurable):
         bug_above: float = Field(math.inf, description="E above which a RuntimeError [Pa]")
         die_above: float = Field(math.inf, description="E above which os._exit(3) [Pa]")
         interrupt_above: float = Field(math.inf, description="E above which Ctrl-C [Pa]")
+        exit_above: float = Field(math.inf, description="E above which sys.exit [Pa]")
+        raise_interrupt_above: float = Field(
+            math.inf, description="E above which to raise KeyboardInterrupt [Pa]"
+        )
         wait_below: float = Field(-math.inf, description="E below which to wait [Pa]")
         slow_above: float = Field(math.inf, description="E above which to sleep 30 s [Pa]")
         rendezvous: str = Field("", description="file a dying run creates first")
@@ -90,17 +99,32 @@ class ToyMoundForwardModel(fbia.Configurable):
             solver.wait()
         if E > self.options.slow_above:
             time.sleep(30.0)
+        waiting = Path(f"{self.options.rendezvous}.waiting")
         if E > self.options.die_above:
             if self.options.rendezvous:
+                # with a waiting run in the set-up, die only once it is under way too
+                deadline = time.monotonic() + 30.0
+                while (
+                    self.options.wait_below > -math.inf
+                    and not waiting.exists()
+                    and time.monotonic() < deadline
+                ):
+                    time.sleep(0.01)
                 Path(self.options.rendezvous).touch()
             os._exit(3)
         if E < self.options.wait_below:
+            waiting.touch()
             deadline = time.monotonic() + 30.0
             while not Path(self.options.rendezvous).exists() and time.monotonic() < deadline:
                 time.sleep(0.01)
             time.sleep(0.5)
-        if E > self.options.interrupt_above:
-            raise KeyboardInterrupt  # what Ctrl-C does in the middle of a run
+        if E > self.options.interrupt_above:  # Ctrl-C in the middle of a run
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5.0)  # the signal's handler raises KeyboardInterrupt in here
+        if E > self.options.raise_interrupt_above:
+            raise KeyboardInterrupt
+        if E > self.options.exit_above:
+            sys.exit(round(10 * nu))
         if E > self.options.bug_above:
             raise RuntimeError(f"toy bug at E = {E}")
         if E > self.options.fail_above:

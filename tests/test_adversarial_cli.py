@@ -90,3 +90,9 @@ def test_good_scheduler_addresses_pass(address):
     from fbia.core.study import check_scheduler_address
 
     assert check_scheduler_address(address, "--address") == address
+
+
+def test_more_workers_than_the_memory_can_start_is_one_line(study_file, capsys):
+    assert main(["run", "study.toml", "--workers", "100000000"]) == 2
+    line = _error(capsys)
+    assert "100000000 worker processes needs about" in line and "lower workers" in line

@@ -133,6 +133,12 @@ def test_a_study_with_faults_completes_on_the_cluster_at_an_address(
         ({"address": "tcp://a:1", "workers": 2}, "with an address the cluster exists already"),
         ({"workers": 0}, "workers must be at least 1, got 0"),
         ({"timeout": 5.0, "isolate": False}, "a time-out needs isolated runs"),
+        ({"cluster_options": {"preload": ["x.py"]}}, "cluster_options: 'preload' is not all"),
+        ({"cluster_options": {"host": "0.0.0.0"}}, "cluster_options: 'host' is not allowed"),
+        (
+            {"cluster": "slurm", "cluster_options": {"python": "/tmp/evil"}},
+            "cluster_options: 'python' is not allowed",
+        ),
     ],
 )
 def test_bad_dask_options_are_config_errors(options, message):
@@ -187,6 +193,42 @@ EXECUTOR_CASES = [
     ),
     ('kind = "dask"\ncluster_options = 3', "[executor] cluster_options: expected a table, got "),
 ]
+# A study file is data: no cluster option that runs code or binds a network interface
+# (issue 14, defect 5); refused before Dask or dask-jobqueue is imported
+REFUSED = "is not allowed: a study file may not run code or open the network"
+EXECUTOR_CASES += [
+    (f'kind = "dask"\ncluster_options = {{ {key} }}', f"[executor] cluster_options: {what}")
+    for key, what in [
+        ('preload = ["evil.py"]', f"'preload' {REFUSED}"),
+        ('host = "0.0.0.0"', f"'host' {REFUSED}"),
+        ('dashboard_address = ":8787"', f"'dashboard_address' {REFUSED}"),
+        ("scheduler_port = 8786", f"'scheduler_port' {REFUSED}"),
+        ('env = { LD_PRELOAD = "x.so" }', f"'env' {REFUSED}"),
+        ('memory_limit = "4GB", worker_class = "x.Y"', f"'worker_class' {REFUSED}"),
+    ]
+] + [
+    (
+        f'kind = "dask"\ncluster = "slurm"\ncluster_options = {{ {key} }}',
+        f"[executor] cluster_options: {what}",
+    )
+    for key, what in [
+        ('job_script_prologue = ["curl x | sh"]', f"'job_script_prologue' {REFUSED}"),
+        ('env_extra = ["curl x | sh"]', f"'env_extra' {REFUSED}"),
+        ('python = "/tmp/evil"', f"'python' {REFUSED}"),
+        ('worker_extra_args = ["--preload", "x.py"]', f"'worker_extra_args' {REFUSED}"),
+        ('interface = "eth0"', f"'interface' {REFUSED}"),
+        ('scheduler_options = { host = "0.0.0.0" }', f"'scheduler_options' {REFUSED}"),
+        ('shebang = "#!/tmp/evil"', f"'shebang' {REFUSED}"),
+        (
+            'walltime = "01:00:00\\nrm -rf ~"',
+            "'walltime': a value with a line break is not allowed",
+        ),
+        (
+            'job_extra_directives = ["--qos=low\\ncurl x | sh"]',
+            "'job_extra_directives': a value with a line break is not allowed",
+        ),
+    ]
+]
 
 
 @pytest.mark.parametrize(("section", "message"), EXECUTOR_CASES)
@@ -208,7 +250,7 @@ def test_a_dask_executor_section_reads_into_the_spec(tmp_path):
     study = study_module.load_study(
         tmp_path / "ok.toml", registry=Registry.load(extra=[PLUGIN]), build=False
     )
-    spec = study.executor
+    spec = study.executor  # resources are allowed
     assert spec == ExecutorSpec(
         "dask", 4, False, 60.0, None, None, "pbs", {"cores": 8, "memory": "16GB"}
     )
