@@ -371,27 +371,10 @@ class AleFsiForwardModel(Configurable):
 
     def _get_solver(self) -> Any:
         if self._solver is None:
-            from .solver import AleFsiSolver, SolverSettings
+            from .solver import AleFsiSolver
 
-            o = self.options
             mesh = self.build_mesh()
-            settings = SolverSettings(
-                fluid_density=o.fluid_density,
-                fluid_viscosity=o.fluid_viscosity,
-                solid_density=o.solid_density,
-                material=o.material,
-                gravity=o.gravity,
-                outflow=o.outflow,
-                mesh_motion=o.mesh_motion,
-                mesh_stiffening=o.mesh_stiffening,
-                order=o.order,
-                newton_tol=o.newton_tol,
-                newton_max_iter=o.newton_max_iter,
-                min_det_f=o.min_det_f,
-                min_quality=o.min_element_quality,
-                theta=o.theta,
-                threads=o.threads,
-            )
+            settings = solver_settings(self.options)
             try:
                 self._solver = AleFsiSolver(mesh, settings)
             except ForwardModelError as exc:
@@ -496,6 +479,30 @@ class AleFsiForwardModel(Configurable):
     def _remember(self, key: dict[str, float], rate: float, state: NDArray[np.float64]) -> None:
         self._store.append((dict(key), rate, state))
         del self._store[:-16]
+
+
+def solver_settings(o: AleFsiOptions) -> Any:
+    """The solver's :class:`~fbia.plugins.ale_fsi.forms.SolverSettings` from the plugin's
+    options (the one place they are mapped; ``growth`` uses it too)."""
+    from .forms import SolverSettings
+
+    return SolverSettings(
+        fluid_density=o.fluid_density,
+        fluid_viscosity=o.fluid_viscosity,
+        solid_density=o.solid_density,
+        material=o.material,
+        gravity=o.gravity,
+        outflow=o.outflow,
+        mesh_motion=o.mesh_motion,
+        mesh_stiffening=o.mesh_stiffening,
+        order=o.order,
+        newton_tol=o.newton_tol,
+        newton_max_iter=o.newton_max_iter,
+        min_det_f=o.min_det_f,
+        min_quality=o.min_element_quality,
+        theta=o.theta,
+        threads=o.threads,
+    )
 
 
 def _nearest(
