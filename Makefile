@@ -25,6 +25,7 @@ test: lint typecheck pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 
 # mypy checks every package of fbia (core, plugins, measures, iterators, testing) as it is
 # installed, through a tree of symlinks (the repository root is the package).

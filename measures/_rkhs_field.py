@@ -67,9 +67,7 @@ def smoothed_field(
     out = np.zeros((len(points), centres.shape[1]))
     if len(points) == 0 or len(centres) == 0:
         return out
-    pairs = cKDTree(points).sparse_distance_matrix(
-        cKDTree(centres), cutoff, output_type="ndarray"
-    )
+    pairs = cKDTree(points).sparse_distance_matrix(cKDTree(centres), cutoff, output_type="ndarray")
     q, i, dist = pairs["i"], pairs["j"], pairs["v"]
     weights = np.exp(-(dist**2) / (2.0 * s * s))
     for k in range(centres.shape[1]):
