@@ -1,15 +1,30 @@
-"""The surface growth law of Paper A, eq. 9 (issue 15).
+"""The surface growth law (Paper A eq. 9) and the finger channel (issue 15).
 
-Eq. 9 is checked against a scalar evaluation of the formula on a prescribed state, for both
-traction measures; zero coefficients give exactly zero growth.
+Coarse finger channels (Paper A growth example, 0.6 x 0.3 mm, finger 0.04 x 0.1 mm at
+x0 = 0.2 mm).  Eq. 9 is checked against a scalar evaluation of the formula on a prescribed
+state, for both traction measures; zero coefficients give exactly zero growth; the finger is
+mirror symmetric and its interface chain, normals and nodal lengths are the polygon's.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
-from fbia.plugins.growth.growth_law import (
+pytest.importorskip("ngsolve")
+
+from fbia.plugins.ale_fsi.geometry import check_mesh  # noqa: E402
+from fbia.plugins.growth.geometry import (  # noqa: E402
+    finger_channel,
+    finger_outline,
+    interface_vertices,
+    nodal_lengths,
+    vertex_coordinates,
+    vertex_normals,
+)
+from fbia.plugins.growth.growth_law import (  # noqa: E402
     DAY,
     NODE_AREA,
     GrowthCoefficients,
@@ -17,6 +32,12 @@ from fbia.plugins.growth.growth_law import (
 )
 
 PAPER = GrowthCoefficients(k1g=6e4, k2g=5e-2, k3g=8e-2)  # Paper A, growth example
+X0 = 0.2
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return finger_channel(mesh_size=0.06, interface_mesh_size=0.01, n_tip=8)
 
 
 def _state(n: int, seed: int = 1):
@@ -67,6 +88,25 @@ def test_growth_law_signs_and_units():
     np.testing.assert_allclose(node, NODE_AREA * dens, rtol=1e-12)
     with pytest.raises(ValueError, match="traction_measure"):
         growth_displacement(n, np.zeros(2), pressure, PAPER, DAY, "force")
+
+
+def test_finger_outline_and_interface(mesh):
+    p = finger_outline(n_tip=8)
+    np.testing.assert_allclose(p[[0, -1]], [[0.18, 0.0], [0.22, 0.0]], atol=1e-15)
+    assert p[:, 1].max() == pytest.approx(0.1)
+    np.testing.assert_allclose(p[::-1] * (-1, 1) + (2 * X0, 0), p, atol=1e-15)  # mirror
+    check_mesh(mesh)
+    pts = vertex_coordinates(mesh)
+    (chain,) = interface_vertices(mesh)
+    x = pts[chain]
+    assert x[0] == pytest.approx([0.18, 0.0]) and x[-1] == pytest.approx([0.22, 0.0])
+    n = vertex_normals(pts, chain)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, rtol=1e-12)
+    assert n[0] == pytest.approx([-1.0, 0.0]) and n[-1] == pytest.approx([1.0, 0.0])
+    assert n[np.argmax(x[:, 1])] == pytest.approx([0.0, 1.0])  # out of the biofilm at the apex
+    length = nodal_lengths(pts, chain)
+    perimeter = 2 * 0.08 + 8 * 2 * 0.02 * math.sin(math.pi / 16)  # the polygon's
+    assert length.sum() == pytest.approx(perimeter, rel=1e-12)
 
 
 def test_zero_coefficients_give_zero_growth():
