@@ -25,6 +25,7 @@ from fbia.plugins.ale_fsi.geometry import check_mesh, mesh_arrays  # noqa: E402
 from fbia.plugins.growth.geometry import (  # noqa: E402
     finger_channel,
     finger_outline,
+    interface_state,
     interface_vertices,
     nodal_lengths,
     vertex_coordinates,
@@ -224,6 +225,11 @@ def test_grown_mesh_solves_with_ale_fsi(mesh):
     lengths = nodal_lengths(pts, chain, u)
     forces = AleFsiPostprocess(solver).interface_nodal_forces()
     t = vertex_tractions(forces, chain, lengths)
+    (state,) = interface_state(solver)  # the same in one call
+    np.testing.assert_array_equal(state.vertices, chain)
+    for got, want in ((state.normals, n), (state.lengths, lengths), (state.tractions, t)):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(state.displacement, u[chain])
     assert np.all(np.isfinite(t)) and 0.01 < np.abs(t).max() < 0.2  # Pa; measured 0.06
     # the tractions sum back to the force on the interface (but for the feet's share)
     total = forces[chain[1:-1]].sum(axis=0)
@@ -250,7 +256,6 @@ def test_five_steps_of_eq9_with_the_fsi_tractions(mesh):
     day beside an FSI displacement of 2.1 -> 0.9 um as the finger thickens, quality 0.77 ->
     0.69 after five steps.
     """
-    from fbia.plugins.ale_fsi.postprocess import AleFsiPostprocess
     from fbia.plugins.ale_fsi.solver import AleFsiSolver, SolverSettings
 
     q0, area0 = mesh_quality(mesh), solid_area(mesh)
@@ -258,16 +263,13 @@ def test_five_steps_of_eq9_with_the_fsi_tractions(mesh):
         solver = AleFsiSolver(mesh, SolverSettings())
         solver.set_materials({"solid": (100.0, 0.3)})
         solver.solve_steady(0.1)
-        pts = vertex_coordinates(mesh)
-        (chain,) = interface_vertices(mesh)
-        u = vertex_displacement(solver)
-        n = vertex_normals(pts, chain, u)
-        lengths = nodal_lengths(pts, chain, u)
-        t = vertex_tractions(AleFsiPostprocess(solver).interface_nodal_forces(), chain, lengths)
-        d = growth_displacement(n, np.full(len(chain), 5.2e-13), t, PAPER, DAY)
-        dn = np.einsum("ij,ij->i", d, n)
+        (s,) = interface_state(solver)
+        d = growth_displacement(
+            s.normals, np.full(len(s.vertices), 5.2e-13), s.tractions, PAPER, DAY
+        )
+        dn = np.einsum("ij,ij->i", d, s.normals)
         assert -3e-3 < dn.min() < -0.5e-3 and 2e-3 < dn.max() < 3e-3  # erosion and growth
-        assert 0.3e-3 < np.abs(u[chain]).max() < 3e-3  # FSI: microns too
-        mesh = grow_mesh(mesh, chain, d, reference_area=area0)
+        assert 0.3e-3 < np.abs(s.displacement).max() < 3e-3  # FSI: microns too
+        mesh = grow_mesh(mesh, s.vertices, d, reference_area=area0)
         assert mesh_quality(mesh) > max(0.02, 0.5 * q0)
     assert solid_area(mesh) > area0

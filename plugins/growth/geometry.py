@@ -10,7 +10,9 @@ The interface helpers work on the vertices of an ``ale_fsi`` mesh (named per
 :mod:`fbia.plugins.ale_fsi.geometry`): the ordered vertex chains of the interface (solid on
 the right, i.e. from the upstream foot to the downstream foot), unit normals out of the
 biofilm, lumped nodal lengths and traction densities from ``ale_fsi``'s consistent nodal
-forces, all in the reference or a deformed configuration.
+forces, all in the reference or a deformed configuration; :func:`interface_state` gives them
+all for an ``AleFsiSolver`` state, ready for
+:func:`~fbia.plugins.growth.growth_law.growth_displacement`.
 
 >>> p = finger_outline(n_tip=4)
 >>> print(p[0], p[-1], p[3])
@@ -19,6 +21,7 @@ forces, all in the reference or a deformed configuration.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -100,6 +103,11 @@ def interface_vertices(mesh: Any) -> list[NDArray[np.int64]]:
     Open chains run from their upstream end (for a mound: upstream foot -> downstream foot);
     a closed chain does not repeat its first vertex.
     """
+    return [verts for verts, _ in _interface_chains(mesh)]
+
+
+def _interface_chains(mesh: Any) -> list[tuple[NDArray[np.int64], bool]]:
+    """(vertex numbers, closed) of each interface chain."""
     import ngsolve
 
     chains = interface_chains(mesh, ngsolve)
@@ -110,9 +118,10 @@ def interface_vertices(mesh: Any) -> list[NDArray[np.int64]]:
         el, start = chain[-1]
         a, b = el_vertices[el]
         end = b if start == a else a
-        if end != verts[0]:
+        closed = end == verts[0]
+        if not closed:
             verts.append(end)
-        out.append(np.array(verts, dtype=np.int64))
+        out.append((np.array(verts, dtype=np.int64), closed))
     return out
 
 
@@ -204,3 +213,42 @@ def vertex_tractions(
     if not closed and len(t) > 2:
         t[0], t[-1] = t[1], t[-2]
     return np.asarray(t, dtype=float)
+
+
+@dataclass(frozen=True)
+class InterfaceState:
+    """What eq. 9 needs of an ``ale_fsi`` state, at the vertices of one interface chain.
+
+    ``vertices`` (n,) vertex numbers (solid on the right), ``normals`` (n, 2) unit normals out
+    of the biofilm, ``lengths`` (n,) lumped nodal lengths (mm), ``tractions`` (n, 2) traction
+    density of the fluid on the biofilm (Pa), ``displacement`` (n, 2) FSI displacement (mm);
+    normals and lengths in the configuration the state was taken in.
+    """
+
+    vertices: NDArray[np.int64]
+    normals: NDArray[np.float64]
+    lengths: NDArray[np.float64]
+    tractions: NDArray[np.float64]
+    displacement: NDArray[np.float64]
+
+
+def interface_state(solver: Any, deformed: bool = True) -> list[InterfaceState]:
+    """Per interface chain, the :class:`InterfaceState` of an ``AleFsiSolver``'s current state.
+
+    ``deformed``: normals and nodal lengths of the deformed interface (the tractions act
+    there), else of the reference one.  The tractions are always the deformed state's.
+    """
+    from ..ale_fsi.postprocess import AleFsiPostprocess
+
+    mesh = solver.mesh
+    pts = vertex_coordinates(mesh)
+    u = vertex_displacement(solver)
+    forces = AleFsiPostprocess(solver).interface_nodal_forces()
+    out = []
+    for chain, closed in _interface_chains(mesh):
+        disp = u if deformed else None
+        lengths = nodal_lengths(pts, chain, disp, closed=closed)
+        normals = vertex_normals(pts, chain, disp, closed=closed)
+        tractions = vertex_tractions(forces, chain, lengths, closed=closed)
+        out.append(InterfaceState(chain, normals, lengths, tractions, u[chain]))
+    return out
