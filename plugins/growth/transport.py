@@ -7,9 +7,10 @@ piecewise coefficients:
   convective velocity ``c = v - w`` (v: fluid velocity, w: mesh velocity);
 * biofilm (eq. 5b): ``dPhi/dt|_X + Phi div w - div(D_biofilm grad Phi) + R(Phi) = 0``; the
   mesh moves with the biofilm there (w = v^S), so the ALE time derivative is the material one,
-  and the Monod consumption of eq. 6 is ``R = K1R Phi+ / (K2R + Phi+)`` with
-  ``Phi+ = max(Phi, 0)``: the discrete Phi may undershoot zero by a little where the biofilm
-  consumes it all, and R then stays defined, bounded and zero (no production of nutrient);
+  and the Monod consumption of eq. 6 is ``R = K1R Phi / (K2R + |Phi|)``: the discrete Phi may
+  undershoot zero by a little where the biofilm consumes it all, and R then stays defined,
+  bounded and smooth (C^1), with the sign that pulls Phi back to zero.  (``max(Phi, 0)``
+  instead leaves R flat below zero, and Newton cycles across that kink.);
 * continuity of value and flux across the interface (eq. 8) is natural for one continuous
   field; ``Phi = phi_in`` on ``inflow``, no diffusive flux through every other boundary.
 
@@ -32,7 +33,12 @@ including the second derivatives of the mesh displacement (:meth:`NutrientTransp
 so SUPG stays consistent on a curved mesh motion and P2 keeps its L2 rate h^3.
 
 **Nonlinear solve.** The shared :class:`~fbia.plugins.fem.newton.NewtonSolver` with the
-consistent Jacobian (NGSolve's symbolic linearisation), updates scaled by ``phi_in``.
+consistent Jacobian (NGSolve's symbolic linearisation), updates scaled by ``phi_in`` and
+halved while they take Phi below ``-0.05 phi_in`` at a vertex.  If Newton still fails, the
+half-saturation K2R is lowered to its value in stages from ``4 phi_in`` (a continuation), which
+handles the near-step Monod law of ``K2R << phi_in``.  Failures are
+:class:`fbia.ForwardModelError` with reasons ``transport_newton_divergence``,
+``transport_negative``, ``transport_linear_solver`` or ``transport_nan``.
 
 **Interface flux** (eq. 7), :meth:`NutrientTransport.interface_flux`: the *consistent*
 (variationally recovered) boundary flux (Carey, Chow & Seager 1985; Melbo & Kvamsdal 2003):
@@ -69,6 +75,9 @@ from ..ale_fsi.geometry import FLUID, solid_regions
 from ..fem.newton import NewtonFailure, NewtonSolver, sparse_direct_solver
 
 __all__ = ["NutrientTransport", "TransportReport", "TransportSettings"]
+
+#: Newton updates are halved while Phi at a vertex lies below -NEGATIVE_LIMIT * phi_in
+NEGATIVE_LIMIT = 0.05
 
 
 @dataclass(frozen=True)
@@ -137,6 +146,7 @@ class NutrientTransport:
         self.fes = ngs.H1(mesh, order=s.order, dirichlet="inflow" if self._has_inflow else "")
         self.phi = ngs.GridFunction(self.fes)
         self.phi_old = ngs.GridFunction(self.fes)
+        self._dirichlet = ngs.GridFunction(self.fes)
         V = ngs.VectorH1(mesh, order=s.order)
         self.velocity = ngs.GridFunction(V)
         self.displacement = ngs.GridFunction(V)
@@ -154,7 +164,7 @@ class NutrientTransport:
         else:
             self._inflow_vertices = np.zeros(0, dtype=int)
         self._newton = NewtonSolver(
-            self, s.newton_tol, 25, sparse_direct_solver(), inadmissible="transport_nan"
+            self, s.newton_tol, 25, sparse_direct_solver(), inadmissible="transport_negative"
         )
         self._transient = False
         self.phi.Set(s.phi_in)
@@ -279,12 +289,10 @@ class NutrientTransport:
         return self._solve(where)
 
     def _solve(self, where: str) -> TransportReport:
-        ngs = self.ngs
         t0 = time.perf_counter()
         start = self.phi.vec.CreateVector()
         start.data = self.phi.vec
-        if self._has_inflow:
-            self.phi.Set(self.inflow_value, ngs.BND, definedon=self.mesh.Boundaries("inflow"))
+        self._set_inflow()
         try:
             try:
                 rep = self._newton.solve(where)
@@ -292,10 +300,7 @@ class NutrientTransport:
                 if not self.solids or self.settings.k2r >= self.settings.phi_in:
                     raise
                 self.phi.vec.data = start
-                if self._has_inflow:
-                    self.phi.Set(
-                        self.inflow_value, ngs.BND, definedon=self.mesh.Boundaries("inflow")
-                    )
+                self._set_inflow()
                 rep = self._continuation(where)
         except NewtonFailure as fail:
             self.phi.vec.data = start
@@ -316,6 +321,16 @@ class NutrientTransport:
             phi_min=float(values.min()),
             phi_max=float(values.max()),
         )
+
+    def _set_inflow(self) -> None:
+        """Phi = inflow value on the Dirichlet dofs only (``Set`` on a boundary clears the
+        other dofs, which must keep the current state as Newton's start)."""
+        if not self._has_inflow:
+            return
+        ngs = self.ngs
+        self._dirichlet.Set(self.inflow_value, ngs.BND, definedon=self.mesh.Boundaries("inflow"))
+        fixed = ~self._free
+        self.phi.vec.FV().NumPy()[fixed] = self._dirichlet.vec.FV().NumPy()[fixed]
 
     def _continuation(self, where: str) -> Any:
         """Newton for a half-saturation K2R lowered from phi_in to its value by factors of 4.
@@ -365,7 +380,13 @@ class NutrientTransport:
         return np.full(len(self._free), abs(self.settings.phi_in) or 1.0)
 
     def admissible(self) -> bool:
-        return bool(np.all(np.isfinite(self.phi.vec.FV().NumPy())))
+        """Finite, and at no vertex below ``-NEGATIVE_LIMIT * phi_in``: the damping that
+        makes Newton converge from ``Phi = phi_in`` (the saturated Monod law has a small
+        derivative there, so the first full updates overshoot far below zero)."""
+        values = self.phi.vec.FV().NumPy()
+        if not np.all(np.isfinite(values)):
+            return False
+        return bool(values[: self._nv].min() >= -NEGATIVE_LIMIT * abs(self.settings.phi_in))
 
     # -- post-processing ---------------------------------------------------------------------------
     def flux_field(self) -> Any:
