@@ -40,13 +40,16 @@ handles the near-step Monod law of ``K2R << phi_in``.  Failures are
 :class:`fbia.ForwardModelError` with reasons ``transport_newton_divergence``,
 ``transport_negative``, ``transport_linear_solver`` or ``transport_nan``.
 
-**Interface flux** (eq. 7), :meth:`NutrientTransport.interface_flux`: the *consistent*
-(variationally recovered) boundary flux (Carey, Chow & Seager 1985; Melbo & Kvamsdal 2003):
-the residual of the biofilm-side terms alone, tested with the interface basis functions,
-equals ``int_Gamma h psi_i ds`` with ``h = D_biofilm grad Phi . n_S``; h is the solution of
-that system with the interface mass matrix (current configuration, all interface dofs of the
-order-k trace space), read at the vertices.  It converges at about the rate of Phi itself
-(tests/test_growth_transport.py), unlike the raw gradient.
+**Interface flux** (eq. 7), :meth:`NutrientTransport.interface_flux`: the consistent
+boundary flux with a lumped interface mass (Carey, Chow & Seager 1985; Melbo & Kvamsdal
+2003).  The residual of the biofilm-side terms alone (diffusion, consumption, storage),
+tested with the vertex (P1 hat) function psi_i of an interface vertex, equals
+``int_Gamma h psi_i ds`` with ``h = D_biofilm grad Phi . n_S``, since every other biofilm
+boundary is no-flux; ``h_i = r_S(psi_i) / int_Gamma psi_i ds`` (current configuration).  The
+total ``sum_i h_i int psi_i ds`` is exactly the biofilm's uptake (consumption + storage).
+Measured on a two-layer slab (P2): vertex values converge as h^2 (1.3e-2, 3.7e-3, 1.1e-3,
+3.0e-4 relative for 2 ... 16 elements over the biofilm), 3-8 times closer than solving with
+the full P2 trace mass, whose vertex values oscillate about the (superconvergent) mean.
 
 **Balance**, :meth:`NutrientTransport.balance`: the advective fluxes through ``inflow`` and
 ``outflow`` (``Phi c . n``), the diffusive flux through ``inflow`` as the consistent flux of
@@ -198,7 +201,6 @@ class NutrientTransport:
         def monod(phi: Any) -> Any:  # eq. 6, extended oddly to Phi < 0
             return s.k1r * phi / (k2r + ngs.IfPos(phi, phi, -phi))
 
-        self._reaction = monod
         reaction = monod(u)
 
         fluid = (rate + c * grad_x(u) - f) * psi + s.d_fluid * grad_x(u) * grad_x(psi)
@@ -221,6 +223,10 @@ class NutrientTransport:
             solid_cf = (J * solid).Compile()
             self.form += solid_cf * ngs.dx("|".join(self.solids))
             self.solid_form += solid_cf * ngs.dx("|".join(self.solids))
+            # int R psi_i with the quadrature of the forms: summed over the vertex functions
+            # (a partition of unity) it is the consumption that the residual balances exactly
+            self._consumption = ngs.BilinearForm(self.fes, symmetric=False)
+            self._consumption += (J * reaction * psi).Compile() * ngs.dx("|".join(self.solids))
 
         # current length element and normal times length on boundaries: n ds = cof(F) N dS
         Fb, _, _ = self._kinematics(boundary=True)
@@ -228,11 +234,16 @@ class NutrientTransport:
         t = Fb * ngs.CF((-N[1], N[0]))
         self._n_ds = ngs.CF((t[1], -t[0]))
         self._ds = ngs.sqrt(t * t)
-        self.interface_mass: Any = None
+        # lumped interface mass: int psi_i ds of the vertex (P1) functions, current configuration
+        self._p1 = ngs.H1(self.mesh, order=1)
+        self._interface_weight: Any = None
+        self._gamma_vertices = np.zeros(0, dtype=int)
         if self._has["interface"]:
-            self.interface_mass = ngs.BilinearForm(self.fes, symmetric=True)
-            self.interface_mass += self._ds * u * psi * ngs.ds("interface")
-            self._gamma = self.fes.GetDofs(self.mesh.Boundaries("interface"))
+            psi1 = self._p1.TestFunction()
+            self._interface_weight = ngs.LinearForm(self._p1)
+            self._interface_weight += self._ds * psi1 * ngs.ds("interface")
+            on = np.array(self._p1.GetDofs(self.mesh.Boundaries("interface")), dtype=bool)
+            self._gamma_vertices = np.flatnonzero(on)
 
     def _lap_x(self) -> Any:
         """The vector q with ``lap_x f = tr(F^-T Hess_X f F^-1) - grad_x f . q``: from
@@ -390,18 +401,19 @@ class NutrientTransport:
 
     # -- post-processing ---------------------------------------------------------------------------
     def flux_field(self) -> Any:
-        """The consistent interface flux h = D_biofilm grad Phi . n_S [mol/(mm^2 s)] as a
-        GridFunction (nonzero only on interface dofs); see the module docstring."""
+        """The interface flux h = D_biofilm grad Phi . n_S [mol/(mm^2 s)] at the interface
+        vertices, as a P1 GridFunction (zero off the interface); see the module docstring."""
         ngs = self.ngs
-        h = ngs.GridFunction(self.fes)
-        if self.interface_mass is None:
+        h = ngs.GridFunction(self._p1)
+        if self._interface_weight is None:
             return h
         res = self.phi.vec.CreateVector()
         with ngs.TaskManager():
-            self.solid_form.Apply(self.phi.vec, res)
-            self.interface_mass.Assemble()
-            inv = self.interface_mass.mat.Inverse(self._gamma, inverse="sparsecholesky")
-            h.vec.data = inv * res
+            self.solid_form.Apply(self.phi.vec, res)  # biofilm-side residual: int h psi_i ds
+            self._interface_weight.Assemble()  # int psi_i ds, current configuration
+        weight = self._interface_weight.vec.FV().NumPy()
+        on = self._gamma_vertices
+        h.vec.FV().NumPy()[on] = res.FV().NumPy()[: self._nv][on] / weight[on]
         return h
 
     def interface_flux(self, vertices: Sequence[int]) -> NDArray[np.float64]:
@@ -418,7 +430,9 @@ class NutrientTransport:
         """Nutrient balance of the last solve [mol/s]: ``inflow`` (advective + consistent
         diffusive flux in through ``inflow``), ``outflow`` (advective out through
         ``outflow``), ``consumption`` (int R over the biofilm), ``storage`` (d/dt of the
-        content, 0 for a steady solve with a fixed mesh), ``source`` (verification hook) and
+        content, 0 for a steady solve with a fixed mesh), ``source`` (verification hook),
+        ``uptake`` (the interface flux h integrated over ``interface``: what enters the
+        biofilm, = its consumption + storage for a mesh with the biofilm off the inflow) and
         ``residual`` = inflow - outflow - consumption - storage + source."""
         ngs = self.ngs
         mesh = self.mesh
@@ -444,12 +458,10 @@ class NutrientTransport:
         out["outflow"] = float(outflow)
         consumption = 0.0
         if self.solids:
-            consumption = ngs.Integrate(
-                self._reaction(phi) * J,
-                mesh,
-                definedon=mesh.Materials("|".join(self.solids)),
-                order=order,
-            )
+            res = phi.vec.CreateVector()
+            with ngs.TaskManager():
+                self._consumption.Apply(phi.vec, res)
+            consumption = float(np.sum(res.FV().NumPy()[: self._nv]))
         out["consumption"] = float(consumption)
         storage = ngs.Integrate(
             (self.inv_dt * (phi - self.phi_old) + phi * self._div_w) * J, mesh, order=order
@@ -457,6 +469,11 @@ class NutrientTransport:
         out["storage"] = float(storage)
         source = 0.0 if self.source is None else ngs.Integrate(self.source * J, mesh, order=order)
         out["source"] = float(source)
+        uptake = 0.0
+        if self._interface_weight is not None:
+            h = self.flux_field().vec.FV().NumPy()
+            uptake = float(np.dot(h, self._interface_weight.vec.FV().NumPy()))
+        out["uptake"] = uptake
         out["residual"] = (
             out["inflow"] - out["outflow"] - out["consumption"] - out["storage"] + out["source"]
         )
