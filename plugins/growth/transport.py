@@ -34,7 +34,8 @@ so SUPG stays consistent on a curved mesh motion and P2 keeps its L2 rate h^3.
 
 **Nonlinear solve.** The shared :class:`~fbia.plugins.fem.newton.NewtonSolver` with the
 consistent Jacobian (NGSolve's symbolic linearisation), updates scaled by ``phi_in`` and
-halved while they take Phi below ``-0.05 phi_in`` at a vertex.  If Newton still fails, the
+halved while they take Phi below ``-0.05 phi_in`` at a biofilm vertex (or deepen an
+undershoot more than twofold).  If Newton still fails, the
 half-saturation K2R is lowered to its value in stages from ``4 phi_in`` (a continuation), which
 handles the near-step Monod law of ``K2R << phi_in``.  Failures are
 :class:`fbia.ForwardModelError` with reasons ``transport_newton_divergence``,
@@ -166,6 +167,12 @@ class NutrientTransport:
             self._inflow_vertices = np.flatnonzero(inflow_dofs[: self._nv])
         else:
             self._inflow_vertices = np.zeros(0, dtype=int)
+        if self.solids:
+            biofilm = self.fes.GetDofs(mesh.Materials("|".join(self.solids)))
+            self._biofilm_vertices = np.flatnonzero(np.array(biofilm, dtype=bool)[: self._nv])
+        else:
+            self._biofilm_vertices = np.zeros(0, dtype=int)
+        self._floor = -NEGATIVE_LIMIT * abs(s.phi_in)
         self._newton = NewtonSolver(
             self, s.newton_tol, 25, sparse_direct_solver(), inadmissible="transport_negative"
         )
@@ -382,6 +389,8 @@ class NutrientTransport:
     def residual(self, res: Any) -> None:
         with self.ngs.TaskManager():
             self.form.Apply(self.phi.vec, res)
+        # the floor of admissible(): the state Newton steps from is always admissible
+        self._floor = min(-NEGATIVE_LIMIT * abs(self.settings.phi_in), 2.0 * self._biofilm_min())
 
     def assemble_jacobian(self) -> None:
         with self.ngs.TaskManager():
@@ -390,14 +399,20 @@ class NutrientTransport:
     def scales(self) -> NDArray[np.float64]:
         return np.full(len(self._free), abs(self.settings.phi_in) or 1.0)
 
+    def _biofilm_min(self) -> float:
+        values = self.phi.vec.FV().NumPy()[self._biofilm_vertices]
+        return float(values.min()) if values.size else 0.0
+
     def admissible(self) -> bool:
-        """Finite, and at no vertex below ``-NEGATIVE_LIMIT * phi_in``: the damping that
-        makes Newton converge from ``Phi = phi_in`` (the saturated Monod law has a small
-        derivative there, so the first full updates overshoot far below zero)."""
-        values = self.phi.vec.FV().NumPy()
-        if not np.all(np.isfinite(values)):
+        """Finite, and in the biofilm at no vertex below ``-NEGATIVE_LIMIT * phi_in`` or,
+        if Phi already undershoots, twice the current undershoot: the damping that makes
+        Newton converge from ``Phi = phi_in`` (the saturated Monod law has a small derivative
+        there, so the first full updates overshoot far below zero).  The fluid, where the
+        problem is linear (and where an unstabilised Galerkin solution may oscillate), is
+        not damped."""
+        if not np.all(np.isfinite(self.phi.vec.FV().NumPy())):
             return False
-        return bool(values[: self._nv].min() >= -NEGATIVE_LIMIT * abs(self.settings.phi_in))
+        return self._biofilm_min() >= self._floor
 
     # -- post-processing ---------------------------------------------------------------------------
     def flux_field(self) -> Any:
