@@ -111,3 +111,19 @@ def test_five_growth_days_keep_the_mesh_above_the_quality_threshold(tmp_path):
     growth = sol.diagnostics["growth"]
     assert len(growth) == 5
     assert all(0.5e-3 < g[0] < 5e-3 for g in growth)  # um-scale growth every day
+
+
+def test_field_output_holds_the_nutrient_and_the_growth(tmp_path):
+    import meshio
+
+    m = fbia.forward_model("growth", **COARSE, write_vtu=True)
+    sol = m.solve(REFERENCE, [{"day": 1}], tmp_path)
+    (path,) = sol.fields.values()
+    vtu = meshio.read(path)
+    assert {"velocity", "pressure", "displacement", "phi", "growth"} <= set(vtu.point_data)
+    phi = vtu.point_data["phi"]
+    # consumed in the biofilm; P2 with SUPG may overshoot phi_in by a hair
+    assert 0.0 < phi.min() < phi.max() <= 2.5e-11 * (1 + 1e-4)
+    growth = np.linalg.norm(vtu.point_data["growth"][:, :2], axis=1)
+    d = sol.diagnostics
+    assert growth.max() == pytest.approx(max(d["max_growth"], d["max_erosion"]), rel=1e-12)

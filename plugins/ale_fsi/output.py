@@ -20,8 +20,10 @@ import numpy as np
 from .geometry import FLUID, mesh_arrays
 
 
-def write_vtu(solver: Any, path: str | Path) -> Path:
-    """Write the current state of an :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver`."""
+def write_vtu(solver: Any, path: str | Path, extra: dict[str, np.ndarray] | None = None) -> Path:
+    """Write the current state of an :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver`;
+    ``extra``: more point data by name, one value or 2-vector per mesh vertex (e.g. the
+    nutrient and the growth displacement of ``growth``)."""
     import meshio
 
     path = Path(path)
@@ -61,6 +63,10 @@ def write_vtu(solver: Any, path: str | Path) -> Path:
             "displacement": np.c_[vertex_vector(d), np.zeros(nv)],
             "pressure": pressure,
             "interface_force": np.c_[force, np.zeros(nv)],
+            **{
+                name: (np.c_[a, np.zeros(nv)] if a.ndim == 2 else a)
+                for name, a in (extra or {}).items()
+            },
         },
         cell_data={"subdomain": [np.concatenate(subdomain)]},
     )

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -121,6 +121,9 @@ class _StepState:
     nodal_length: NDArray[np.float64]  # (n,) [mm]
     uptake: float  # nutrient consumed in the biofilm [mol/s]
     chains: list[NDArray[np.int64]]  # positions in ``vertices`` of each interface chain
+    # the solvers of this state, for field output (dropped before a state is kept for reuse)
+    solver: Any = None
+    transport: Any = None
 
 
 class GrowthForwardModel(Configurable):
@@ -191,6 +194,7 @@ class GrowthForwardModel(Configurable):
         area0 = solid_area(mesh)
         curves: dict[int, list[NDArray[np.float64]]] = {}
         diag: dict[str, Any] = {"growth": [], "uptake": [], "reused_state": False}
+        fields: dict[str, Path] = {}
         state: _StepState | None = None
         dt_g = o.growth_period / o.growth_steps
         for step in range(max(1, steps_total)):
@@ -201,12 +205,16 @@ class GrowthForwardModel(Configurable):
             else:
                 state = self._fsi_and_transport(mesh, params, f"growth step {step + 1}")
                 if key is not None:
-                    self._remember(key, state)
+                    self._remember(key, replace(state, solver=None, transport=None))
             if step == 0 and 0 in days:
                 curves[0] = self._curves(state, np.zeros_like(state.reference))
             if steps_total == 0:
                 break
             d_g = self._growth(state, params, dt_g)
+            if o.write_vtu and state.solver is not None:
+                fields[f"vtu_step_{step + 1:03d}"] = self._write_vtu(
+                    state, d_g, Path(workdir) / f"growth_{step + 1:03d}.vtu"
+                )
             mesh = grow_mesh(mesh, state.vertices, d_g, o.min_element_quality, reference_area=area0)
             n = np.linalg.norm(d_g, axis=1) * np.sign(np.sum(d_g * state.normals, axis=1))
             diag["growth"].append([float(n.max()), float(n.min())])
@@ -222,7 +230,7 @@ class GrowthForwardModel(Configurable):
             mean_flux=float(np.mean(state.flux)),
             wall_time=time.perf_counter() - t_start,
         )
-        return Solution.from_pairs(pairs, diagnostics=diag)
+        return Solution.from_pairs(pairs, fields=fields, diagnostics=diag)
 
     # -- the stages ----------------------------------------------------------------------------
     def _fsi_and_transport(self, mesh: Any, params: dict[str, float], where: str) -> _StepState:
@@ -274,7 +282,21 @@ class GrowthForwardModel(Configurable):
             nodal_length=np.concatenate([c.lengths for c in chains]),
             uptake=transport.balance()["consumption"],
             chains=[np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:], strict=True)],
+            solver=solver,
+            transport=transport,
         )
+
+    @staticmethod
+    def _write_vtu(state: _StepState, growth: NDArray[Any], path: Path) -> Path:
+        """The FSI state (velocity, pressure, displacement, interface force) with the nutrient
+        ``phi`` [mol/mm^3] and the growth displacement ``growth`` [mm] of this step."""
+        from ..ale_fsi.output import write_vtu
+
+        nv = state.solver.mesh.nv
+        g = np.zeros((nv, 2))
+        g[state.vertices] = growth
+        phi = np.array(state.transport.phi.vec.FV().NumPy()[:nv], copy=True)
+        return write_vtu(state.solver, path, {"phi": phi, "growth": g})
 
     def _growth(self, state: _StepState, params: dict[str, float], dt_g: float) -> NDArray[Any]:
         """Eq. 9 at the interface vertices."""
