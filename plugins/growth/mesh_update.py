@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...core.errors import ForwardModelError
 from ..ale_fsi.geometry import mesh_arrays, mesh_from_arrays, solid_regions
-from .geometry import interface_vertices
+from .geometry import interface_vertices, vertex_normals
 
 #: Outer boundaries held fixed by the extension (the interface is prescribed).
 FIXED_BOUNDARIES = ("inflow", "outflow", "walls", "solid_fixed", "obstacle")
@@ -233,23 +233,36 @@ def _check_outline(
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     moved = iface & np.any(d != 0.0, axis=1)
     xi = x_new[moved]
-    if np.any(xi[:, 1] >= hi[1] - tol) or np.any(xi[:, 0] <= lo[0] + tol):
-        raise ForwardModelError("growth reaches the top wall or the inflow", "growth_blocked")
-    if np.any(xi[:, 0] >= hi[0] - tol):
-        raise ForwardModelError("growth reaches the outflow", "growth_blocked")
-    if np.any(x_new[moved & ~floor, 1] <= lo[1] + tol):
-        raise ForwardModelError("erosion brings the interface down to the floor", "eroded_away")
     area_old = area_new = 0.0
     crossing = False
+    outward = 0.0  # the mean outward movement (growth > 0, erosion < 0)
     for chain in interface_vertices(mesh):
         a_old, _ = _outline_area(pts, chain)
         a_new, simple = _outline_area(x_new, chain)
         area_old += a_old
         area_new += a_new
         crossing |= not simple
+        normals = vertex_normals(pts, chain, floor=None)  # only the sign of the sum counts
+        outward += float(np.sum(d[chain] * normals))
     ref = area_old if reference_area is None else float(reference_area)
+    # an interface pushed through the biofilm to the other walls is erosion, not growth
+    eroding = outward < 0.0
+    if np.any(xi[:, 1] >= hi[1] - tol) or np.any(xi[:, 0] <= lo[0] + tol):
+        if eroding:
+            raise ForwardModelError(
+                "erosion pushes the interface through the biofilm to the walls", "eroded_away"
+            )
+        raise ForwardModelError("growth reaches the top wall or the inflow", "growth_blocked")
+    if np.any(xi[:, 0] >= hi[0] - tol):
+        if eroding:
+            raise ForwardModelError(
+                "erosion pushes the interface through the biofilm to the outflow", "eroded_away"
+            )
+        raise ForwardModelError("growth reaches the outflow", "growth_blocked")
+    if np.any(x_new[moved & ~floor, 1] <= lo[1] + tol):
+        raise ForwardModelError("erosion brings the interface down to the floor", "eroded_away")
     if crossing:
-        if area_new < area_old:
+        if eroding:
             raise ForwardModelError("erosion makes the biofilm outline cross itself", "eroded_away")
         raise ForwardModelError("growth makes the biofilm outline cross itself", "growth_inverted")
     if area_new <= min_area_fraction * ref:
