@@ -135,11 +135,11 @@ class GpSmcIterator(IteratorBase):
         )
         n_train: int = Field(200, ge=2, description="forward runs of the training design [-]")
         n_check: int = Field(
-            0,
+            8,
             ge=0,
             description="forward runs at distinct posterior draws after SMC, to measure the "
-            "surrogate's error where the posterior is (its RMSE in L should be well below 1; "
-            "surrogate mode) [-]",
+            "surrogate's error where the posterior is; a RMSE in L not below 0.5 makes the "
+            "status 'unreliable' (surrogate mode; 0 skips the check, status 'unchecked') [-]",
         )
         n_test: int = Field(
             0,
@@ -255,13 +255,20 @@ class GpSmcIterator(IteratorBase):
             opts.map_bins,
             (lambda z: log_likelihood(z) + _log_prior(run.inputs, z)) if laplace else None,
         )
+        status = _status(opts.mode, check)
         return GpSmcResult(
-            status="completed",
-            success=True,
+            status=status,
+            success=status == "completed",
             message=(
                 f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
                 f"steps ({opts.mode}; {run.nfev} forward runs, {run.n_failed} failed)"
                 + ("" if check is None else check.note())
+                + (
+                    "; the surrogate was not checked at posterior draws (n_check = 0): "
+                    "nothing says whether this posterior is right"
+                    if status == "unchecked"
+                    else ""
+                )
             ),
             x=dict(zip(problem.names, map(float, posterior.map), strict=True)),
             nfev=run.nfev,
@@ -558,6 +565,16 @@ class _Run:
         self.nfev += len(evs)
         self.n_failed += sum(not ev.ok for ev in evs)
         return self.log_likelihoods(evs)
+
+
+def _status(mode: str, check: PosteriorCheck | None) -> str:
+    """``completed`` (direct SMC, or a surrogate whose error at posterior draws is well below
+    1 in L), ``unreliable`` (it is not) or ``unchecked`` (the check was switched off)."""
+    if mode != "surrogate":
+        return "completed"
+    if check is None:
+        return "unchecked"
+    return "completed" if check.reliable else "unreliable"
 
 
 def _log_prior(inputs: Sequence[Parameter], z: FloatArray) -> FloatArray:

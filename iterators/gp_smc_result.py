@@ -56,6 +56,11 @@ class SurrogateFit:
     best_log_likelihood: float
 
 
+#: the largest surrogate RMSE in L at posterior draws that counts as "well below 1": an error
+#: of 0.5 changes posterior density ratios by up to a factor e^0.5 = 1.65
+RELIABLE_RMSE = 0.5
+
+
 @dataclass(frozen=True)
 class PosteriorCheck:
     """Forward runs at ``n`` distinct posterior draws: the surrogate's error where the
@@ -71,13 +76,23 @@ class PosteriorCheck:
 
     @property
     def reliable(self) -> bool:
-        return bool(self.rmse < 1.0)
+        """Whether the surrogate's error at the posterior draws is well below 1 in L
+        (:data:`RELIABLE_RMSE`); False when no draw could be checked."""
+        return bool(self.n > 0 and self.rmse < RELIABLE_RMSE)
 
     def note(self) -> str:
         """The check in the result message, with a warning when it failed."""
+        if self.n == 0:
+            return (
+                f"; the surrogate could not be checked: all {self.n_failed} forward runs at "
+                "posterior draws failed (the posterior is not reliable)"
+            )
         text = f"; surrogate RMSE {self.rmse:.3g} in L at {self.n} posterior draws"
         if not self.reliable:
-            text += " (not well below 1: the posterior is not reliable, train on more runs)"
+            text += (
+                f" (not well below 1, limit {RELIABLE_RMSE:g}: the posterior is not reliable; "
+                "train on more runs)"
+            )
         return text
 
 

@@ -121,7 +121,7 @@ def test_laplace_approximation_of_a_gaussian_is_exact():
 def test_map_near_ground_truth_and_surrogate_accurate(runs):
     problem, result, it = runs[False]
     assert result.success and result.status == "completed"
-    assert result.nfev == 256 + 32 and result.n_failed == 0
+    assert result.nfev == 256 + 32 + 8 and result.n_failed == 0  # design, test, check
     assert abs(result.x["E"] - 400.0) < 20.0 and abs(result.x["nu"] - 0.3) < 0.03
     gp = result.surrogate.summary
     assert gp["loo_relative_l2"] < 0.05 and gp["test_relative_l2"] < 0.05
@@ -152,7 +152,13 @@ def test_posterior_band_follows_the_e_nu_coupling(runs):
 def test_uncertain_inflow_widens_the_posterior(runs):
     _, plain, _ = runs[False]
     problem, under, _ = runs[True]
-    assert under.success and under.names == ["E", "nu", "inflow_rate"]
+    assert plain.status == "completed"
+    # A fixed Sobol design of 256 points in 3-D does not resolve L where this posterior is
+    # (surrogate RMSE about 1 in L at posterior draws; issue 16: an adaptive design is the
+    # fix), and the result says so instead of passing for right.  The Paper B effects below
+    # hold all the same.
+    assert under.status == "unreliable" and not under.success
+    assert under.names == ["E", "nu", "inflow_rate"]
     assert under.posterior.particles.shape == (1000, 3)
     det_plain = np.linalg.det(plain.posterior.cov)
     det_under = np.linalg.det(under.posterior.cov)
@@ -234,7 +240,7 @@ def test_steps_yield_every_stage():
     it = fbia.iterator("gp_smc", n_train=16, **FAST)
     stages = [state.stage for state in it.steps(problem, fbia.SerialEvaluator())]
     assert stages[:3] == ["design", "forward_runs", "surrogate"]
-    assert set(stages[3:]) == {"smc"}
+    assert set(stages[3:-1]) == {"smc"} and stages[-1] == "check"
 
 
 def test_arviz_reads_the_posterior(runs, tmp_path):
@@ -264,8 +270,9 @@ def test_hpd_mass_of_map_truth_and_a_far_point(runs):
 
 def test_design_extends_reusing_the_earlier_runs():
     problem = _problem(failure_region={"E": (100.0, 150.0)})
-    first = fbia.iterator("gp_smc", n_train=32, **FAST).run(problem)
-    more = fbia.iterator("gp_smc", n_train=64, n_test=8, **FAST).reuse(first).run(problem)
+    first = fbia.iterator("gp_smc", n_train=32, n_check=0, **FAST).run(problem)
+    more = fbia.iterator("gp_smc", n_train=64, n_test=8, n_check=0, **FAST).reuse(first)
+    more = more.run(problem)
     # Only the 32 + 8 new points of the same Sobol sequence ran.
     assert more.nfev == 40 and len(more.evaluations) == 72
     np.testing.assert_array_equal(more.design.points[:32], first.design.points)
@@ -338,10 +345,17 @@ def test_posterior_check_measures_the_surrogate_where_the_posterior_is():
     ]
     err = good.surrogate.predict_mean(x) - np.array(exact)
     assert check.rmse == pytest.approx(float(np.sqrt(np.mean(err**2))), rel=1e-9)
-    assert check.rmse < 1.0 and "not reliable" not in result.message
-    # Eight training runs cannot resolve the posterior: the check says so.
+    assert check.rmse < 0.5 and "not reliable" not in result.message
+    assert (result.status, result.success) == ("completed", True)
+    # Eight training runs cannot resolve the posterior: the check says so, in the status too
+    # (issue 16: never a silently wrong posterior).
     poor = fbia.iterator("gp_smc", n_train=8, n_check=8, **FAST).run(problem)
     assert poor.check.rmse > 1.0 and "not reliable" in poor.message
+    assert (poor.status, poor.success) == ("unreliable", False)
+    # Without the check nothing vouches for the posterior: the status says that as well.
+    blind = fbia.iterator("gp_smc", n_train=256, n_check=0, **FAST).run(problem)
+    assert (blind.status, blind.success) == ("unchecked", False)
+    assert "not checked" in blind.message
 
 
 def test_the_rkhs_residual_vector_does_not_change_the_likelihood():
