@@ -12,3 +12,6 @@ def register_iterators(register):
     from .gp_smc import GpSmcIterator
 
     register("gp_smc", GpSmcIterator)
+    from .sobol_indices import SobolIndicesIterator
+
+    register("sobol_indices", SobolIndicesIterator)
