@@ -257,7 +257,9 @@ class _Reader:
         if "x0" in fields:
             if "x0" in options:
                 options["x0"] = self.starts(options["x0"], f"{where} x0")
-            elif all(p.initial is not None for p in self.parameters):
+            elif options.get("x0_from") is None and all(
+                p.initial is not None for p in self.parameters
+            ):  # x0_from (a posterior to start from) replaces the initial values
                 options["x0"] = {p.name: p.initial for p in self.parameters}
         return options
 

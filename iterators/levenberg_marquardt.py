@@ -58,169 +58,27 @@ import inspect
 import math
 from collections.abc import Generator
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, model_validator
 
 from ..core.errors import ConfigError
 from ..core.evaluator import Evaluator
 from ..core.iteration import IteratorBase
-from ..core.options import PluginOptions
 from ..core.problem import Evaluation, ProblemLike
 from .lm_core import LMChain, LMSettings, Outcome, PaperChain, err_res_of
+from .lm_handoff import POSTERIOR_LABELS, posterior_starts
+from .lm_options import LMOptions
 from .lm_result import FitStatistics, LMResult, LMState, compare_starts
 from .lm_robust import RobustChain
 
 FloatArray = NDArray[np.float64]
 
+
 #: Options that only the robust mode knows.
-_ROBUST_ONLY = ("ftol", "xtol", "gtol", "scaling", "speculative", "final_jacobian")
-
-
 class _StopRequested(Exception):
     """Thrown into a running :meth:`LevenbergMarquardtIterator.steps` by its ``stop``."""
-
-
-class LMOptions(PluginOptions):
-    """Options of :class:`LevenbergMarquardtIterator` (units in every description)."""
-
-    x0: dict[str, float] | list[dict[str, float]] | None = Field(
-        None,
-        description="initial guess {name: value} in the parameters' units, or a list of "
-        "them for a multi-start analysis (Paper A Tables 1, 3-6); default: the "
-        "parameters' `initial` values",
-    )
-    mode: Literal["robust", "paper"] = Field(
-        "robust",
-        description="'robust': improved algorithm (declines steps that increase the "
-        "residual, projects steps onto the bounds, survives failed runs); 'paper': Paper A "
-        "exactly as published",
-    )
-    alpha: float | dict[str, float] = Field(
-        1e-5,
-        description="absolute part α of the finite-difference perturbation "
-        "δx_i = α + β·x_i (Paper A eq. 21; robust mode uses |x_i|), in each parameter's "
-        "unit; one number or {name: value}; with α = 0, δx_i = β where x_i = 0",
-    )
-    beta: float = Field(
-        1e-3, ge=0.0, description="relative part β of the perturbation (eq. 21) [-]"
-    )
-    mu0: float | None = Field(
-        None,
-        gt=0.0,
-        description="initial damping μ0 of eq. 18, relative to diag(JᵀJ) [-]; default 1 "
-        "in paper mode (the default of QUEENS, where Paper A's algorithm was implemented), "
-        "1e-2 in robust mode (where it sets the first trust region: the length of the "
-        "first step)",
-    )
-    mu_limit: float = Field(
-        1e6,
-        gt=1.0,
-        description="paper mode: damping limit factor, the run ends without result when "
-        "μ > μ0·mu_limit (Paper A: 1e6) [-]; the robust mode ends on xtol instead",
-    )
-    eps_grad: float = Field(
-        1e-8,
-        ge=0.0,
-        description="eq. 29a: converged when err_grad = ‖Jᵀr‖ < eps_grad; unit "
-        "[r]²/[x], mixed over the parameters as in the paper; 0 disables",
-    )
-    eps_res: float = Field(
-        0.0,
-        ge=0.0,
-        description="eq. 29b: converged when err_res = ‖r‖/√n_r < eps_res, in the unit "
-        "of the residuals (mm); 0 disables",
-    )
-    max_iter: int = Field(
-        100, ge=0, description="eq. 29c: largest number of LM iterations (steps taken)"
-    )
-    ftol: float = Field(
-        1e-8,
-        ge=0.0,
-        description="robust mode: converged when a step reduces ‖r‖² by a fraction "
-        "below ftol (actual and predicted) [-]",
-    )
-    xtol: float = Field(
-        1e-8,
-        ge=0.0,
-        description="robust mode: converged when the trust region ‖D Δx‖ shrinks below "
-        "xtol·‖D x‖ (D: Jacobian column norms, so each parameter counts by its effect on "
-        "r) [-]",
-    )
-    gtol: float = Field(
-        1e-8,
-        ge=0.0,
-        description="robust mode: converged when r is orthogonal to every column of J "
-        "within gtol (largest |cos| of the angle) [-]",
-    )
-    scaling: Literal["adaptive", "marquardt"] = Field(
-        "adaptive",
-        description="robust mode: damping matrix D² of eq. 18: 'marquardt' = "
-        "diag(JᵀJ) of the current J (as in the paper), 'adaptive' = largest squared "
-        "column norms of J seen so far (Moré 1978; robust for insensitive parameters)",
-    )
-    speculative: bool = Field(
-        False,
-        description="robust mode: evaluate a trial point together with its n_x "
-        "perturbations in one batch (n_x+1 runs per round, like the paper: fewer rounds "
-        "on a pool, n_x runs wasted per declined step); default: the trial point first",
-    )
-    final_jacobian: Literal["central", "forward"] = Field(
-        "central",
-        description="robust mode: Jacobian of the last iterations. 'central': once "
-        "ftol, xtol or gtol hold with forward differences, go on with central "
-        "differences (2 n_x runs per J, step δx·β^(-1/3)) until they hold again, so that "
-        "the result is as accurate as the residuals allow, not only as the forward-"
-        "difference J does; 'forward': stop at the first convergence",
-    )
-    max_nfev: int | None = Field(
-        None,
-        ge=1,
-        description="stop after this many forward runs in total (checked after each batch)",
-    )
-    uncertain_values: dict[str, float] | None = Field(
-        None,
-        description="values at which to hold the problem's uncertain parameters θ "
-        "(least squares has no place for distributions), in their units",
-    )
-    fit_rtol: float = Field(
-        0.05,
-        ge=0.0,
-        description="multi-start: optima whose err_res is within this fraction of the "
-        "best one fit 'equally well' [-]",
-    )
-    agree_rtol: float = Field(
-        0.01,
-        gt=0.0,
-        description="multi-start: equally good optima disagree when a parameter differs "
-        "by more than agree_rtol·max(|x|, α/β) [-]",
-    )
-
-    @model_validator(mode="after")
-    def _paper_mode_is_the_paper(self) -> LMOptions:
-        if self.mode == "paper":
-            extra = [k for k in _ROBUST_ONLY if k in self.model_fields_set]
-            if extra:
-                raise ValueError(
-                    f"option(s) {', '.join(extra)} apply to mode='robust' only; "
-                    "mode='paper' is Paper A's algorithm as published"
-                )
-        elif "mu_limit" in self.model_fields_set:
-            raise ValueError(
-                "option mu_limit applies to mode='paper' only; the robust mode ends when "
-                "the steps fall below xtol"
-            )
-        alphas = self.alpha if isinstance(self.alpha, dict) else {"alpha": self.alpha}
-        bad = {k: v for k, v in alphas.items() if not v >= 0}
-        if bad:
-            raise ValueError(f"alpha must be >= 0, got {bad}")
-        if self.beta == 0 and not all(v > 0 for v in alphas.values()):
-            raise ValueError("alpha and beta are both zero: no finite-difference step")
-        if isinstance(self.x0, list) and not self.x0:
-            raise ValueError("x0 is an empty list of initial guesses")
-        return self
 
 
 class LevenbergMarquardtIterator(IteratorBase):
@@ -371,6 +229,8 @@ class LevenbergMarquardtIterator(IteratorBase):
         self, problem: Any, names: list[str], lower: FloatArray, upper: FloatArray
     ) -> list[FloatArray]:
         x0 = self.options.x0
+        if self.options.x0_from is not None:
+            x0 = posterior_starts(self.options.x0_from)
         if x0 is None:
             params = list(getattr(problem, "parameters", ()))
             missing = [p.name for p in params if p.initial is None]
@@ -511,6 +371,13 @@ class LevenbergMarquardtIterator(IteratorBase):
             "warnings": warnings,
             "info": {"mode": settings.mode, "options": self.options.model_dump()},
         }
+        labels = self.options.x0_labels or (
+            list(POSTERIOR_LABELS) if self.options.x0_from is not None else None
+        )
+        if labels:  # e.g. Bayes -> LM: say which start was which
+            common["info"]["start_labels"] = list(labels)
+            for row, label in zip(rows, labels, strict=False):
+                row["label"] = label
         if best is None:
             if nfev > 0 and n_failed == nfev:
                 status = "all_failed"
