@@ -317,6 +317,37 @@ class SequentialMonteCarlo:
             return float(np.nextafter(gamma, 2.0))
         return float(brentq(excess, gamma, 1.0, xtol=1e-14, rtol=1e-10))
 
+    def _stalled(
+        self, gamma: float, loglik: NDArray[np.float64], log_w: NDArray[np.float64]
+    ) -> str:
+        """Why the tempering did not reach gamma = 1 within max_steps, and what to change."""
+        finite = loglik[np.isfinite(loglik)]
+        spread = float(np.ptp(finite)) if finite.size else math.nan
+        alive = int(np.sum(np.exp(log_w) > 1e-3 / len(log_w)))
+        unique = len(np.unique(loglik))
+        # resampling restarts the ESS at N; each step lowers it by the factor zeta, so one
+        # resampling cycle takes log(ess_min) / log(zeta) steps
+        cycle = math.log(max(self.ess_min, 1e-3)) / math.log(self.zeta)
+        why = [
+            f"no convergence to gamma = 1 in {self.max_steps} tempering steps "
+            f"(gamma = {gamma:.3g})",
+            f"with zeta = {self.zeta:g} one resampling cycle takes about {cycle:.0f} steps",
+            f"the log-likelihood spans {spread:.3g} over the particles",
+        ]
+        if unique < 0.1 * len(loglik):
+            why.append(
+                f"the particles have collapsed onto {unique} distinct points (raise "
+                "n_rejuvenation or the proposal's reach)"
+            )
+        elif alive < 0.1 * len(log_w):
+            why.append(f"only {alive} particles carry weight")
+        why.append(
+            "lower zeta (e.g. 0.95), use rejuvenate = 'after_resampling', or raise "
+            "max_steps; a log-likelihood spread far beyond the training range of a surrogate "
+            "is a surrogate artefact (check it with n_check)"
+        )
+        return "; ".join(why)
+
     def steps(self) -> Generator[SmcState, None, SmcResult]:
         """Run Algorithm 1; yield after each tempering step, return the :class:`SmcResult`."""
         rng, n = self.rng, self.n_particles
@@ -337,11 +368,7 @@ class SequentialMonteCarlo:
             t0 = time.perf_counter()
             step += 1
             if step > self.max_steps:
-                raise ConfigError(
-                    f"no convergence to gamma = 1 in {self.max_steps} tempering steps "
-                    f"(gamma = {gamma:.3g}); lower zeta or raise max_steps",
-                    "smc",
-                )
+                raise ConfigError(self._stalled(gamma, loglik, log_w), "smc")
             new_gamma = self._next_gamma(gamma, log_w, loglik)
             # Reweighting w_s = w_{s-1} exp((gamma_s - gamma_{s-1}) L) and the evidence factor.
             inc = np.where(np.isfinite(loglik), (new_gamma - gamma) * loglik, -np.inf)

@@ -221,3 +221,23 @@ def test_a_likelihood_below_minus_700_everywhere_does_not_underflow_the_weights(
     assert std == pytest.approx(exact_std, rel=0.25)
     exact_log_z = -800.0 + 0.5 * np.log(np.pi / 1000.0)
     assert abs(post.log_evidence - exact_log_z) < 4 * post.log_evidence_se + 0.05
+
+
+def test_a_stalled_tempering_says_why_and_what_to_change():
+    """Issue 16, item 4: a sharp likelihood with zeta close to 1 cannot reach gamma = 1 in a
+    few steps; the error names the cycle length, the likelihood's spread and the remedies."""
+    prior = fbia.priors.uniform(0.0, 1.0)
+    with pytest.raises(fbia.ConfigError) as err:
+        fbia.smc(
+            lambda x: -1e4 * (x[:, 0] - 0.3) ** 2,
+            [prior],
+            n_particles=200,
+            zeta=0.998,
+            n_rejuvenation=1,
+            max_steps=20,
+            seed=0,
+        )
+    text = str(err.value)
+    assert "no convergence to gamma = 1 in 20 tempering steps" in text
+    assert "one resampling cycle takes about 346 steps" in text
+    assert "lower zeta" in text and "spans" in text
