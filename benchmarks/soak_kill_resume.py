@@ -36,6 +36,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"
+sys.path.insert(0, str(TESTS))
+
+from _models import write_driver  # noqa: E402  (the toy plugins' command line)
 
 STUDY = """\
 [study]
@@ -62,18 +65,6 @@ options = {{ x0 = [ {{ E = 200.0, nu = 0.4 }}, {{ E = 700.0, nu = -0.5 }} ] }}
 {executor}
 """
 
-DRIVER = f"""
-import sys
-sys.path.insert(0, {str(TESTS)!r})
-from _models import PLUGIN
-from fbia.core import study_file as study
-from fbia.core.cli import main
-from fbia.core.registry import Registry
-registry = Registry.load(extra=[PLUGIN])
-study.default_registry = lambda: registry
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
-"""
 
 SETUPS = {
     "serial": 'kind = "serial"',
@@ -129,7 +120,7 @@ def _run(folder: Path) -> subprocess.CompletedProcess[str]:
 
 
 def trial(folder: Path, executor: str, kill_after: float, reference: dict) -> dict[str, bool]:
-    (folder / "drive.py").write_text(DRIVER)
+    write_driver(folder)
     (folder / "toy.toml").write_text(STUDY.format(executor=executor))
     # stderr to a file: children of the killed study may hold a pipe open
     with open(folder / "stderr1.txt", "w") as err_file:
@@ -192,7 +183,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory(prefix="fbia-soak-") as tmp:
             ref = Path(tmp) / "reference"
             ref.mkdir()
-            (ref / "drive.py").write_text(DRIVER)
+            write_driver(ref)
             (ref / "toy.toml").write_text(STUDY.format(executor=executor))
             t0 = time.monotonic()
             done = _run(ref)

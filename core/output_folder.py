@@ -20,12 +20,48 @@ from typing import IO
 
 from .errors import ConfigError
 
-__all__ = ["LOCK_NAME", "OutputLock", "clear_runs", "is_fbia_store"]
+__all__ = ["LOCK_NAME", "LockHeld", "OutputLock", "clear_runs", "is_fbia_store", "lock_file"]
 
 #: the lock file a writing command holds in its output folder
 LOCK_NAME = ".fbia.lock"
 
 _RUN_FOLDER = re.compile(r"eval_\d{6,}(-\d+)?")
+
+
+class LockHeld(Exception):
+    """Another process holds the lock; ``holder`` is what it wrote into the lock file."""
+
+    def __init__(self, holder: str) -> None:
+        super().__init__(holder)
+        self.holder = holder
+
+
+def this_process() -> str:
+    """``pid <n> on <host>``: who holds a lock."""
+    return f"pid {os.getpid()} on {socket.gethostname()}"
+
+
+def lock_file(path: Path, holder: str) -> IO[str] | None:
+    """Take an exclusive lock (``flock``) on the file ``path`` and write ``holder`` into it;
+    the lock lives as long as the returned handle is open (None where there are no POSIX
+    locks).  Raises :class:`LockHeld` naming the process that has it."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        return None
+    fh = open(path, "a+", encoding="utf-8")  # held open until released
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        fh.seek(0)
+        who = fh.read().strip() or "another fbia process"
+        fh.close()
+        raise LockHeld(who) from None
+    fh.seek(0)
+    fh.truncate()
+    fh.write(f"{holder}\n")
+    fh.flush()
+    return fh
 
 
 class OutputLock:
@@ -35,29 +71,15 @@ class OutputLock:
 
     def __init__(self, folder: Path, command: str) -> None:
         self.folder = folder
-        self._fh: IO[str] | None = None
         folder.mkdir(parents=True, exist_ok=True)
         try:
-            import fcntl
-        except ImportError:  # not POSIX: no lock
-            return
-        fh = open(folder / LOCK_NAME, "a+", encoding="utf-8")
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            fh.seek(0)
-            who = fh.read().strip() or "another fbia process"
-            fh.close()
+            self._fh = lock_file(folder / LOCK_NAME, f"{command} ({this_process()})")
+        except LockHeld as held:
             raise ConfigError(
-                f"the output folder is in use by {who}; {command} would overwrite its files "
-                "(wait for it, or give --output another folder)",
+                f"the output folder is in use by {held.holder}; {command} would overwrite its "
+                "files (wait for it, or give --output another folder)",
                 str(folder),
             ) from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(f"{command} (pid {os.getpid()} on {socket.gethostname()})\n")
-        fh.flush()
-        self._fh = fh
 
     def release(self) -> None:
         if self._fh is not None:

@@ -70,7 +70,7 @@ from .fingerprints import (
 )
 from .interface import Interface
 from .observation import CoordinateKey, Solution, coordinate_key
-from .output_folder import is_fbia_store
+from .output_folder import LockHeld, is_fbia_store, lock_file, this_process
 from .problem import Evaluation, InverseProblem
 from .store_db import connect
 from .store_migration import migrate
@@ -235,27 +235,14 @@ class StudyStore:
     # -- opening ---------------------------------------------------------------------------
     def _take_lock(self) -> IO[str] | None:
         try:
-            import fcntl
-        except ImportError:  # not POSIX: no lock
-            return None
-        lock = self.path.with_name(f".{self.path.name}.lock")
-        fh = open(lock, "a+", encoding="utf-8")  # held open until close: the lock lives with it
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            fh.seek(0)
-            who = fh.read().strip() or "another process"
-            fh.close()
+            lock = self.path.with_name(f".{self.path.name}.lock")
+            return lock_file(lock, f"fbia run {this_process()}")
+        except LockHeld as held:
             raise ConfigError(
-                f"the study store is in use by {who}: two runs cannot write one study at once "
-                "(wait for it, or give this run another --output)",
+                f"the study store is in use by {held.holder}: two runs cannot write one study "
+                "at once (wait for it, or give this run another --output)",
                 str(self.path),
             ) from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(f"fbia run pid {os.getpid()} on {socket.gethostname()}\n")
-        fh.flush()
-        return fh
 
     def _release_lock(self) -> None:
         if self._lock is not None:

@@ -109,9 +109,18 @@ def sobol_design(
     with warnings.catch_warnings():  # any n is fine here: designs are extended point by point
         warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*")
         u = sampler.random(n)
+    return unit_to_inputs(parameters, u, through_prior)
+
+
+def unit_to_inputs(
+    parameters: Sequence[Parameter], u: FloatArray, through_prior: bool
+) -> FloatArray:
+    """Points of the unit cube mapped to the inputs: uniformly onto finite bounds, or through
+    the prior's inverse CDF (where there are no finite bounds, or always with
+    ``through_prior`` when there is a prior)."""
     out = np.empty_like(u)
     for j, p in enumerate(parameters):
-        if p.bounds is not None and _finite_bounds(p) and not through_prior:
+        if p.bounds is not None and _finite_bounds(p) and not (through_prior and p.prior):
             lo, hi = p.bounds
             out[:, j] = lo + (hi - lo) * u[:, j]
         else:

@@ -5,7 +5,7 @@ Paper B recommends a sensitivity analysis before a high-dimensional calibration:
 first-order index ``S1_i`` is the share of the variance of the quantity that ``x_i`` explains
 alone, the total index ``ST_i`` the share it takes part in (interactions included); an input
 with ``ST_i`` near 0 can be fixed.  The variance is over the inputs' priors (a calibration
-parameter without a prior: uniform on its bounds).
+parameter without a prior: uniform on its bounds; the map is gp_smc's ``unit_to_inputs``).
 
 The stages (``fbia.iterator("sobol_indices", ...)``):
 
@@ -50,6 +50,7 @@ from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter
 from ..core.problem import InverseProblem, Result, jsonable
+from .gp_smc import unit_to_inputs
 from .gp_surrogate import GpSurrogate
 
 __all__ = ["SobolIndices", "SobolIndicesIterator", "SobolIndicesResult", "sobol_indices"]
@@ -86,21 +87,6 @@ class SobolIndices:
         return "\n".join([head, *rows])
 
 
-def _to_inputs(parameters: Sequence[Parameter], u: FloatArray) -> FloatArray:
-    """Unit-cube points mapped through each input's prior (uniform on finite bounds
-    without one)."""
-    out = np.empty_like(u)
-    for j, p in enumerate(parameters):
-        if p.prior is not None:
-            out[:, j] = p.prior.ppf(np.clip(u[:, j], 1e-9, 1 - 1e-9))
-        elif p.bounds is not None and all(math.isfinite(b) for b in p.bounds):
-            lo, hi = p.bounds
-            out[:, j] = lo + (hi - lo) * u[:, j]
-        else:
-            raise ConfigError("needs a prior or finite bounds for the Sobol indices", p.name)
-    return out
-
-
 def sobol_indices(
     f: Callable[[FloatArray], FloatArray],
     parameters: Sequence[Parameter],
@@ -121,7 +107,10 @@ def sobol_indices(
     global_state = np.random.get_state()  # noqa: NPY002 (restored, not used)
     try:
         u = sample.sample(problem, n_base, calc_second_order=False, scramble=True, seed=seed)
-        y = np.asarray(f(_to_inputs(parameters, np.asarray(u, dtype=float))), dtype=float)
+        y = np.asarray(
+            f(unit_to_inputs(parameters, np.asarray(u, dtype=float), through_prior=True)),
+            dtype=float,
+        )
         if not np.all(np.isfinite(y)):
             raise ConfigError("the function is not finite at every sample", "sobol_indices")
         res = analyze.analyze(
@@ -218,7 +207,7 @@ class SobolIndicesIterator(IteratorBase):
         n_all = o.n_train + o.n_test
         with warnings.catch_warnings():  # any n is fine for a training design
             warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*")
-            x = _to_inputs(inputs, sampler.random(n_all))
+            x = unit_to_inputs(inputs, sampler.random(n_all), through_prior=True)
         yield SobolState("design", f"{o.n_train} + {o.n_test} Sobol points")
         points = [dict(zip(names, map(float, row), strict=True)) for row in x]
         evaluations = list(evaluator.evaluate(problem, points))

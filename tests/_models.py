@@ -298,3 +298,25 @@ def _alive(pid: int) -> bool:
         return stat.read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except OSError:  # gone meanwhile, or no /proc
         return stat.parent.exists()
+
+
+_DRIVER = """
+import sys
+sys.path.insert(0, {tests!r})
+from _models import PLUGIN
+from fbia.core import study_file as study
+from fbia.core.cli import main
+from fbia.core.registry import Registry
+registry = Registry.load(extra=[PLUGIN])
+study.default_registry = lambda: registry
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
+"""
+
+
+def write_driver(folder: Path) -> Path:
+    """``folder/drive.py``: the fbia command line with the toy plugins registered, for tests
+    that need a process of its own (signals, ``kill -9``)."""
+    path = Path(folder) / "drive.py"
+    path.write_text(_DRIVER.format(tests=str(Path(__file__).resolve().parent)))
+    return path

@@ -79,6 +79,16 @@ def write_study(folder: Path, text: str = STUDY) -> Path:
     return path
 
 
+def one_error_line(capsys) -> str:
+    """The one line ``fbia: error: <message>`` the command line printed, without the prefix
+    (and nothing else on stderr)."""
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("fbia: error: ")
+    return lines[0].removeprefix("fbia: error: ")
+
+
 def edit(old: str, new: str) -> str:
     assert old in STUDY, old
     return STUDY.replace(old, new, 1)

@@ -4,34 +4,16 @@ with exit status 2, before anything runs; nothing is written where it was not as
 from __future__ import annotations
 
 import pytest
-from _studies import write_study
+from _studies import edit, one_error_line
 
 import fbia
 from fbia.core.cli import main
 
 
-@pytest.fixture
-def study_file(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    return write_study(tmp_path)
-
-
-def _error(capsys) -> str:
-    err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and err[0].startswith("fbia: error: "), err
-    return err[0]
-
-
-def _edit(study_file, old: str, new: str) -> None:
-    text = study_file.read_text()
-    assert old in text
-    study_file.write_text(text.replace(old, new))
-
-
 def test_deeply_nested_toml(study_file, capsys):
     study_file.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
     assert main(["validate", "study.toml"]) == 2
-    assert "TOML nested too deeply" in _error(capsys)
+    assert "TOML nested too deeply" in one_error_line(capsys)
 
 
 @pytest.mark.parametrize(
@@ -39,27 +21,29 @@ def test_deeply_nested_toml(study_file, capsys):
     [('""', "a non-empty string"), ('"out\\u0000put"', "a control character")],
 )
 def test_a_bad_output_folder_in_the_study_file(study_file, capsys, output, message):
-    _edit(study_file, 'output = "out"', f"output = {output}")
+    study_file.write_text(edit('output = "out"', f"output = {output}"))
     assert main(["run", "study.toml"]) == 2
-    line = _error(capsys)
+    line = one_error_line(capsys)
     assert "[study] output" in line and message in line
 
 
 def test_an_empty_output_on_the_command_line_writes_nothing(study_file, capsys, tmp_path):
     before = sorted(p.name for p in tmp_path.iterdir())
     assert main(["run", "study.toml", "--output", ""]) == 2
-    assert "--output: needs a folder name" in _error(capsys)
+    assert "--output: needs a folder name" in one_error_line(capsys)
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 def test_gp_smc_sizes_beyond_the_memory_are_refused_before_any_run(study_file, capsys, tmp_path):
-    _edit(
-        study_file,
-        'name = "levenberg_marquardt"\noptions = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }',
-        'name = "gp_smc"\noptions = { n_train = 16, n_particles = 100000000000 }',
+    study_file.write_text(
+        edit(
+            'name = "levenberg_marquardt"\n'
+            "options = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }",
+            'name = "gp_smc"\noptions = { n_train = 16, n_particles = 100000000000 }',
+        )
     )
     assert main(["run", "study.toml"]) == 2
-    line = _error(capsys)
+    line = one_error_line(capsys)
     assert "gp_smc options: n_train = 16, n_particles = 100000000000 needs about" in line
     assert "lower n_train or n_particles" in line
     assert not (tmp_path / "out" / "runs").exists()
@@ -77,10 +61,10 @@ def test_model_sizes_have_upper_bounds(model, option, value):
 @pytest.mark.parametrize("address", ["not a url", "tcp://", "http://10.0.0.5:8786", "tcp://h:port"])
 def test_a_bad_scheduler_address_is_one_line(study_file, capsys, address):
     assert main(["run", "study.toml", "--address", address]) == 2
-    assert "is not a Dask scheduler address" in _error(capsys)
-    _edit(study_file, 'kind = "serial"', f'kind = "dask"\naddress = "{address}"')
+    assert "is not a Dask scheduler address" in one_error_line(capsys)
+    study_file.write_text(edit('kind = "serial"', f'kind = "dask"\naddress = "{address}"'))
     assert main(["validate", "study.toml"]) == 2
-    assert "[executor] address: " in _error(capsys)
+    assert "[executor] address: " in one_error_line(capsys)
 
 
 @pytest.mark.parametrize(
@@ -94,5 +78,5 @@ def test_good_scheduler_addresses_pass(address):
 
 def test_more_workers_than_the_memory_can_start_is_one_line(study_file, capsys):
     assert main(["run", "study.toml", "--workers", "100000000"]) == 2
-    line = _error(capsys)
+    line = one_error_line(capsys)
     assert "100000000 worker processes needs about" in line and "lower workers" in line

@@ -15,8 +15,8 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
-from _models import PLUGIN
-from _studies import BAD_CASES, STUDY, TRUTH, edit, write_study
+from _models import PLUGIN, write_driver
+from _studies import BAD_CASES, STUDY, TRUTH, edit, one_error_line
 
 import fbia
 from fbia.core import study_file as study_module
@@ -26,25 +26,11 @@ from fbia.core.registry import Registry
 FBIA = Path(sys.executable).parent / "fbia"
 
 
-@pytest.fixture
-def study_file(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    return write_study(tmp_path)
-
-
-def _one_error_line(capsys) -> str:
-    out, err = capsys.readouterr()
-    lines = err.splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("fbia: error: ")
-    return lines[0].removeprefix("fbia: error: ")
-
-
 @pytest.mark.parametrize(("case", "text", "message"), BAD_CASES, ids=[c[0] for c in BAD_CASES])
 def test_validate_gives_status_2_and_one_line_per_mistake(study_file, capsys, case, text, message):
     study_file.write_text(text)
     assert main(["validate", "study.toml"]) == 2
-    assert _one_error_line(capsys).startswith(message)
+    assert one_error_line(capsys).startswith(message)
 
 
 @pytest.mark.parametrize("command", [["run"], ["forward"]])
@@ -53,7 +39,7 @@ def test_run_and_forward_report_the_same_mistakes(study_file, capsys, command, c
     text, message = next((t, m) for c, t, m in BAD_CASES if c == case)
     study_file.write_text(text)
     assert main([*command, "study.toml"]) == 2
-    assert _one_error_line(capsys).startswith(message)
+    assert one_error_line(capsys).startswith(message)
     assert not (study_file.parent / "out").exists()  # nothing ran
 
 
@@ -75,7 +61,7 @@ def test_run_and_forward_report_the_same_mistakes(study_file, capsys, command, c
 )
 def test_bad_arguments_give_status_2_and_one_line(study_file, capsys, argv, message):
     assert main(argv) == 2
-    assert _one_error_line(capsys).startswith(message)
+    assert one_error_line(capsys).startswith(message)
 
 
 def test_a_real_subprocess_prints_one_line_and_no_traceback(study_file):
@@ -183,7 +169,7 @@ def test_a_failed_forward_run_exits_1_with_one_line(study_file, capsys):
         edit("n_points = 41", "n_points = 41, failure_region = { E = [500.0, 900.0] }")
     )
     assert main(["forward", "study.toml", "--set", "E=600"]) == 1
-    line = _one_error_line(capsys)
+    line = one_error_line(capsys)
     assert line.startswith("the forward run failed: ") and "mesh distortion" in line
     saved = json.loads((study_file.parent / "out" / "forward" / "result.json").read_text())
     assert saved["status"] == "failed" and saved["n_failed"] == 1
@@ -260,28 +246,14 @@ def test_ctrl_c_exits_130_after_saving_what_was_computed(tmp_path, monkeypatch, 
 def test_an_unwritable_output_is_one_line_with_status_1(study_file, capsys):
     (study_file.parent / "taken").write_text("a file, not a folder")
     assert main(["forward", "study.toml", "--output", "taken"]) == 1
-    assert "taken" in _one_error_line(capsys)
-
-
-_DRIVER = """
-import sys
-sys.path.insert(0, {tests!r})
-from _models import PLUGIN
-from fbia.core import study_file as study
-from fbia.core.cli import main
-from fbia.core.registry import Registry
-registry = Registry.load(extra=[PLUGIN])
-study.default_registry = lambda: registry
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
-"""
+    assert "taken" in one_error_line(capsys)
 
 
 def test_a_real_ctrl_c_exits_130_and_saves_the_finished_runs(tmp_path):
     # A real SIGINT to the process group, as a terminal sends it, during a run that would take
     # 30 s: exit 130 at once with one line and no traceback, the 6 finished runs saved.
     # (tests/test_evaluator.py checks that Ctrl-C stops a process pool's workers.)
-    (tmp_path / "drive.py").write_text(_DRIVER.format(tests=str(Path(__file__).parent)))
+    write_driver(tmp_path)
     (tmp_path / "toy.toml").write_text(
         '[model]\nname = "toy_mound"\noptions = { slow_above = 500.0 }\n'
         '[[parameters]]\nname = "E"\nbounds = [100.0, 800.0]\n'

@@ -146,3 +146,25 @@ def test_transient_fsi_and_transport_agree_with_the_quasi_steady_variant(tmp_pat
     transient = fbia.forward_model("growth", **{**COARSE, "mode": "transient", "time_step": 0.5})
     sol = transient.solve(REFERENCE, [{"day": 1}], tmp_path)
     assert np.abs(_curve(sol, 1) - quasi).max() < 0.05 * sol.diagnostics["max_growth"]
+
+
+def test_the_growth_of_a_day_is_eq9_of_the_kept_state(tmp_path):
+    """With one growth step the FSI + transport state is kept: the day-1 interface minus the
+    day-0 one is eq. 9 of its normals, fluxes and tractions over one day, node by node."""
+    from fbia.plugins.growth.growth_law import NODE_AREA, GrowthCoefficients, growth_displacement
+
+    m = fbia.forward_model("growth", **COARSE)
+    sol = m.solve(REFERENCE, [{"day": 0}, {"day": 1}], tmp_path)
+    (state,) = m._states.values()
+    expected = growth_displacement(
+        state.normals,
+        state.flux,
+        state.traction,
+        GrowthCoefficients(6e4, 5e-2, 8e-2),
+        86400.0,
+        traction_measure="nodal_force",
+        nodal_area=NODE_AREA,
+    )
+    assert np.all(state.flux > 0)  # nutrient enters the biofilm everywhere on the finger
+    order = np.concatenate(state.chains)
+    np.testing.assert_allclose(_curve(sol, 1) - _curve(sol, 0), expected[order], atol=1e-15)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 
 import pytest
-from _studies import write_study
 
 import fbia
 from fbia.core.cli import main
@@ -59,9 +58,8 @@ def test_a_result_without_a_posterior_is_refused():
         fbia.iterator("levenberg_marquardt", x0=lm_result.to_dict())
 
 
-def test_a_study_file_chains_bayes_and_least_squares(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    study = write_study(tmp_path)
+def test_a_study_file_chains_bayes_and_least_squares(study_file, tmp_path, capsys):
+    study = study_file
     text = study.read_text()
     lm = 'name = "levenberg_marquardt"\noptions = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }'
     assert lm in text

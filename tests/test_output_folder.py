@@ -4,23 +4,11 @@ what fbia made."""
 from __future__ import annotations
 
 import pytest
-from _studies import write_study
+from _studies import one_error_line
 
 from fbia.core.cli import main
 from fbia.core.errors import ConfigError
 from fbia.core.output_folder import OutputLock, clear_runs, is_fbia_store
-
-
-@pytest.fixture
-def study_file(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    return write_study(tmp_path)
-
-
-def _error(capsys) -> str:
-    err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and err[0].startswith("fbia: error: "), err
-    return err[0]
 
 
 def test_forward_into_a_running_studys_folder_is_refused_and_changes_nothing(
@@ -30,7 +18,7 @@ def test_forward_into_a_running_studys_folder_is_refused_and_changes_nothing(
     with OutputLock(live, "fbia run"):
         (live / "evaluations.jsonl").write_text("a live study's log\n")
         assert main(["forward", "study.toml", "--output", "live"]) == 2
-        assert "in use by fbia run (pid" in _error(capsys)
+        assert "in use by fbia run (pid" in one_error_line(capsys)
         assert (live / "evaluations.jsonl").read_text() == "a live study's log\n"
         assert not (live / "result.json").exists()
 
@@ -40,14 +28,14 @@ def test_forward_into_a_finished_studys_folder_is_refused(study_file, capsys):
     before = (study_file.parent / "out" / "result.json").read_bytes()
     capsys.readouterr()
     assert main(["forward", "study.toml", "--output", "out"]) == 2
-    assert "holds a study (store.sqlite)" in _error(capsys)
+    assert "holds a study (store.sqlite)" in one_error_line(capsys)
     assert (study_file.parent / "out" / "result.json").read_bytes() == before
 
 
 def test_two_runs_on_one_folder_the_second_is_refused(study_file, capsys):
     with OutputLock(study_file.parent / "out", "fbia run"):
         assert main(["run", "study.toml"]) == 2
-    assert "out: the output folder is in use" in _error(capsys)
+    assert "out: the output folder is in use" in one_error_line(capsys)
 
 
 def test_fresh_deletes_only_fbia_run_folders_and_an_fbia_store(study_file, capsys, tmp_path):
@@ -69,7 +57,7 @@ def test_fresh_refuses_a_store_file_fbia_did_not_make(study_file, capsys, tmp_pa
     precious = tmp_path / "out" / "store.sqlite"
     precious.write_text("someone's data")
     assert main(["run", "study.toml", "--fresh"]) == 2
-    assert "--fresh deletes only an fbia study store" in _error(capsys)
+    assert "--fresh deletes only an fbia study store" in one_error_line(capsys)
     assert precious.read_text() == "someone's data"
 
 

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-from _models import PLUGIN
+from _models import PLUGIN, write_driver
 
 import fbia
 from fbia.core import study_file as study_module
@@ -25,8 +25,6 @@ from fbia.core.cli import main
 from fbia.core.registry import Registry
 from fbia.core.store import StudyStore
 from fbia.core.study_file import load_study
-
-TESTS = Path(__file__).parent
 
 STUDY = """\
 [study]
@@ -62,19 +60,6 @@ options = {{ x0 = [ {{ E = 200.0, nu = 0.4 }}, {{ E = 700.0, nu = -0.5 }} ]{extr
 [executor]
 kind = "{kind}"
 workers = 2
-"""
-
-DRIVER = """
-import sys
-sys.path.insert(0, {tests!r})
-from _models import PLUGIN
-from fbia.core import study_file as study
-from fbia.core.cli import main
-from fbia.core.registry import Registry
-registry = Registry.load(extra=[PLUGIN])
-study.default_registry = lambda: registry
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
 """
 
 
@@ -137,7 +122,7 @@ def _alive(pid: int) -> bool:
 
 def test_a_killed_study_resumes_to_the_uninterrupted_result_repeating_no_run(folder, capsys):
     _write(folder, delay=0.05)
-    (folder / "drive.py").write_text(DRIVER.format(tests=str(TESTS)))
+    write_driver(folder)
     store = folder / "output" / "store.sqlite"
     proc = subprocess.Popen(
         [sys.executable, "drive.py", "run", "toy.toml"],

@@ -9,27 +9,14 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
-
-_DRIVER = """
-import sys
-sys.path.insert(0, {tests!r})
-from _models import PLUGIN
-from fbia.core import study_file as study
-from fbia.core.cli import main
-from fbia.core.registry import Registry
-registry = Registry.load(extra=[PLUGIN])
-study.default_registry = lambda: registry
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
-"""
+from _models import write_driver
 
 
 @pytest.mark.parametrize("executor", ["serial", "processes"])
 def test_sigterm_to_the_job_saves_the_finished_runs_and_exits_143(tmp_path, executor):
-    (tmp_path / "drive.py").write_text(_DRIVER.format(tests=str(Path(__file__).parent)))
+    write_driver(tmp_path)
     workers = "\nworkers = 2" if executor == "processes" else ""
     (tmp_path / "toy.toml").write_text(
         '[model]\nname = "toy_mound"\noptions = { slow_above = 500.0 }\n'

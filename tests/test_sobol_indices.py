@@ -98,13 +98,10 @@ def test_a_starved_design_is_reported_unreliable():
     assert "not reliable" in result.message
 
 
-def test_a_study_file_runs_the_indices_and_writes_the_plot(tmp_path, monkeypatch, capsys):
-    from _studies import write_study
-
+def test_a_study_file_runs_the_indices_and_writes_the_plot(study_file, tmp_path, capsys):
     from fbia.core.cli import main
 
-    monkeypatch.chdir(tmp_path)
-    study = write_study(tmp_path)
+    study = study_file
     text = study.read_text()
     old = 'name = "levenberg_marquardt"\noptions = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }'
     assert old in text

@@ -17,12 +17,6 @@ from fbia.core.study import ExecutorSpec, derived_seed
 from fbia.core.study_file import load_study
 
 
-@pytest.fixture
-def study_file(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    return write_study(tmp_path)
-
-
 @pytest.fixture(scope="module")
 def registry():
     return Registry.load(extra=[PLUGIN])

@@ -118,7 +118,6 @@ class _StepState:
     normals: NDArray[np.float64]  # (n, 2) unit, out of the biofilm, deformed
     flux: NDArray[np.float64]  # (n,) h [mol/(mm^2 s)]
     traction: NDArray[np.float64]  # (n, 2) in the chosen measure
-    nodal_length: NDArray[np.float64]  # (n,) [mm]
     uptake: float  # nutrient consumed in the biofilm [mol/s]
     chains: list[NDArray[np.int64]]  # positions in ``vertices`` of each interface chain
     # the solvers of this state, for field output (dropped before a state is kept for reuse)
@@ -203,7 +202,9 @@ class GrowthForwardModel(Configurable):
                 state = self._states[key]
                 diag["reused_state"] = True
             else:
-                state = self._fsi_and_transport(mesh, params, f"growth step {step + 1}")
+                state = self._fsi_and_transport(
+                    mesh, params, f"growth step {step + 1}", initial=step == 0
+                )
                 if key is not None:
                     self._remember(key, replace(state, solver=None, transport=None))
             if step == 0 and 0 in days:
@@ -233,7 +234,9 @@ class GrowthForwardModel(Configurable):
         return Solution.from_pairs(pairs, fields=fields, diagnostics=diag)
 
     # -- the stages ----------------------------------------------------------------------------
-    def _fsi_and_transport(self, mesh: Any, params: dict[str, float], where: str) -> _StepState:
+    def _fsi_and_transport(
+        self, mesh: Any, params: dict[str, float], where: str, initial: bool
+    ) -> _StepState:
         """FSI (transient over fsi_period, or steady) with the transport on its moving mesh;
         the interface data of the final state."""
         from ..ale_fsi.solver import AleFsiSolver
@@ -242,7 +245,9 @@ class GrowthForwardModel(Configurable):
         try:
             solver = AleFsiSolver(mesh, solver_settings(o))
         except ForwardModelError as exc:
-            raise ConfigError(str(exc), "growth mesh") from None
+            if initial:  # the user's mesh (or outline) is bad input; a grown one is a failure
+                raise ConfigError(str(exc), "growth mesh") from None
+            raise
         solver.set_materials({r: (params["E"], params["nu"]) for r in solver.solids})
         transport = NutrientTransport(mesh, self._transport_settings(params))
         rate = params["inflow_rate"]
@@ -279,7 +284,6 @@ class GrowthForwardModel(Configurable):
             normals=np.vstack([c.normals for c in chains]),
             flux=transport.interface_flux(vertices.tolist()),
             traction=np.vstack([c.tractions for c in chains]),
-            nodal_length=np.concatenate([c.lengths for c in chains]),
             uptake=transport.balance()["consumption"],
             chains=[np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:], strict=True)],
             solver=solver,
