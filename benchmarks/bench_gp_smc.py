@@ -29,7 +29,7 @@ import tracemalloc
 import numpy as np
 
 import fbia
-from fbia.iterators.gp_smc import sobol_design
+from fbia.iterators.gp_design import sobol_design
 from fbia.iterators.gp_surrogate import GpSurrogate
 from fbia.iterators.smc import SequentialMonteCarlo
 

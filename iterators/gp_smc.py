@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,17 +50,15 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field
-from scipy.stats import qmc
 
 from ..core.errors import ConfigError
 from ..core.evaluator import Evaluator
 from ..core.iteration import IteratorBase
-from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
-from ..core.options import PluginOptions
-from ..core.parameters import Parameter, Prior
+from ..core.parameters import Parameter
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..core.resources import check_memory
+from .gp_design import finite_bounds, sobol_design
+from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import (
     DesignRuns,
     GpSmcResult,
@@ -69,7 +66,8 @@ from .gp_smc_result import (
     SmcSummary,
     SurrogateFit,
 )
-from .gp_surrogate import OPTIMIZERS, GpSurrogate
+from .gp_smc_run import SmcRun, log_prior, run_status
+from .gp_surrogate import GpSurrogate
 from .posterior import summarise
 from .smc import SequentialMonteCarlo, SmcResult, SmcState
 
@@ -88,131 +86,15 @@ class GpSmcState:
         return f"[{self.stage}] {self.message}"
 
 
-# -- the design ---------------------------------------------------------------------------------
-def _finite_bounds(p: Parameter) -> bool:
-    return p.bounds is not None and all(math.isfinite(b) for b in p.bounds)
-
-
-def sobol_design(
-    parameters: Sequence[Parameter], n: int, seed: int, start: int = 0, through_prior: bool = False
-) -> FloatArray:
-    """Points ``start .. start + n - 1`` of a scrambled Sobol sequence mapped to the inputs.
-
-    Equal seeds give the same sequence, so a design of n points extends to n + m points by
-    the next m points of the same sequence (Paper B, "Convergence over number of training
-    points"). A parameter with finite bounds gets the uniform map onto them, else (or with
-    ``through_prior``) its prior's inverse CDF (Remark 7).
-    """
-    sampler = qmc.Sobol(len(parameters), scramble=True, seed=seed)
-    if start:
-        sampler.fast_forward(start)
-    with warnings.catch_warnings():  # any n is fine here: designs are extended point by point
-        warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*")
-        u = sampler.random(n)
-    return unit_to_inputs(parameters, u, through_prior)
-
-
-def unit_to_inputs(
-    parameters: Sequence[Parameter], u: FloatArray, through_prior: bool
-) -> FloatArray:
-    """Points of the unit cube mapped to the inputs: uniformly onto finite bounds, or through
-    the prior's inverse CDF (where there are no finite bounds, or always with
-    ``through_prior`` when there is a prior)."""
-    out = np.empty_like(u)
-    for j, p in enumerate(parameters):
-        if p.bounds is not None and _finite_bounds(p) and not (through_prior and p.prior):
-            lo, hi = p.bounds
-            out[:, j] = lo + (hi - lo) * u[:, j]
-        else:
-            if p.prior is None:
-                raise ConfigError("needs finite bounds or a prior for the design", p.name)
-            out[:, j] = p.prior.ppf(np.clip(u[:, j], 1e-9, 1 - 1e-9))
-    return out
-
-
 class GpSmcIterator(IteratorBase):
     """Bayesian calibration under uncertainty: Sobol design, GP surrogate of L, SMC (Paper B).
 
     See the module docstring for the stages; the options are below.
     """
 
-    class Options(PluginOptions):
-        mode: Literal["surrogate", "direct"] = Field(
-            "surrogate",
-            description="'surrogate': SMC on a GP of L trained on a Sobol design; 'direct': "
-            "SMC calls the forward model (only for cheap models) [-]",
-        )
-        n_train: int = Field(200, ge=2, description="forward runs of the training design [-]")
-        n_check: int = Field(
-            8,
-            ge=0,
-            description="forward runs at distinct posterior draws after SMC, to measure the "
-            "surrogate's error where the posterior is; a RMSE in L not below 0.5 makes the "
-            "status 'unreliable' (surrogate mode; 0 skips the check, status 'unchecked') [-]",
-        )
-        n_test: int = Field(
-            0,
-            ge=0,
-            description="held-out forward runs (the next Sobol points) for the surrogate "
-            "error (Paper B Remark 9 uses 100) [-]",
-        )
-        design: Literal["box", "prior"] = Field(
-            "box",
-            description="'box': Sobol points uniform in the bounds; 'prior': through the "
-            "priors' inverse CDFs (Remark 7) [-]",
-        )
-        seed: int = Field(0, description="seed of the Sobol scrambling and of SMC [-]")
-        ard: bool = Field(
-            False,
-            description="one GP length scale per input (product of 1-D Matérn 3/2 kernels, "
-            "Remark 9) instead of one for all standardised inputs [-]",
-        )
-        gp_optimizer: Literal["lbfgsb", "scg"] = Field(
-            "lbfgsb", description=f"evidence maximiser (eq. 29): one of {OPTIMIZERS} [-]"
-        )
-        gp_restarts: int = Field(
-            2, ge=0, description="extra GP trainings from random initial guesses [-]"
-        )
-        gp_subset: int = Field(
-            800,
-            ge=2,
-            description="above this many runs, the GP hyperparameter search runs on the first "
-            "gp_subset design points and is refined on all [-]",
-        )
-        gp_polish_iters: int = Field(
-            20, ge=1, description="iterations of that refinement on all points [-]"
-        )
-        nugget_factor: float = Field(
-            1e-5, gt=0, description="nugget sigma_n^2 = factor (max L - min L) [-]"
-        )
-        mean_offset: float = Field(
-            1.0, description="GP prior mean m = min L - offset (max L - min L) (Remark 10) [-]"
-        )
-        n_particles: int = Field(5000, ge=10, description="SMC particles N [-]")
-        n_rejuvenation: int = Field(
-            20, ge=0, description="Metropolis-Hastings steps per tempering step n_rej [-]"
-        )
-        zeta: float = Field(
-            0.995, gt=0, lt=1, description="ESS_s = zeta ESS_(s-1) (Algorithm 1) [-]"
-        )
-        ess_min: float = Field(
-            0.5, ge=0, le=1, description="resample when ESS < ess_min N (fraction of N) [-]"
-        )
-        rejuvenate: Literal["every_step", "after_resampling"] = Field(
-            "every_step",
-            description="when particles move: every tempering step (Algorithm 1) or only in "
-            "steps that resample and the last one (resample-move; far fewer likelihood calls "
-            "when zeta is close to 1) [-]",
-        )
-        map_bins: int = Field(
-            30, ge=2, description="intervals per x of the MAP histogram under theta (Remark 8) [-]"
-        )
-        laplace: bool = Field(
-            True, description="Laplace approximation at the MAP (no theta only) [-]"
-        )
-        max_smc_steps: int = Field(5000, ge=1, description="limit of tempering steps [-]")
+    Options = GpSmcOptions
 
-    options: Options
+    options: GpSmcOptions
     surrogate: GpSurrogate | None = None
     posterior: SmcResult | None = None
 
@@ -240,7 +122,7 @@ class GpSmcIterator(IteratorBase):
         self, problem: InverseProblem, evaluator: Evaluator
     ) -> Generator[GpSmcState, None, GpSmcResult]:
         opts = self.options
-        run = _Run(problem, evaluator, self._inputs(problem), time.perf_counter())
+        run = SmcRun(problem, evaluator, self._inputs(problem), time.perf_counter())
         self._check_memory(run.n_x)
         if opts.mode == "surrogate":
             design = yield from self._design_stage(run)
@@ -262,9 +144,9 @@ class GpSmcIterator(IteratorBase):
             run.n_x,
             run.inputs,
             opts.map_bins,
-            (lambda z: log_likelihood(z) + _log_prior(run.inputs, z)) if laplace else None,
+            (lambda z: log_likelihood(z) + log_prior(run.inputs, z)) if laplace else None,
         )
-        status = _status(opts.mode, check)
+        status = run_status(opts.mode, check)
         return GpSmcResult(
             status=status,
             success=status == "completed",
@@ -312,7 +194,7 @@ class GpSmcIterator(IteratorBase):
         for p in inputs:
             if p.prior is None:
                 raise ConfigError("needs a prior distribution", p.name)
-            if not _finite_bounds(p) and self.options.design == "box" and p in problem.parameters:
+            if not finite_bounds(p) and self.options.design == "box" and p in problem.parameters:
                 raise ConfigError(
                     "a calibration parameter needs finite bounds for the Sobol design "
                     "(or design = 'prior')",
@@ -320,7 +202,7 @@ class GpSmcIterator(IteratorBase):
                 )
         return inputs
 
-    def _design_stage(self, run: _Run) -> Generator[GpSmcState, None, DesignRuns]:
+    def _design_stage(self, run: SmcRun) -> Generator[GpSmcState, None, DesignRuns]:
         """Stages 1-2: the Sobol design (reusing an earlier result's runs) and its runs."""
         opts = self.options
         n_all = opts.n_train + opts.n_test
@@ -349,7 +231,7 @@ class GpSmcIterator(IteratorBase):
         )
 
     def _surrogate_stage(
-        self, run: _Run, design: DesignRuns
+        self, run: SmcRun, design: DesignRuns
     ) -> Generator[GpSmcState, None, tuple[SurrogateFit, GpSurrogate]]:
         """Stage 3: the GP on the successful training runs, its LOO and held-out errors."""
         opts = self.options
@@ -383,7 +265,7 @@ class GpSmcIterator(IteratorBase):
         return fit, gp
 
     def _smc_stage(
-        self, run: _Run, log_likelihood: Callable[[FloatArray], FloatArray]
+        self, run: SmcRun, log_likelihood: Callable[[FloatArray], FloatArray]
     ) -> Generator[GpSmcState, None, SmcResult]:
         """Stage 4: adaptive tempered SMC (Algorithm 1) on exp(gamma L) p."""
         opts = self.options
@@ -411,7 +293,7 @@ class GpSmcIterator(IteratorBase):
         return post
 
     def _check_stage(
-        self, run: _Run, post: SmcResult, gp: GpSurrogate
+        self, run: SmcRun, post: SmcResult, gp: GpSurrogate
     ) -> Generator[GpSmcState, None, PosteriorCheck]:
         """Forward runs at ``n_check`` distinct posterior draws: the surrogate's error there.
 
@@ -447,7 +329,7 @@ class GpSmcIterator(IteratorBase):
         )
         return check
 
-    def _finish_failed(self, run: _Run, design: DesignRuns) -> GpSmcResult:
+    def _finish_failed(self, run: SmcRun, design: DesignRuns) -> GpSmcResult:
         evaluations = run.evaluations
         messages = sorted({ev.message for ev in evaluations if not ev.ok})[:3]
         n_bad = sum(not ev.ok for ev in evaluations)
@@ -521,74 +403,3 @@ class GpSmcIterator(IteratorBase):
 
         assert isinstance(result, GpSmcResult)
         return plot_gp_smc_result(result, problem, folder, figures)
-
-
-@dataclass
-class _Run:
-    """What the stages of one :meth:`GpSmcIterator.steps` share."""
-
-    problem: InverseProblem
-    evaluator: Evaluator
-    inputs: list[Parameter]
-    t_start: float
-    history: list[dict[str, Any]] = field(default_factory=list)
-    evaluations: list[Evaluation] = field(default_factory=list)
-    nfev: int = 0
-    n_failed: int = 0
-
-    def __post_init__(self) -> None:
-        self.sigmas = noise_levels(self.problem)
-        self.count = measurement_count(self.problem)
-
-    @property
-    def names(self) -> list[str]:
-        return [p.name for p in self.inputs]
-
-    @property
-    def n_x(self) -> int:
-        return len(self.problem.parameters)
-
-    @property
-    def priors(self) -> list[Prior]:
-        return [p.prior for p in self.inputs if p.prior is not None]
-
-    def record(self, stage: str, **data: Any) -> dict[str, Any]:
-        entry = {"stage": stage, "seconds": time.perf_counter() - self.t_start, **data}
-        self.history.append(entry)
-        return entry
-
-    def evaluate(self, x: FloatArray) -> list[Evaluation]:
-        points = [dict(zip(self.names, map(float, row), strict=True)) for row in x]
-        return list(self.evaluator.evaluate(self.problem, points))
-
-    def log_likelihoods(self, evaluations: Sequence[Evaluation]) -> FloatArray:
-        """Paper B eq. 5 of each record (-inf where the run failed)."""
-        return np.array(
-            [gaussian_log_likelihood(ev, self.sigmas, self.count) for ev in evaluations]
-        )
-
-    def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
-        """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have
-        zero likelihood (L = -inf) and are counted; the records stay in the evaluator."""
-        evs = self.evaluate(x)
-        self.nfev += len(evs)
-        self.n_failed += sum(not ev.ok for ev in evs)
-        return self.log_likelihoods(evs)
-
-
-def _status(mode: str, check: PosteriorCheck | None) -> str:
-    """``completed`` (direct SMC, or a surrogate whose error at posterior draws is well below
-    1 in L), ``unreliable`` (it is not) or ``unchecked`` (the check was switched off)."""
-    if mode != "surrogate":
-        return "completed"
-    if check is None:
-        return "unchecked"
-    return "completed" if check.reliable else "unreliable"
-
-
-def _log_prior(inputs: Sequence[Parameter], z: FloatArray) -> FloatArray:
-    out = np.zeros(len(z))
-    for j, p in enumerate(inputs):
-        assert p.prior is not None  # checked at the start of steps()
-        out += p.prior.logpdf(z[:, j])
-    return out

@@ -5,7 +5,7 @@ Paper B recommends a sensitivity analysis before a high-dimensional calibration:
 first-order index ``S1_i`` is the share of the variance of the quantity that ``x_i`` explains
 alone, the total index ``ST_i`` the share it takes part in (interactions included); an input
 with ``ST_i`` near 0 can be fixed.  The variance is over the inputs' priors (a calibration
-parameter without a prior: uniform on its bounds; the map is gp_smc's ``unit_to_inputs``).
+parameter without a prior: uniform on its bounds; the map is gp_design's ``unit_to_inputs``).
 
 The stages (``fbia.iterator("sobol_indices", ...)``):
 
@@ -50,7 +50,7 @@ from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter
 from ..core.problem import InverseProblem, Result, jsonable
-from .gp_smc import unit_to_inputs
+from .gp_design import unit_to_inputs
 from .gp_surrogate import GpSurrogate
 
 __all__ = ["SobolIndices", "SobolIndicesIterator", "SobolIndicesResult", "sobol_indices"]

@@ -8,7 +8,8 @@ import pytest
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood as log_likelihood_of
 from fbia.core.likelihood import measurement_count
-from fbia.iterators.gp_smc import GpSmcIterator, sobol_design
+from fbia.iterators.gp_design import sobol_design
+from fbia.iterators.gp_smc import GpSmcIterator
 from fbia.iterators.posterior import (
     laplace_approximation,
     load_posterior,

@@ -1,0 +1,85 @@
+"""The options of ``gp_smc`` and the rules between them."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from ..core.options import PluginOptions
+from .gp_surrogate import OPTIMIZERS
+
+
+class GpSmcOptions(PluginOptions):
+    """The options of ``gp_smc`` (:class:`~fbia.iterators.gp_smc.GpSmcIterator`)."""
+
+    mode: Literal["surrogate", "direct"] = Field(
+        "surrogate",
+        description="'surrogate': SMC on a GP of L trained on a Sobol design; 'direct': "
+        "SMC calls the forward model (only for cheap models) [-]",
+    )
+    n_train: int = Field(200, ge=2, description="forward runs of the training design [-]")
+    n_check: int = Field(
+        8,
+        ge=0,
+        description="forward runs at distinct posterior draws after SMC, to measure the "
+        "surrogate's error where the posterior is; a RMSE in L not below 0.5 makes the "
+        "status 'unreliable' (surrogate mode; 0 skips the check, status 'unchecked') [-]",
+    )
+    n_test: int = Field(
+        0,
+        ge=0,
+        description="held-out forward runs (the next Sobol points) for the surrogate "
+        "error (Paper B Remark 9 uses 100) [-]",
+    )
+    design: Literal["box", "prior"] = Field(
+        "box",
+        description="'box': Sobol points uniform in the bounds; 'prior': through the "
+        "priors' inverse CDFs (Remark 7) [-]",
+    )
+    seed: int = Field(0, description="seed of the Sobol scrambling and of SMC [-]")
+    ard: bool = Field(
+        False,
+        description="one GP length scale per input (product of 1-D Matérn 3/2 kernels, "
+        "Remark 9) instead of one for all standardised inputs [-]",
+    )
+    gp_optimizer: Literal["lbfgsb", "scg"] = Field(
+        "lbfgsb", description=f"evidence maximiser (eq. 29): one of {OPTIMIZERS} [-]"
+    )
+    gp_restarts: int = Field(
+        2, ge=0, description="extra GP trainings from random initial guesses [-]"
+    )
+    gp_subset: int = Field(
+        800,
+        ge=2,
+        description="above this many runs, the GP hyperparameter search runs on the first "
+        "gp_subset design points and is refined on all [-]",
+    )
+    gp_polish_iters: int = Field(
+        20, ge=1, description="iterations of that refinement on all points [-]"
+    )
+    nugget_factor: float = Field(
+        1e-5, gt=0, description="nugget sigma_n^2 = factor (max L - min L) [-]"
+    )
+    mean_offset: float = Field(
+        1.0, description="GP prior mean m = min L - offset (max L - min L) (Remark 10) [-]"
+    )
+    n_particles: int = Field(5000, ge=10, description="SMC particles N [-]")
+    n_rejuvenation: int = Field(
+        20, ge=0, description="Metropolis-Hastings steps per tempering step n_rej [-]"
+    )
+    zeta: float = Field(0.995, gt=0, lt=1, description="ESS_s = zeta ESS_(s-1) (Algorithm 1) [-]")
+    ess_min: float = Field(
+        0.5, ge=0, le=1, description="resample when ESS < ess_min N (fraction of N) [-]"
+    )
+    rejuvenate: Literal["every_step", "after_resampling"] = Field(
+        "every_step",
+        description="when particles move: every tempering step (Algorithm 1) or only in "
+        "steps that resample and the last one (resample-move; far fewer likelihood calls "
+        "when zeta is close to 1) [-]",
+    )
+    map_bins: int = Field(
+        30, ge=2, description="intervals per x of the MAP histogram under theta (Remark 8) [-]"
+    )
+    laplace: bool = Field(True, description="Laplace approximation at the MAP (no theta only) [-]")
+    max_smc_steps: int = Field(5000, ge=1, description="limit of tempering steps [-]")

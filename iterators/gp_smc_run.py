@@ -1,0 +1,92 @@
+"""What the stages of one ``gp_smc`` run share, and the status rule of its result."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.evaluator import Evaluator
+from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
+from ..core.parameters import Parameter, Prior
+from ..core.problem import Evaluation, InverseProblem
+from .gp_smc_result import PosteriorCheck
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class SmcRun:
+    """What the stages of one :meth:`~fbia.iterators.gp_smc.GpSmcIterator.steps` share: the
+    problem, the evaluator, the inputs (x then theta), the records and the run counts."""
+
+    problem: InverseProblem
+    evaluator: Evaluator
+    inputs: list[Parameter]
+    t_start: float
+    history: list[dict[str, Any]] = field(default_factory=list)
+    evaluations: list[Evaluation] = field(default_factory=list)
+    nfev: int = 0
+    n_failed: int = 0
+
+    def __post_init__(self) -> None:
+        self.sigmas = noise_levels(self.problem)
+        self.count = measurement_count(self.problem)
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.inputs]
+
+    @property
+    def n_x(self) -> int:
+        return len(self.problem.parameters)
+
+    @property
+    def priors(self) -> list[Prior]:
+        return [p.prior for p in self.inputs if p.prior is not None]
+
+    def record(self, stage: str, **data: Any) -> dict[str, Any]:
+        entry = {"stage": stage, "seconds": time.perf_counter() - self.t_start, **data}
+        self.history.append(entry)
+        return entry
+
+    def evaluate(self, x: FloatArray) -> list[Evaluation]:
+        points = [dict(zip(self.names, map(float, row), strict=True)) for row in x]
+        return list(self.evaluator.evaluate(self.problem, points))
+
+    def log_likelihoods(self, evaluations: Sequence[Evaluation]) -> FloatArray:
+        """Paper B eq. 5 of each record (-inf where the run failed)."""
+        return np.array(
+            [gaussian_log_likelihood(ev, self.sigmas, self.count) for ev in evaluations]
+        )
+
+    def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
+        """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have
+        zero likelihood (L = -inf) and are counted; the records stay in the evaluator."""
+        evs = self.evaluate(x)
+        self.nfev += len(evs)
+        self.n_failed += sum(not ev.ok for ev in evs)
+        return self.log_likelihoods(evs)
+
+
+def run_status(mode: str, check: PosteriorCheck | None) -> str:
+    """``completed`` (direct SMC, or a surrogate whose error at posterior draws is well below
+    1 in L), ``unreliable`` (it is not) or ``unchecked`` (the check was switched off)."""
+    if mode != "surrogate":
+        return "completed"
+    if check is None:
+        return "unchecked"
+    return "completed" if check.reliable else "unreliable"
+
+
+def log_prior(inputs: Sequence[Parameter], z: FloatArray) -> FloatArray:
+    """log p(x) + log p(theta) at the rows of ``z`` (independent priors)."""
+    out = np.zeros(len(z))
+    for j, p in enumerate(inputs):
+        assert p.prior is not None  # checked at the start of steps()
+        out += p.prior.logpdf(z[:, j])
+    return out
