@@ -4,7 +4,7 @@
 
     import fbia
     it = fbia.iterator("gp_smc", n_train=200, n_particles=5000, n_rejuvenation=20,
-                       zeta=0.995, seed=0)
+                       zeta=0.995, seed=0)   # adaptive design, at most 200 forward runs
     result = it.run(problem)                  # problem.noise_std = sigma_N [mm] (eq. 5)
     print(result.summary())                   # MAP, posterior mean, std
     it.write_plots(result, problem, "output")     # Paper B Figs. 5-9, 13-15
@@ -14,19 +14,26 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
 :class:`~fbia.iterators.gp_smc_result.GpSmcResult`; posterior statistics and files are in
 :mod:`fbia.iterators.posterior`):
 
-1. **Design**: the first ``n_train`` (+ ``n_test`` held-out) points of a scrambled, seeded
+1. **Design**: ``design = "adaptive"`` (default; :mod:`fbia.iterators.gp_adaptive_loop`):
+   ``n_initial`` Sobol runs, then rounds of GP -> SMC on the surrogate -> a batch of runs
+   at posterior draws and where they reduce the posterior's uncertainty most
+   (:mod:`fbia.iterators.gp_adaptive`), one evaluator call per batch, until the posterior
+   and the evidence stop changing and the surrogate is right at new posterior draws, or
+   ``n_train`` runs are spent (``result.adaptive`` has the rounds). ``design = "sobol"``
+   (Paper B): the first ``n_train`` (+ ``n_test`` held-out) points of a scrambled, seeded
    Sobol sequence in the box of the calibration parameters x and the uncertain parameters
-   theta (bounds; a theta without finite bounds, or every input with ``design="prior"``
-   (Remark 7), goes through its prior's inverse CDF). A larger ``n_train`` with the same
-   seed extends the design by the next points of the same sequence, and
-   :meth:`GpSmcIterator.reuse` keeps an earlier result's runs so only the new points run.
-   All forward runs go to the evaluator as one batch; failed runs are excluded from training
-   and kept in the result (``Result.evaluations``, ``result.design.status``).
+   theta (bounds; a theta without finite bounds, or every input with
+   ``design_space="prior"`` (Remark 7), goes through its prior's inverse CDF). A larger
+   ``n_train`` with the same seed extends the design by the next points of the same
+   sequence, and :meth:`GpSmcIterator.reuse` keeps an earlier result's runs so only the new
+   points run. Failed runs are excluded from training (the adaptive design keeps them at its
+   floor) and kept in the result (``Result.evaluations``, ``result.design.status``).
 2. **Likelihood** (eq. 4-5): per observation k with noise sigma_k (``Observation.noise_std``,
    else ``problem.noise_std``), L = sum_k [-n_k/2 log(2 pi sigma_k^2) - D_k^2 / (2 sigma_k^2)],
    n_k the number of individual measurements (the residual count of the measure; 1 for rkhs).
 3. **GP surrogate** of L (:mod:`fbia.iterators.gp_surrogate`, eq. 26-29, Remarks 9-10),
-   its leave-one-out error and the error at the held-out Sobol points (Fig. 12).
+   its leave-one-out error and the error at the held-out Sobol points (Fig. 12); inside SMC
+   its mean is capped a little above the best training value (extrapolation guard).
    ``mode="direct"`` skips the surrogate and runs the forward model inside SMC (cheap models;
    every SMC batch goes to the evaluator, failed runs count as zero likelihood; the records
    stay in the evaluator, not in ``Result.evaluations``).
@@ -43,10 +50,10 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Generator, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Generator, Mapping, Sequence
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,33 +64,24 @@ from ..core.iteration import IteratorBase
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..core.resources import check_memory
+from .gp_adaptive import soft_floor
+from .gp_adaptive_loop import CAP_MARGIN, ROUND_REJUVENATION, ROUND_ZETA, adaptive_design, capped
 from .gp_design import finite_bounds, sobol_design
 from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import (
+    AdaptiveDesign,
     DesignRuns,
     GpSmcResult,
     PosteriorCheck,
     SmcSummary,
     SurrogateFit,
 )
-from .gp_smc_run import SmcRun, log_prior, run_status
+from .gp_smc_run import GpSmcState, SmcRun, log_prior, run_status
 from .gp_surrogate import GpSurrogate
 from .posterior import summarise
 from .smc import SequentialMonteCarlo, SmcResult, SmcState
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass
-class GpSmcState:
-    """What :meth:`GpSmcIterator.steps` yields: the stage and its figures."""
-
-    stage: Literal["design", "forward_runs", "surrogate", "smc", "check"]
-    message: str
-    data: dict[str, Any] = field(default_factory=dict)
-
-    def __str__(self) -> str:
-        return f"[{self.stage}] {self.message}"
 
 
 class GpSmcIterator(IteratorBase):
@@ -124,12 +122,34 @@ class GpSmcIterator(IteratorBase):
         opts = self.options
         run = SmcRun(problem, evaluator, self._inputs(problem), time.perf_counter())
         self._check_memory(run.n_x)
+        adaptive: AdaptiveDesign | None = None
         if opts.mode == "surrogate":
-            design = yield from self._design_stage(run)
-            if int((design.train_mask & design.ok).sum()) < 2:
+            if opts.design == "sobol":
+                design = yield from self._design_stage(run)
+                use = design.train_mask & design.ok
+                gp = (
+                    None
+                    if use.sum() < 2
+                    else self._fit_gp(design.points[use], design.log_likelihood[use])
+                )
+            else:
+                outcome = yield from adaptive_design(
+                    run, opts, self._fit_gp, lambda ll, n: self._round_smc(run, ll, n)
+                )
+                design, gp = outcome.design, outcome.gp
+                adaptive = AdaptiveDesign(
+                    n_initial=outcome.n_initial,
+                    rounds=outcome.rounds,
+                    stop_reason=outcome.stop_reason,
+                    floor=outcome.floor,
+                )
+            if gp is None:
                 return self._finish_failed(run, design)
-            fit, gp = yield from self._surrogate_stage(run, design)
-            log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean
+            self.surrogate = gp
+            floor = None if adaptive is None else adaptive.floor
+            fit = yield from self._surrogate_stage(run, design, gp, floor)
+            cap = float(gp.y_train.max()) + CAP_MARGIN
+            log_likelihood: Callable[[FloatArray], FloatArray] = capped(gp, cap)
         else:
             design, fit, gp = None, None, None
             log_likelihood = run.forward_log_likelihood
@@ -153,6 +173,7 @@ class GpSmcIterator(IteratorBase):
             message=(
                 f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
                 f"steps ({opts.mode}; {run.nfev} forward runs, {run.n_failed} failed)"
+                + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
                 + (
                     "; the surrogate was not checked at posterior draws (n_check = 0): "
@@ -172,6 +193,7 @@ class GpSmcIterator(IteratorBase):
             mode=opts.mode,
             priors=[p.describe() for p in run.inputs],
             design=design,
+            adaptive=adaptive,
             surrogate=fit,
             check=check,
             posterior=posterior,
@@ -194,7 +216,11 @@ class GpSmcIterator(IteratorBase):
         for p in inputs:
             if p.prior is None:
                 raise ConfigError("needs a prior distribution", p.name)
-            if not finite_bounds(p) and self.options.design == "box" and p in problem.parameters:
+            if (
+                not finite_bounds(p)
+                and self.options.design_space == "box"
+                and p in problem.parameters
+            ):
                 raise ConfigError(
                     "a calibration parameter needs finite bounds for the Sobol design "
                     "(or design = 'prior')",
@@ -206,7 +232,9 @@ class GpSmcIterator(IteratorBase):
         """Stages 1-2: the Sobol design (reusing an earlier result's runs) and its runs."""
         opts = self.options
         n_all = opts.n_train + opts.n_test
-        points = sobol_design(run.inputs, n_all, opts.seed, through_prior=opts.design == "prior")
+        points = sobol_design(
+            run.inputs, n_all, opts.seed, through_prior=opts.design_space == "prior"
+        )
         yield GpSmcState(
             "design",
             f"{opts.n_train} training + {opts.n_test} test points (Sobol, seed {opts.seed})",
@@ -230,26 +258,52 @@ class GpSmcIterator(IteratorBase):
             train_mask=np.arange(n_all) < opts.n_train,
         )
 
-    def _surrogate_stage(
-        self, run: SmcRun, design: DesignRuns
-    ) -> Generator[GpSmcState, None, tuple[SurrogateFit, GpSurrogate]]:
-        """Stage 3: the GP on the successful training runs, its LOO and held-out errors."""
+    def _fit_gp(
+        self, x: FloatArray, y: FloatArray, start: Mapping[str, Any] | None = None
+    ) -> GpSurrogate:
+        """The GP of eq. 26-29 on (x, y); ``start``: earlier hyperparameters (a round of the
+        adaptive design), which then also take one restart instead of ``gp_restarts``."""
         opts = self.options
-        use = design.train_mask & design.ok
-        gp = GpSurrogate(
+        return GpSurrogate(
             ard=opts.ard,
             optimizer=opts.gp_optimizer,
-            restarts=opts.gp_restarts,
+            restarts=opts.gp_restarts if start is None else min(1, opts.gp_restarts),
             nugget_factor=opts.nugget_factor,
             mean_offset=opts.mean_offset,
             subset=opts.gp_subset,
             polish_iters=opts.gp_polish_iters,
-        ).fit(design.points[use], design.log_likelihood[use], rng=np.random.default_rng(opts.seed))
-        self.surrogate = gp
+        ).fit(x, y, rng=np.random.default_rng(opts.seed), start=start)
+
+    def _round_smc(
+        self, run: SmcRun, log_likelihood: Callable[[FloatArray], FloatArray], n_particles: int
+    ) -> SmcResult:
+        """A coarse SMC for a round of the adaptive design (its posterior only picks the next
+        runs and tells whether the design has converged)."""
+        opts = self.options
+        return SequentialMonteCarlo(
+            log_likelihood,
+            run.priors,
+            n_particles=n_particles,
+            zeta=ROUND_ZETA,
+            n_rejuvenation=ROUND_REJUVENATION,
+            ess_min=opts.ess_min,
+            rng=np.random.default_rng([opts.seed, 4]),
+            max_steps=opts.max_smc_steps,
+        ).run()
+
+    def _surrogate_stage(
+        self, run: SmcRun, design: DesignRuns, gp: GpSurrogate, floor: float | None
+    ) -> Generator[GpSmcState, None, SurrogateFit]:
+        """Stage 3: the GP on the successful training runs, its LOO and held-out errors
+        (against L with the adaptive design's soft ``floor``, which the GP was trained on)."""
+        use = design.train_mask & design.ok
         quality: dict[str, Any] = dict(gp.loo())
         test = ~design.train_mask & design.ok
         if test.any():
-            quality.update(gp.test_error(design.points[test], design.log_likelihood[test]))
+            held_out = design.log_likelihood[test]
+            if floor is not None:
+                held_out = soft_floor(held_out, floor)
+            quality.update(gp.test_error(design.points[test], held_out))
         best = int(np.argmax(np.where(use, design.log_likelihood, -np.inf)))
         fit = SurrogateFit(
             summary={**gp.describe(), **quality},
@@ -262,7 +316,7 @@ class GpSmcIterator(IteratorBase):
             f"GP on {int(use.sum())} runs: LOO rel. error {quality['loo_relative_l2']:.3g}",
             run.record("surrogate", **{k: v for k, v in gp.describe().items()}, **quality),
         )
-        return fit, gp
+        return fit
 
     def _smc_stage(
         self, run: SmcRun, log_likelihood: Callable[[FloatArray], FloatArray]
@@ -358,11 +412,18 @@ class GpSmcIterator(IteratorBase):
         """Extend an earlier study: reuse the forward runs of ``result`` (same seed, design and
         inputs) and run only the new points of the same Sobol sequence (Paper B's n_train study).
 
-        >>> # r200 = fbia.iterator("gp_smc", n_train=200).run(problem)
-        >>> # r500 = fbia.iterator("gp_smc", n_train=500).reuse(r200).run(problem)  # 300 runs
+        >>> # r200 = fbia.iterator("gp_smc", design="sobol", n_train=200).run(problem)
+        >>> # r500 = fbia.iterator("gp_smc", design="sobol", n_train=500).reuse(r200).run(problem)
+
+        Only for ``design = "sobol"``: an adaptive design picks its points from its own
+        rounds (a study file's store reuses every run it already has either way).
         """
         if not isinstance(result, GpSmcResult) or result.design is None:
             raise ConfigError("can only reuse the result of a surrogate-mode gp_smc run", "reuse")
+        if self.options.design != "sobol" or result.adaptive is not None:
+            raise ConfigError(
+                "reuse extends a fixed Sobol design: set design = 'sobol' for both runs", "reuse"
+            )
         self._previous = result
         return self
 

@@ -18,7 +18,13 @@ class GpSmcOptions(PluginOptions):
         description="'surrogate': SMC on a GP of L trained on a Sobol design; 'direct': "
         "SMC calls the forward model (only for cheap models) [-]",
     )
-    n_train: int = Field(200, ge=2, description="forward runs of the training design [-]")
+    n_train: int = Field(
+        200,
+        ge=2,
+        description="forward runs of the training design: with design = 'sobol' all of "
+        "them, with 'adaptive' the most it may use (it stops earlier when the posterior "
+        "has converged) [-]",
+    )
     n_check: int = Field(
         8,
         ge=0,
@@ -32,10 +38,41 @@ class GpSmcOptions(PluginOptions):
         description="held-out forward runs (the next Sobol points) for the surrogate "
         "error (Paper B Remark 9 uses 100) [-]",
     )
-    design: Literal["box", "prior"] = Field(
+    design: Literal["adaptive", "sobol"] = Field(
+        "adaptive",
+        description="'adaptive': a small Sobol start, then rounds of SMC on the surrogate and "
+        "batches of runs where the posterior is uncertain, until it converges "
+        "(gp_adaptive); 'sobol': all n_train points of one Sobol design (Paper B) [-]",
+    )
+    design_space: Literal["box", "prior"] = Field(
         "box",
-        description="'box': Sobol points uniform in the bounds; 'prior': through the "
-        "priors' inverse CDFs (Remark 7) [-]",
+        description="where Sobol points go: 'box' uniform in the bounds; 'prior' through "
+        "the priors' inverse CDFs (Remark 7) [-]",
+    )
+    n_initial: int = Field(
+        0,
+        ge=0,
+        description="Sobol runs that start the adaptive design (0: 10 per input, Loeppky "
+        "et al. 2009) [-]",
+    )
+    batch_size: int = Field(
+        0,
+        ge=0,
+        description="runs per adaptive round (0: a fifth of the runs so far, at least 4 and "
+        "a multiple of the evaluator's parallel workers) [-]",
+    )
+    adaptive_tol: float = Field(
+        0.1,
+        gt=0,
+        description="the adaptive design stops when no posterior mean moved by more than "
+        "this many posterior std and no std changed by more than this fraction in a round, "
+        "and the surrogate error at new posterior draws is below 0.5 in L [-]",
+    )
+    round_particles: int = Field(
+        2000,
+        ge=10,
+        description="SMC particles in the rounds of the adaptive design (the final SMC uses "
+        "n_particles) [-]",
     )
     seed: int = Field(0, description="seed of the Sobol scrambling and of SMC [-]")
     ard: bool = Field(

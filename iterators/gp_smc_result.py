@@ -1,8 +1,9 @@
 """The typed result of the ``gp_smc`` iterator (Paper B): design, surrogate, posterior.
 
 :class:`GpSmcResult` is a :class:`~fbia.core.problem.Result` whose parts are typed records
-instead of string keys: :class:`DesignRuns` (the Sobol design and what its forward runs
-gave), :class:`SurrogateFit` (the GP and its errors), :class:`PosteriorCheck` (the surrogate
+instead of string keys: :class:`DesignRuns` (the design and what its forward runs
+gave), :class:`AdaptiveDesign` (the rounds of the adaptive design), :class:`SurrogateFit`
+(the GP and its errors), :class:`PosteriorCheck` (the surrogate
 against forward runs at posterior draws), :class:`ParticlePosterior` (the weighted
 particles and their summaries) and :class:`SmcSummary` (how the sampler ran).  The plots,
 :func:`fbia.iterators.posterior.save_posterior` and :func:`~fbia.iterators.posterior.hpd_mass`
@@ -22,6 +23,8 @@ from ..core.problem import Result, jsonable
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    "AdaptiveDesign",
+    "AdaptiveRound",
     "DesignRuns",
     "GpSmcResult",
     "LaplaceApproximation",
@@ -44,6 +47,65 @@ class DesignRuns:
     @property
     def ok(self) -> NDArray[np.bool_]:
         return np.isfinite(self.log_likelihood)
+
+
+@dataclass(frozen=True)
+class AdaptiveRound:
+    """One round of the adaptive design: the posterior on the surrogate of ``n_runs`` runs,
+    how far it moved since the last round, and the error of that surrogate at the new batch's
+    posterior draws (predicted before it was trained on them)."""
+
+    round: int
+    n_runs: int  # design runs the round's GP was trained on
+    n_batch: int  # runs the round added
+    mean: FloatArray  # posterior mean of every input (x, theta) on the round's surrogate
+    std: FloatArray
+    mean_shift: float  # largest move of a mean since the last round, in posterior std
+    std_change: float  # largest |log| ratio of a std to the last round's
+    validation_rmse: float  # in L, at the batch's posterior draws
+    log_evidence: float
+    evidence_change: float  # |change of log Z| since the last round
+    floor: float  # the soft floor of the round's training values
+    seconds: float
+
+    def describe(self) -> str:
+        return (
+            f"round {self.round}: GP on {self.n_runs} runs, posterior mean moved "
+            f"{self.mean_shift:.3g} std, std changed {self.std_change:.3g}, log Z changed "
+            f"{self.evidence_change:.3g}, surrogate RMSE "
+            f"{self.validation_rmse:.3g} in L at new posterior draws; {self.n_batch} runs added"
+        )
+
+    def to_record(self) -> dict[str, Any]:
+        return {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()
+        }
+
+
+@dataclass(frozen=True)
+class AdaptiveDesign:
+    """How the adaptive design went: its rounds and why it stopped (``converged``: the
+    posterior stopped moving and the surrogate was right at new posterior draws;
+    ``budget``: n_train runs were used first)."""
+
+    n_initial: int
+    rounds: list[AdaptiveRound]
+    stop_reason: str
+    floor: float  # the final GP's soft floor (L below it is compressed)
+
+    @property
+    def converged(self) -> bool:
+        return self.stop_reason == "converged"
+
+    def note(self) -> str:
+        """The design in the result message, with a warning when it ran out of runs."""
+        n = len(self.rounds)
+        if self.converged:
+            return f"; adaptive design converged in {n} rounds"
+        return (
+            f"; the adaptive design did not converge within n_train runs ({n} rounds): "
+            "the posterior may still change with more runs (raise n_train)"
+        )
 
 
 @dataclass(frozen=True)
@@ -165,8 +227,9 @@ class GpSmcResult(Result):
         ``surrogate`` or ``direct``.
     priors
         The inputs' descriptions (name, unit, bounds, prior).
-    design, surrogate, check, posterior, smc
-        The stages' records (see the module docstring).
+    design, adaptive, surrogate, check, posterior, smc
+        The stages' records (see the module docstring); ``adaptive`` only with the
+        adaptive design.
     seconds
         Wall time of the analysis.
     """
@@ -176,6 +239,7 @@ class GpSmcResult(Result):
     mode: str = "surrogate"
     priors: list[dict[str, Any]] = field(default_factory=list)
     design: DesignRuns | None = field(default=None, repr=False)
+    adaptive: AdaptiveDesign | None = field(default=None, repr=False)
     surrogate: SurrogateFit | None = field(default=None, repr=False)
     check: PosteriorCheck | None = None
     posterior: ParticlePosterior | None = field(default=None, repr=False)
@@ -191,7 +255,7 @@ class GpSmcResult(Result):
             "priors": self.priors,
             "seconds": self.seconds,
         }
-        for name in ("design", "surrogate", "check", "posterior", "smc"):
+        for name in ("design", "adaptive", "surrogate", "check", "posterior", "smc"):
             value = getattr(self, name)
             parts[name] = None if value is None else asdict(value)
         out["info"] = {**out["info"], **jsonable(parts)}

@@ -1,11 +1,11 @@
-"""What the stages of one ``gp_smc`` run share, and the status rule of its result."""
+"""What the stages of one ``gp_smc`` run share, what they yield, and the status rule."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +17,18 @@ from ..core.problem import Evaluation, InverseProblem
 from .gp_smc_result import PosteriorCheck
 
 FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class GpSmcState:
+    """What :meth:`GpSmcIterator.steps` yields: the stage and its figures."""
+
+    stage: Literal["design", "forward_runs", "round", "surrogate", "smc", "check"]
+    message: str
+    data: dict[str, Any] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        return f"[{self.stage}] {self.message}"
 
 
 @dataclass

@@ -256,14 +256,27 @@ class GpSurrogate:
 
     # -- training -------------------------------------------------------------------------
     def fit(
-        self, x: ArrayLike, y: ArrayLike, rng: np.random.Generator | int | None = None
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        rng: np.random.Generator | int | None = None,
+        start: Mapping[str, Any] | None = None,
     ) -> GpSurrogate:
-        """Train on inputs ``x`` (n, d) and log-likelihood values ``y`` (n,); returns self."""
+        """Train on inputs ``x`` (n, d) and log-likelihood values ``y`` (n,); returns self.
+
+        ``start``: the :meth:`hyperparameters` of an earlier fit on part of these data (an
+        adaptive design's previous round) as the first initial guess, instead of the data-based
+        one and the search on a subset; ``restarts`` perturb it.
+        """
         with blas_single_thread():
-            return self._fit(x, y, rng)
+            return self._fit(x, y, rng, start)
 
     def _fit(
-        self, x: ArrayLike, y: ArrayLike, rng: np.random.Generator | int | None
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        rng: np.random.Generator | int | None,
+        start: Mapping[str, Any] | None = None,
     ) -> GpSurrogate:
         x = np.atleast_2d(np.asarray(x, dtype=float))
         y = np.asarray(y, dtype=float).ravel()
@@ -310,6 +323,10 @@ class GpSurrogate:
         starts: list[Any]
         if self.gpy_default:
             starts = [None]
+        elif start is not None:
+            starts = self._warm_starts(start, rng)
+            if len(y) > self.subset:
+                max_iters = self.polish_iters
         elif len(y) > self.subset:
             # Hyperparameter search on a prefix of the design, then a refinement on all points.
             pre = GpSurrogate(
@@ -331,18 +348,18 @@ class GpSurrogate:
         else:
             starts = self._initial_guesses(xs, ys, rng)
         best, best_obj, runs = None, math.inf, []
-        for start in starts:
-            if start is not None:
-                self._set_hyper(*start)
+        for guess in starts:
+            if guess is not None:
+                self._set_hyper(*guess)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 try:
                     model.optimize(self.optimizer, max_iters=max_iters, messages=False)
                 except np.linalg.LinAlgError as exc:
-                    runs.append({"start": start, "error": str(exc)})
+                    runs.append({"start": guess, "error": str(exc)})
                     continue
             obj = float(model.objective_function())
-            runs.append({"start": start, "neg_log_evidence": obj})
+            runs.append({"start": guess, "neg_log_evidence": obj})
             if math.isfinite(obj) and obj < best_obj:
                 best, best_obj = model.param_array.copy(), obj
         if best is None:
@@ -381,6 +398,20 @@ class GpSurrogate:
             f_var = 10.0 ** rng.uniform(-1.0, 1.0)
             f_ell = 10.0 ** rng.uniform(-0.7, 0.7, size=n_ell)
             guesses.append((var0 * f_var, ell0 * f_ell))
+        return guesses
+
+    def _warm_starts(
+        self, hp: Mapping[str, Any], rng: np.random.Generator
+    ) -> list[tuple[float, NDArray[np.float64]]]:
+        """Earlier hyperparameters in this fit's units (the input and output scales moved
+        with the data), then ``restarts`` log-uniform perturbations of them."""
+        ratio = np.asarray(hp["x_std"]) / self.x_std
+        ells = np.asarray(hp["lengthscales"]) * (ratio if self.ard else ratio.mean())
+        var = float(np.clip(hp["signal_variance"] / self.scale**2, *VARIANCE_BOUNDS))
+        guesses = [(var, np.clip(ells, *LENGTHSCALE_BOUNDS))]
+        for _ in range(self.restarts):
+            f_ell = 10.0 ** rng.uniform(-0.5, 0.5, size=len(ells))
+            guesses.append((var * 10.0 ** rng.uniform(-1.0, 1.0), guesses[0][1] * f_ell))
         return guesses
 
     def _set_hyper(self, variance: float, lengthscale: NDArray[np.float64]) -> None:
@@ -455,6 +486,22 @@ class GpSurrogate:
             self.mean_value + self.scale * mean.ravel(),
             np.maximum(var.ravel(), 0.0) * self.scale**2,
         )
+
+    def posterior_covariance(self, a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+        """Posterior covariance of L between the rows of ``a`` (M, d) and ``b`` (P, d)
+        (eq. 28b off the diagonal), in units of L^2: what conditioning on a new run at a
+        point of ``b`` removes from the variance at ``a`` (an adaptive design's criterion)."""
+        xa = self._standardise(np.atleast_2d(a))
+        xb = self._standardise(np.atleast_2d(b))
+        if self.model is not None:
+            w = np.asarray(self.model.posterior.woodbury_inv, dtype=float)
+        else:
+            assert self._chol is not None
+            w = _cho_solve(self._chol, np.eye(len(self._xs)))
+        kab = matern32_cross(xa, xb, self._ell, self._var, self.ard)
+        k_ax = matern32_cross(xa, self._xs, self._ell, self._var, self.ard)
+        k_xb = matern32_cross(self._xs, xb, self._ell, self._var, self.ard)
+        return np.asarray((kab - k_ax @ (w @ k_xb)) * self.scale**2)
 
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:
