@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 
 # The flow-cell example: Levenberg-Marquardt with the finite-element FSI model (seconds with
 # warm starts), LM with the closed-form stand-in from all eleven Table 1 starts (seconds), and
-# the Bayesian GP + SMC calibration of Paper B on the stand-in (about 20 s).
+# the Bayesian GP + SMC calibration of Paper B with ale_fsi on an adaptive design (about a minute).
 demo: $(STAMP)
 	$(BIN)/fbia run examples/flow_cell/study_fsi.toml
 	$(BIN)/fbia run examples/flow_cell/study.toml

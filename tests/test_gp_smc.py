@@ -289,7 +289,7 @@ def test_design_extends_reusing_the_earlier_runs():
 
 @pytest.mark.slow
 def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
-    """The demo's Bayes study with ale_fsi (152 FEM runs, ~1 min): Paper B Fig. 9a behaviour.
+    """The demo's Bayes study with ale_fsi (~70 FEM runs, ~1 min): Paper B Fig. 9a behaviour.
 
     The ground truth lies inside the posterior bulk, the band follows the E-nu coupling and
     the failed soft runs are reported, not fatal.
@@ -300,7 +300,8 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
 
     example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
     result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
-    assert result.success and result.nfev == 144 + 8 and 0 < result.n_failed < 20
+    assert result.success and result.adaptive.converged and 0 < result.n_failed < 20
+    assert result.nfev <= 128 + 16 + 8  # the budget, the held-out points, the check
     assert result.check.rmse < 1.0  # the surrogate is right there
     assert abs(result.x["E"] - 400.0) < 60.0 and abs(result.x["nu"] - 0.3) < 0.2
     cov = np.asarray(result.posterior.cov)
