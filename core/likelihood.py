@@ -9,6 +9,16 @@ unless the measure declares a fixed number per observation (``measurements_per_o
 rkhs: 1, D itself, whatever the length of its residual vector).  With one sigma for all
 observations n = the total count; with different sigmas it is taken as split evenly among
 the observations.
+
+When sigma_N is unknown (``InverseProblem.noise_prior``), it becomes an input of the
+posterior with that prior (one sigma_N for all observations). L then depends on the forward
+run only through S = sum_k D_k^2 and n, and on sigma_N in closed form; the surrogate models
+the profile log-likelihood, L maximised over sigma_N (sigma^2 = S / n),
+
+    L^(x) = max_sigma L(x, sigma) = -n/2 [log(2 pi S / n) + 1],
+
+from which S = n / (2 pi) exp(-2 L^ / n - 1) and L(x, sigma) follow exactly
+(:func:`profile_log_likelihood`, :func:`log_likelihood_from_profile`).
 """
 
 from __future__ import annotations
@@ -17,9 +27,25 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .errors import ConfigError
+from .parameters import Parameter
 from .problem import Evaluation, InverseProblem
+
+#: the name of sigma_N when it is inferred (an input of the posterior, in mm)
+NOISE_NAME = "sigma_N"
+#: the smallest S = sum D^2 per measurement the profile likelihood takes (mm^2): an exact fit
+#: (S = 0) would make it infinite
+MIN_SQUARED_DISTANCE = 1e-24
+
+
+def noise_parameter(problem: InverseProblem) -> Parameter | None:
+    """sigma_N as an input of the posterior when the problem infers it, else None."""
+    prior = problem.noise_prior
+    if prior is None:
+        return None
+    return Parameter(NOISE_NAME, prior=prior, unit="mm")  # bounds: the finite support
 
 
 def noise_levels(problem: InverseProblem) -> list[float]:
@@ -64,3 +90,33 @@ def gaussian_log_likelihood(
         )
     n_k = n / len(dist)
     return float(np.sum(-0.5 * n_k * np.log(2 * math.pi * sig**2) - dist**2 / (2 * sig**2)))
+
+
+def squared_distance(record: Evaluation, count: int | None = None) -> tuple[float, int]:
+    """S = sum_k D_k^2 and n of one record (eq. 5); S = inf for a failed run."""
+    if not record.ok or record.distances is None or record.residuals is None:
+        return math.inf, 0
+    n = len(record.residuals) if count is None else count
+    return float(np.sum(np.asarray(record.distances, dtype=float) ** 2)), int(n)
+
+
+def profile_log_likelihood(record: Evaluation, count: int | None = None) -> float:
+    """L of eq. 5 maximised over one sigma_N for all observations (module docstring);
+    ``-inf`` for a failed run."""
+    s, n = squared_distance(record, count)
+    if not math.isfinite(s) or n == 0:
+        return -math.inf
+    s = max(s, n * MIN_SQUARED_DISTANCE)
+    return -0.5 * n * (math.log(2 * math.pi * s / n) + 1.0)
+
+
+def log_likelihood_from_profile(
+    profile: ArrayLike, n: int, sigma: ArrayLike
+) -> NDArray[np.float64]:
+    """Eq. 5 at noise ``sigma`` from the profile log-likelihood (elementwise): exact for the
+    true profile, and what SMC evaluates on a surrogate of it."""
+    profile = np.asarray(profile, dtype=float)
+    sigma = np.asarray(sigma, dtype=float)
+    with np.errstate(over="ignore"):
+        s = n / (2 * math.pi) * np.exp(-2.0 * profile / n - 1.0)
+    return np.asarray(-0.5 * n * np.log(2 * math.pi * sigma**2) - s / (2 * sigma**2))

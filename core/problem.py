@@ -31,7 +31,7 @@ from .errors import ConfigError, ForwardModelError, MeasureError
 from .interface import NonFiniteInterfaceError
 from .observation import Observation, Solution, coordinate_key
 from .options import plugin_options
-from .parameters import Parameter
+from .parameters import Parameter, Prior
 from .protocols import Discrepancy, ForwardModel
 
 #: Evaluation outcomes.  ``failed``: the forward model raised ForwardModelError;
@@ -134,6 +134,9 @@ class InverseProblem:
     noise_std
         Standard deviation σ_N of the likelihood noise in mm (Paper B eq. 5); observations may
         override it with their own ``noise_std``.
+    noise_prior
+        A prior on σ_N [mm] when it is not known: Bayesian iterators then infer it (one σ_N
+        for all observations; instead of ``noise_std``, and observations without their own).
     fixed
         Model inputs held at given values in every run (e.g. ``{"inflow_rate": 100.0}``).
     """
@@ -145,6 +148,7 @@ class InverseProblem:
     uncertain: Sequence[Parameter] = ()
     noise_std: float | None = None
     fixed: Mapping[str, float] = field(default_factory=dict)
+    noise_prior: Prior | None = None
 
     def __post_init__(self) -> None:
         self.observations = list(self.observations)
@@ -181,6 +185,8 @@ class InverseProblem:
             self.noise_std > 0 and math.isfinite(self.noise_std)
         ):
             raise ConfigError(f"noise_std must be a positive number, got {self.noise_std}")
+        if self.noise_prior is not None:
+            self._check_noise_prior()
         # A coordinate fixes its inputs per state, so varying the same input would be ignored
         # silently (e.g. an uncertain inflow rate with observations at {"inflow_rate": 100}).
         coordinate_names = {k for o in self.observations for k in o.coordinate}
@@ -195,6 +201,25 @@ class InverseProblem:
         dims = {o.dim for o in self.observations}
         if len(dims) > 1:
             raise ConfigError(f"observations mix dimensions {sorted(dims)}")
+
+    def _check_noise_prior(self) -> None:
+        """A prior on sigma_N: positive support, and no known sigma_N beside it."""
+        prior = self.noise_prior
+        if not isinstance(prior, Prior):
+            raise ConfigError(
+                f"noise_prior must be an fbia.Prior, got {type(prior).__name__}", "noise_prior"
+            )
+        if not prior.support[0] >= 0.0:
+            raise ConfigError(
+                f"a prior on sigma_N needs positive support, this one starts at "
+                f"{prior.support[0]:g} (use lognormal, or bounds above 0)",
+                "noise_prior",
+            )
+        if self.noise_std is not None or any(o.noise_std is not None for o in self.observations):
+            raise ConfigError(
+                "sigma_N is either known (noise_std) or inferred (noise_prior), not both",
+                "noise_prior",
+            )
 
     # -- names and vectors -------------------------------------------------------------------
     @property
@@ -328,6 +353,7 @@ class InverseProblem:
             "uncertain": [p.describe() for p in self.uncertain],
             "fixed": self.fixed,
             "noise_std": self.noise_std,
+            "noise_prior": None if self.noise_prior is None else self.noise_prior.spec(),
             "observations": [
                 {"label": o.label(), "coordinate": dict(o.coordinate), "noise_std": o.noise_std}
                 for o in self.observations

@@ -20,7 +20,7 @@ from .executors import make_evaluator
 from .iteration import InverseIterator
 from .observation import Observation
 from .options import plugin_options
-from .parameters import Parameter
+from .parameters import Parameter, Prior
 from .problem import Evaluation, InverseProblem
 from .protocols import Discrepancy, ForwardModel
 
@@ -180,6 +180,7 @@ class Study:
     observations: list[Observation]
     synthetic: SyntheticSpec | None
     noise_std: float | None
+    noise_prior: Prior | None
     iterator: InverseIterator | None
     iterator_name: str | None
     executor: ExecutorSpec
@@ -207,6 +208,7 @@ class Study:
                 uncertain=self.uncertain,
                 noise_std=self.noise_std,
                 fixed=self.fixed,
+                noise_prior=self.noise_prior,
             )
         except ConfigError as err:
             raise err.located(self.file) from None

@@ -52,7 +52,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     options = {}
 
     [likelihood]
-    noise_std = 0.01            # sigma_N in mm (Paper B eq. 5)
+    noise_std = 0.01            # sigma_N in mm (Paper B eq. 5), or when it is not known:
+    # noise_prior = { distribution = "lognormal", mu_ln = -4.6, sigma_ln = 1.0 }   # inferred
 
     [iterator]                  # optional; without it `fbia run` does one forward run
     name = "levenberg_marquardt"
@@ -147,7 +148,7 @@ SECTIONS: dict[str, str] = {
     "observations": "observed states from files (array of tables)",
     "synthetic": "observations made from the model at a ground truth",
     "measure": "discrepancy measure name and options",
-    "likelihood": "noise_std",
+    "likelihood": "noise_std, or noise_prior (sigma_N inferred)",
     "iterator": "iterator name and options",
     "executor": "serial, processes or dask; workers, time-out, cluster",
 }
@@ -383,6 +384,18 @@ class _Reader:
             LikelihoodSection, raw.get("likelihood", {}), self.where("[likelihood]")
         )
         noise_std = likelihood.noise_std
+        noise_prior = None
+        if likelihood.noise_prior is not None:
+            where = self.where("[likelihood]", "noise_prior")
+            if noise_std is not None:
+                raise ConfigError(
+                    "sigma_N is either known (noise_std) or inferred (noise_prior), not both",
+                    where,
+                )
+            try:
+                noise_prior = Prior.from_spec(likelihood.noise_prior)
+            except ConfigError as err:
+                raise err.located(where) from None
 
         iterator_name, iterator = (
             self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
@@ -404,6 +417,7 @@ class _Reader:
             observations=observations,
             synthetic=synthetic,
             noise_std=noise_std,
+            noise_prior=noise_prior,
             iterator=iterator,
             iterator_name=iterator_name,
             executor=executor,

@@ -11,7 +11,7 @@ LikelihoodSection(noise_std=0.01)
 >>> parse_section(LikelihoodSection, {"sigma": 0.01}, "study.toml: [likelihood]")
 Traceback (most recent call last):
 ...
-fbia.core.errors.ConfigError: study.toml: [likelihood]: unknown key 'sigma'; valid keys: noise_std
+fbia.core.errors.ConfigError: study.toml: [likelihood]: unknown key 'sigma'; valid keys: noise_std, noise_prior
 """
 
 from __future__ import annotations
@@ -176,6 +176,7 @@ class StudySection(Section):
 
 class LikelihoodSection(Section):
     noise_std: Annotated[Number, Field(gt=0)] | None = None
+    noise_prior: Table | None = None  # a prior table: sigma_N is inferred
 
 
 class SyntheticSection(Section):

@@ -64,7 +64,7 @@ from ..core.iteration import IteratorBase
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..core.resources import check_memory
-from .gp_adaptive import soft_floor
+from .gp_adaptive import distinct_draws, soft_floor
 from .gp_adaptive_loop import CAP_MARGIN, ROUND_REJUVENATION, ROUND_ZETA, adaptive_design, capped
 from .gp_design import finite_bounds, sobol_design
 from .gp_smc_options import GpSmcOptions
@@ -72,6 +72,7 @@ from .gp_smc_result import (
     AdaptiveDesign,
     DesignRuns,
     GpSmcResult,
+    ParticlePosterior,
     PosteriorCheck,
     SmcSummary,
     SurrogateFit,
@@ -153,18 +154,19 @@ class GpSmcIterator(IteratorBase):
         else:
             design, fit, gp = None, None, None
             log_likelihood = run.forward_log_likelihood
-        post = yield from self._smc_stage(run, log_likelihood)
+        post = yield from self._smc_stage(run, run.joint(log_likelihood))
         check = None
         if opts.mode == "surrogate" and opts.n_check:
             assert gp is not None
             check = yield from self._check_stage(run, post, gp)
         laplace = opts.laplace and opts.mode == "surrogate"
+        target = run.joint(log_likelihood)
         posterior = summarise(
             post,
             run.n_x,
-            run.inputs,
+            run.sampled,
             opts.map_bins,
-            (lambda z: log_likelihood(z) + log_prior(run.inputs, z)) if laplace else None,
+            (lambda z: target(z) + log_prior(run.sampled, z)) if laplace else None,
         )
         status = run_status(opts.mode, check)
         return GpSmcResult(
@@ -175,6 +177,7 @@ class GpSmcIterator(IteratorBase):
                 f"steps ({opts.mode}; {run.nfev} forward runs, {run.n_failed} failed)"
                 + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
+                + _noise_note(run, posterior)
                 + (
                     "; the surrogate was not checked at posterior draws (n_check = 0): "
                     "nothing says whether this posterior is right"
@@ -188,10 +191,10 @@ class GpSmcIterator(IteratorBase):
             iterator="gp_smc",
             history=run.history,
             evaluations=run.evaluations,
-            names=run.names,
+            names=run.sampled_names,
             n_x=run.n_x,
             mode=opts.mode,
-            priors=[p.describe() for p in run.inputs],
+            priors=[p.describe() for p in run.sampled],
             design=design,
             adaptive=adaptive,
             surrogate=fit,
@@ -325,13 +328,13 @@ class GpSmcIterator(IteratorBase):
         opts = self.options
         sampler = SequentialMonteCarlo(
             log_likelihood,
-            run.priors,
+            run.sampled_priors,
             n_particles=opts.n_particles,
             zeta=opts.zeta,
             n_rejuvenation=opts.n_rejuvenation,
             ess_min=opts.ess_min,
             rng=np.random.default_rng([opts.seed, 1]),
-            names=run.names,
+            names=run.sampled_names,
             max_steps=opts.max_smc_steps,
             rejuvenate=opts.rejuvenate,
         )
@@ -356,9 +359,7 @@ class GpSmcIterator(IteratorBase):
         error of order 1 changes posterior ratios by a factor e).
         """
         rng = np.random.default_rng([self.options.seed, 2])
-        order = rng.choice(len(post.weights), size=len(post.weights), p=post.weights)
-        _, first = np.unique(order, return_index=True)
-        x = post.particles[order[np.sort(first)][: self.options.n_check]]
+        x = distinct_draws(post, self.options.n_check, rng)[:, : len(run.inputs)]
         evs = run.evaluate(x)
         loglik = run.log_likelihoods(evs)
         ok = np.isfinite(loglik)
@@ -464,3 +465,11 @@ class GpSmcIterator(IteratorBase):
 
         assert isinstance(result, GpSmcResult)
         return plot_gp_smc_result(result, problem, folder, figures)
+
+
+def _noise_note(run: SmcRun, posterior: ParticlePosterior) -> str:
+    """sigma_N's marginal posterior in the result message, when it was inferred."""
+    if run.noise is None:
+        return ""
+    lo, mid, hi = posterior.credible_intervals[run.noise.name]
+    return f"; sigma_N = {mid:.3g} mm (95 % interval {lo:.3g} .. {hi:.3g} mm, inferred)"

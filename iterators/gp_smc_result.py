@@ -246,6 +246,34 @@ class GpSmcResult(Result):
     smc: SmcSummary | None = field(default=None, repr=False)
     seconds: float = 0.0
 
+    def summary(self) -> str:
+        """The status line, the MAP, then per input (x, theta, sigma_N when inferred) the
+        posterior mean, std and 95 % interval, and the adaptive design's rounds."""
+        text = super().summary()
+        post = self.posterior
+        if post is None:
+            return text
+        lines = [text, "  posterior (mean, std, 2.5 % / 50 % / 97.5 %):"]
+        std = np.sqrt(np.maximum(np.diag(post.cov_all), 0.0))
+        for j, name in enumerate(post.names):
+            lo, mid, hi = post.credible_intervals[name]
+            lines.append(
+                f"    {name:<12} {post.mean_all[j]:<12.6g} {std[j]:<12.4g} "
+                f"{lo:.6g} / {mid:.6g} / {hi:.6g}"
+            )
+        if self.adaptive is not None:
+            lines.append(
+                f"  adaptive design: {self.adaptive.n_initial} start runs, "
+                f"{len(self.adaptive.rounds)} rounds, stopped: {self.adaptive.stop_reason}"
+            )
+            for r in self.adaptive.rounds:
+                lines.append(
+                    f"    round {r.round:<3} runs {r.n_runs:<5} +{r.n_batch:<4} mean moved "
+                    f"{r.mean_shift:<8.3g} std changed {r.std_change:<8.3g} RMSE at new draws "
+                    f"{r.validation_rmse:.3g}"
+                )
+        return "\n".join(lines)
+
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()
         parts: dict[str, Any] = {

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -11,7 +11,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.evaluator import Evaluator
-from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
+from ..core.likelihood import (
+    gaussian_log_likelihood,
+    log_likelihood_from_profile,
+    measurement_count,
+    noise_levels,
+    noise_parameter,
+    profile_log_likelihood,
+    squared_distance,
+)
 from ..core.parameters import Parameter, Prior
 from ..core.problem import Evaluation, InverseProblem
 from .gp_smc_result import PosteriorCheck
@@ -46,8 +54,38 @@ class SmcRun:
     n_failed: int = 0
 
     def __post_init__(self) -> None:
-        self.sigmas = noise_levels(self.problem)
         self.count = measurement_count(self.problem)
+        self.noise = noise_parameter(self.problem)
+        self.sigmas = [] if self.noise is not None else noise_levels(self.problem)
+        self.noise_n: int | None = self.count  # n of eq. 5 when sigma_N is inferred
+
+    @property
+    def sampled(self) -> list[Parameter]:
+        """The posterior's inputs: x, theta, and sigma_N when it is inferred."""
+        return self.inputs if self.noise is None else [*self.inputs, self.noise]
+
+    @property
+    def sampled_names(self) -> list[str]:
+        return [p.name for p in self.sampled]
+
+    @property
+    def sampled_priors(self) -> list[Prior]:
+        return [p.prior for p in self.sampled if p.prior is not None]
+
+    def joint(
+        self, design_l: Callable[[FloatArray], FloatArray]
+    ) -> Callable[[FloatArray], FloatArray]:
+        """L on the posterior's inputs from the design quantity (L of x and theta, or its
+        profile over sigma_N, which then is the last column)."""
+        if self.noise is None:
+            return design_l
+        d = len(self.inputs)
+
+        def log_likelihood(z: FloatArray) -> FloatArray:
+            assert self.noise_n is not None
+            return log_likelihood_from_profile(design_l(z[:, :d]), self.noise_n, z[:, d])
+
+        return log_likelihood
 
     @property
     def names(self) -> list[str]:
@@ -71,10 +109,17 @@ class SmcRun:
         return list(self.evaluator.evaluate(self.problem, points))
 
     def log_likelihoods(self, evaluations: Sequence[Evaluation]) -> FloatArray:
-        """Paper B eq. 5 of each record (-inf where the run failed)."""
-        return np.array(
-            [gaussian_log_likelihood(ev, self.sigmas, self.count) for ev in evaluations]
-        )
+        """What the surrogate models, per record (-inf where the run failed): Paper B eq. 5,
+        or its profile over sigma_N when sigma_N is inferred."""
+        if self.noise is None:
+            return np.array(
+                [gaussian_log_likelihood(ev, self.sigmas, self.count) for ev in evaluations]
+            )
+        if self.noise_n is None:  # n of the measure: the residual count of a successful run
+            ok = [ev for ev in evaluations if ev.ok and ev.residuals is not None]
+            if ok:
+                self.noise_n = squared_distance(ok[0])[1]
+        return np.array([profile_log_likelihood(ev, self.noise_n) for ev in evaluations])
 
     def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
         """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have
