@@ -7,7 +7,7 @@ files, priors).  :func:`parse_section` turns the first validation error into a
 key: ``study.toml: [executor] timeout: must be positive, got -1``.
 
 >>> parse_section(LikelihoodSection, {"noise_std": 0.01}, "study.toml: [likelihood]")
-LikelihoodSection(noise_std=0.01)
+LikelihoodSection(noise_std=0.01, noise_prior=None)
 >>> parse_section(LikelihoodSection, {"sigma": 0.01}, "study.toml: [likelihood]")
 Traceback (most recent call last):
 ...
