@@ -1,0 +1,408 @@
+"""Benchmark: the accuracy targets of the Bayesian pipeline against exact posteriors (issue 16).
+
+Three cheap forward models with exact likelihoods (:mod:`bayes_models`: a layered mound whose
+interface is a closed-form graph, measured by the ray measure; Paper B's priors, ground truths
+and Beta inflow), each calibrated in one run by
+
+* the **exact reference**: ``fbia.smc`` on the vectorised eq. 5 (checked equal to what the
+  pipeline computes at the truth and 30 prior draws), two seeds with many particles, whose
+  agreement is printed; in the 2-D cases also quadrature on a fine grid;
+* the **pipeline under test**: ``fbia.iterator("gp_smc", ...)`` through ``fbia.InverseProblem``
+  and a ``SerialEvaluator`` (which counts the forward runs), with ``design="adaptive"`` when the
+  installed gp_smc has it (else today's default design at the same budget);
+* the **fixed Sobol design at the paper's budget** (Paper B: n_train = 1000 in 2-D (+1),
+  5000 particles, 20 rejuvenations, zeta = 0.995; 2000 with an ARD Matérn kernel, 10 000
+  particles, 30 rejuvenations, zeta = 0.998 in 6 + 1-D), beside it.
+
+Targets (issue 16): every posterior mean of x within 0.3 exact posterior standard deviations of
+the exact one, every posterior std within a factor 1.5, with <= 100 forward runs in 2-D and
+<= 1000 in 6 + 1-D, in <= 10 minutes on 2 cores excluding forward-run time.  The inflow
+(theta) rows are printed for information; the targets concern the calibration parameters x
+(the posterior under uncertainty q(x | Y), Paper B eq. 3b).  The exit status is 0 whatever the
+verdict; the last lines are one summary per case.
+
+    .venv/bin/python benchmarks/bench_bayes_targets.py                 # all cases, ~1 h
+    .venv/bin/python benchmarks/bench_bayes_targets.py --case 2d       # one case
+    .venv/bin/python benchmarks/bench_bayes_targets.py --quick         # smoke run, < 1 min
+    .venv/bin/python benchmarks/bench_bayes_targets.py --case 7d --skip-paper
+
+The pipeline options per case are the tables below; change them there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from bayes_models import Case, Moments, build_case, grid_posterior  # next to this file
+
+import fbia
+from fbia.iterators.gp_smc import GpSmcIterator
+
+# -- what is tested: one table, easy to change -----------------------------------------------------
+CASES = ("2d", "2d_inflow", "7d")
+#: forward runs allowed to the pipeline under test (issue 16); n_train + n_test + n_check
+BUDGET = {"2d": 100, "2d_inflow": 100, "7d": 1000}
+#: |mean - exact| / exact std, std ratio factor, seconds excluding forward runs
+TARGET_SHIFT, TARGET_FACTOR, TARGET_SECONDS = 0.3, 1.5, 600.0
+#: gp_smc options of the pipeline under test ("adaptive": n_train is the most design runs)
+PIPELINE: dict[str, dict[str, Any]] = {
+    "2d": {"design": "adaptive", "n_train": 92, "n_check": 8, "seed": 0},
+    "2d_inflow": {"design": "adaptive", "n_train": 92, "n_check": 8, "seed": 0},
+    "7d": {"design": "adaptive", "n_train": 992, "n_check": 8, "ard": True, "seed": 0},
+}
+#: the fixed Sobol design at the paper's budget (Paper B, "Calibration of constitutive
+#: parameters" and Remark 9 / last example); "sobol" is today's "box"
+_PAPER_2D = {
+    "design": "sobol",
+    "n_train": 1000,
+    "n_particles": 5000,
+    "n_rejuvenation": 20,
+    "zeta": 0.995,
+    "seed": 0,
+}
+PAPER: dict[str, dict[str, Any]] = {
+    "2d": _PAPER_2D,
+    "2d_inflow": _PAPER_2D,
+    "7d": {
+        "design": "sobol",
+        "n_train": 2000,
+        "ard": True,
+        "n_particles": 10_000,
+        "n_rejuvenation": 30,
+        "zeta": 0.998,
+        "seed": 0,
+    },
+}
+#: what replaces the paper's SMC settings, in turn, when they do not finish within
+#: --paper-smc-limit seconds (each says so in the output)
+PAPER_FALLBACKS: list[dict[str, Any]] = [
+    {"rejuvenate": "after_resampling"},
+    {"rejuvenate": "after_resampling", "zeta": 0.95},
+]
+#: the reference counts as converged when its two seeds differ by at most this (|dmean|/std
+#: and |log std ratio|)
+CONVERGED = 0.05
+#: the exact reference: fbia.smc on the vectorised eq. 5, two seeds
+REFERENCE = {"n_particles": 20_000, "n_rejuvenation": 30, "zeta": 0.95, "seeds": (101, 102)}
+#: quadrature grid of the 2-D cases (points per x, per theta)
+GRID = {"2d": (400, None), "2d_inflow": (160, 100)}
+#: --quick: small sizes for a smoke run (overrides of the tables above)
+QUICK_PIPELINE = {"n_particles": 500, "n_rejuvenation": 3, "zeta": 0.8, "n_check": 4}
+QUICK_TRAIN = {"2d": 24, "2d_inflow": 24, "7d": 60}
+QUICK_REFERENCE = {"n_particles": 1000, "n_rejuvenation": 5, "zeta": 0.8, "seeds": (101, 102)}
+QUICK_GRID = {"2d": (100, None), "2d_inflow": (40, 30)}
+
+
+# -- options against the installed gp_smc ----------------------------------------------------------
+def design_choices() -> tuple[str, ...]:
+    """The values of gp_smc's ``design`` option in the installed fbia."""
+    return typing.get_args(GpSmcIterator.Options.model_fields["design"].annotation)
+
+
+def resolve(options: Mapping[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """``options`` for the installed gp_smc, and notes on what had to change."""
+    fields = GpSmcIterator.Options.model_fields
+    choices = design_choices()
+    out, notes = dict(options), []
+    design = out.get("design")
+    if design == "sobol" and "sobol" not in choices:
+        out["design"] = "box"  # the same fixed Sobol design under its old name
+    elif design == "adaptive" and "adaptive" not in choices:
+        del out["design"]
+        default = fields["design"].default
+        notes.append(
+            f"design='adaptive' is not in the installed gp_smc (design: {', '.join(choices)}): "
+            f"the pipeline under test runs today's default design={default!r} at the same budget"
+        )
+    for key in [k for k in out if k not in fields]:
+        notes.append(f"option {key}={out.pop(key)!r} is not known to the installed gp_smc: dropped")
+    return out, notes
+
+
+# -- the runs ------------------------------------------------------------------------------------
+@dataclass
+class Reference:
+    moments: Moments
+    seeds: list[Moments]
+    seconds: float
+    grid: Moments | None = None
+    grid_size: tuple | None = None
+    check_dl: float = math.nan
+
+
+@dataclass
+class PipelineRun:
+    label: str
+    options: dict[str, Any]
+    notes: list[str] = field(default_factory=list)
+    result: Any = None
+    moments: Moments | None = None
+    nfev: int = 0
+    seconds: float = 0.0
+    forward_seconds: float = 0.0
+    error: str = ""
+
+    @property
+    def seconds_excluding_runs(self) -> float:
+        return self.seconds - self.forward_seconds
+
+
+def smc_moments(case: Case, seed: int, n_particles: int, n_rejuvenation: int, zeta: float):
+    post = fbia.smc(
+        case.log_likelihood,
+        case.priors,
+        n_particles=n_particles,
+        n_rejuvenation=n_rejuvenation,
+        zeta=zeta,
+        seed=seed,
+        names=case.names,
+    )
+    return Moments(case.names, post.mean, np.sqrt(np.diag(post.cov)))
+
+
+def pooled(runs: list[Moments]) -> Moments:
+    """Moments of the equal mixture of the runs (each a weighted particle set)."""
+    mean = np.mean([m.mean for m in runs], axis=0)
+    second = np.mean([m.std**2 + m.mean**2 for m in runs], axis=0)
+    return Moments(runs[0].names, mean, np.sqrt(second - mean**2))
+
+
+def exact_reference(case: Case, settings: Mapping[str, Any], grid: tuple | None) -> Reference:
+    t0 = time.perf_counter()
+    check_dl = case.check_log_likelihood(30, seed=7)
+    seeds = [
+        smc_moments(case, s, settings["n_particles"], settings["n_rejuvenation"], settings["zeta"])
+        for s in settings["seeds"]
+    ]
+    ref = Reference(pooled(seeds), seeds, time.perf_counter() - t0, check_dl=check_dl)
+    if grid is not None:
+        ref.grid, ref.grid_size = grid_posterior(case, *grid), grid
+    return ref
+
+
+def run_pipeline(case: Case, label: str, options: dict[str, Any], notes: list[str], limit=None):
+    """gp_smc on the case's InverseProblem with a fresh SerialEvaluator; ``limit``: seconds
+    allowed to the SMC stage (the run is abandoned past it, ``error`` says so)."""
+    run = PipelineRun(label, options, list(notes))
+    it = fbia.iterator("gp_smc", **options)
+    evaluator = fbia.SerialEvaluator()
+    t0 = time.perf_counter()
+    t_smc = None
+    try:
+        gen = it.steps(case.problem, evaluator)
+        while True:
+            try:
+                state = next(gen)
+            except StopIteration as stop:
+                run.result = stop.value
+                break
+            if state.stage == "smc":
+                t_smc = t_smc or time.perf_counter()
+                if limit is not None and time.perf_counter() - t_smc > limit:
+                    gen.close()
+                    run.error = f"SMC stage not finished after {limit:.0f} s"
+                    break
+    finally:
+        run.seconds = time.perf_counter() - t0
+        run.nfev = len(evaluator.history)
+        run.forward_seconds = float(sum(ev.time for ev in evaluator.history))
+        evaluator.close()
+    if run.result is not None:
+        post = run.result.posterior
+        run.moments = Moments(
+            list(post.names), np.asarray(post.mean_all), np.sqrt(np.diag(post.cov_all))
+        )
+    return run
+
+
+def run_paper(case: Case, options: dict[str, Any], limit: float) -> PipelineRun:
+    """The fixed design at the paper's budget; if its SMC stage does not finish within
+    ``limit`` seconds, the fallbacks of PAPER_FALLBACKS in turn."""
+    tries = [{}, *PAPER_FALLBACKS] if case.name == "7d" else [{}]
+    abandoned: list[str] = []
+    run = None
+    for extra in tries:
+        opts, notes = resolve({**options, **extra})
+        if extra:
+            notes.append(
+                f"the paper's SMC settings did not finish in {limit:.0f} s "
+                f"({'; '.join(abandoned)}): ran with {extra}"
+                + ("; the paper's zeta was NOT used" if "zeta" in extra else "")
+            )
+        last = extra is tries[-1]
+        run = run_pipeline(case, "fixed Sobol design, paper's budget", opts, notes,
+                           None if last else limit)  # fmt: skip
+        if not run.error:
+            return run
+        abandoned.append(f"{extra or 'as in the paper'}: {run.error}")
+        print(f"  ... {abandoned[-1]}; next try", flush=True)
+    assert run is not None
+    return run
+
+
+# -- the tables ----------------------------------------------------------------------------------
+def verdict(ref: Reference, run: PipelineRun, n_x: int, budget: int | None) -> tuple[bool, str]:
+    """Whether ``run`` meets the targets, and the figures that say so; ``budget`` None (the
+    fixed design at the paper's budget): accuracy only, runs and time are reported."""
+    m = run.moments
+    if m is None:
+        return False, f"no result ({run.error})"
+    shift = np.abs(m.mean - ref.moments.mean) / ref.moments.std
+    ratio = m.std / ref.moments.std
+    bad_ratio = np.maximum(ratio, 1 / ratio)
+    j, k = int(np.argmax(shift[:n_x])), int(np.argmax(bad_ratio[:n_x]))
+    ok = bool(np.all(shift[:n_x] <= TARGET_SHIFT) and np.all(bad_ratio[:n_x] <= TARGET_FACTOR))
+    seconds = run.seconds_excluding_runs
+    words = (
+        f"max |dmean|/std {shift[j]:.2f} ({m.names[j]}), worst std ratio {ratio[k]:.2f} "
+        f"({m.names[k]}), {run.nfev} runs"
+    )
+    if budget is None:
+        return ok, words + f", {seconds:.0f} s excl. runs"
+    ok_runs, ok_time = run.nfev <= budget, seconds <= TARGET_SECONDS
+    words += (
+        f" (<= {budget}: {'yes' if ok_runs else 'NO'}), {seconds:.0f} s excl. runs "
+        f"(<= {TARGET_SECONDS:.0f}: {'yes' if ok_time else 'NO'})"
+    )
+    return ok and ok_runs and ok_time, words
+
+
+def print_run(case: Case, ref: Reference, run: PipelineRun, budget: int | None) -> None:
+    print(f"\n  {run.label}: gp_smc {run.options}")
+    for note in run.notes:
+        print(f"    note: {note}")
+    if run.moments is None:
+        print(f"    no result: {run.error}")
+        return
+    n_x = len(case.problem.parameters)
+    head = (
+        f"    {'parameter':<12} {'exact mean':>11} {'exact std':>10} {'pipe mean':>11} "
+        f"{'pipe std':>10} {'|dmean|/std':>11} {'std ratio':>9}  verdict"
+    )
+    print(head)
+    print("    " + "-" * (len(head) - 4))
+    for j, name in enumerate(case.names):
+        em, es = ref.moments.mean[j], ref.moments.std[j]
+        pm, ps = run.moments.mean[j], run.moments.std[j]
+        shift, ratio = abs(pm - em) / es, ps / es
+        if j < n_x:
+            ok = shift <= TARGET_SHIFT and max(ratio, 1 / ratio) <= TARGET_FACTOR
+            word = "PASS" if ok else "FAIL"
+        else:
+            word = "(theta, info)"
+        print(
+            f"    {name:<12} {em:>11.4g} {es:>10.4g} {pm:>11.4g} {ps:>10.4g} {shift:>11.3f} "
+            f"{ratio:>9.3f}  {word}"
+        )
+    res = run.result
+    check = res.check
+    rmse = "n/a" if check is None else f"{check.rmse:.3g} at {check.n} draws"
+    print(
+        f"    forward runs {run.nfev} (result.nfev {res.nfev}, failed {res.n_failed}); wall "
+        f"{run.seconds:.1f} s, forward runs {run.forward_seconds:.1f} s, excluding them "
+        f"{run.seconds_excluding_runs:.1f} s"
+    )
+    smc = res.smc
+    print(
+        f"    gp_smc status {res.status!r}; check RMSE in L {rmse}; SMC {smc.n_steps} steps "
+        f"({smc.steps_with_moves} with moves, {smc.rejuvenate}), final ESS {smc.final_ess:.0f}"
+    )
+    ok, words = verdict(ref, run, n_x, budget)
+    print(f"    => {'PASS' if ok else 'FAIL'}: {words}")
+
+
+def print_reference(case: Case, ref: Reference, settings: Mapping[str, Any]) -> None:
+    a, b = ref.seeds[0], ref.seeds[1]
+    shift = np.abs(a.mean - b.mean) / ref.moments.std
+    ratio = np.abs(np.log(a.std / b.std))
+    print(
+        f"  exact L: vectorised eq. 5 = eq. 5 through InverseProblem.evaluate + ray measure + "
+        f"fbia.core.likelihood to max |dL| = {ref.check_dl:.1e} (truth + 30 prior draws)"
+    )
+    print(
+        f"  exact reference: fbia.smc on it, seeds {list(settings['seeds'])}, "
+        f"{settings['n_particles']} particles, {settings['n_rejuvenation']} MH steps, "
+        f"zeta {settings['zeta']} ({ref.seconds:.0f} s): seeds differ by max |dmean|/std "
+        f"{shift.max():.3f}, max |log std ratio| {ratio.max():.3f}: "
+        + ("converged" if max(shift.max(), ratio.max()) <= CONVERGED else "NOT converged")
+        + f" (<= {CONVERGED}, << the target {TARGET_SHIFT})"
+    )
+    if ref.grid is not None:
+        g = ref.grid
+        gs = np.abs(g.mean - ref.moments.mean) / g.std
+        gr = np.abs(np.log(ref.moments.std / g.std))
+        print(
+            f"  quadrature on a {ref.grid_size} grid: reference differs by max "
+            f"|dmean|/std {gs.max():.3f}, max |log std ratio| {gr.max():.3f}"
+        )
+
+
+# -- main ----------------------------------------------------------------------------------------
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--case", choices=[*CASES, "all"], default="all")
+    ap.add_argument("--quick", action="store_true", help="small sizes: a smoke run")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the data noise and of gp_smc")
+    ap.add_argument("--skip-paper", action="store_true", help="skip the fixed-design runs")
+    ap.add_argument(
+        "--paper-smc-limit",
+        type=float,
+        default=1200.0,
+        help="seconds allowed to the SMC stage of the 6 + 1-D paper run before the fallbacks",
+    )
+    args = ap.parse_args(argv)
+    cases = CASES if args.case == "all" else (args.case,)
+    print(
+        f"fbia {fbia.__version__}; gp_smc design choices: {', '.join(design_choices())}; "
+        f"{os.cpu_count()} cores visible, {len(os.sched_getaffinity(0))} usable"
+    )
+    t0 = time.perf_counter()
+    warm, _ = resolve({**PIPELINE["2d"], **QUICK_PIPELINE, "n_train": 16, "n_check": 0})
+    run_pipeline(build_case("2d"), "warm-up", warm, [])
+    print(f"warm-up (numba compilation, imports): {time.perf_counter() - t0:.1f} s, not counted")
+    summary = []
+    for name in cases:
+        case = build_case(name, seed=args.seed)
+        n_x = len(case.problem.parameters)
+        x, theta = case.problem.names, case.problem.uncertain_names
+        print(f"\n=== case {name}: x = {x}, theta = {theta}")
+        settings = QUICK_REFERENCE if args.quick else REFERENCE
+        grid = (QUICK_GRID if args.quick else GRID).get(name)
+        ref = exact_reference(case, settings, grid)
+        print_reference(case, ref, settings)
+
+        options = {**PIPELINE[name], "seed": args.seed}
+        if args.quick:
+            options.update(QUICK_PIPELINE, n_train=QUICK_TRAIN[name])
+        opts, notes = resolve(options)
+        pipe = run_pipeline(case, "pipeline under test", opts, notes)
+        print_run(case, ref, pipe, BUDGET[name])
+        ok, words = verdict(ref, pipe, n_x, BUDGET[name])
+        line = f"SUMMARY {name}: pipeline {'PASS' if ok else 'FAIL'} ({words})"
+        if not args.skip_paper:
+            paper = {**PAPER[name], "seed": args.seed}
+            if args.quick:
+                paper.update(QUICK_PIPELINE, n_train=2 * QUICK_TRAIN[name])
+            fixed = run_paper(case, paper, args.paper_smc_limit)
+            print_run(case, ref, fixed, None)
+            ok, words = verdict(ref, fixed, n_x, None)
+            line += f"; fixed Sobol at the paper's budget {'PASS' if ok else 'FAIL'} ({words})"
+        summary.append(line)
+        sys.stdout.flush()
+    print()
+    for line in summary:
+        print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
