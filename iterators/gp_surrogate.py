@@ -456,6 +456,20 @@ class GpSurrogate:
             np.maximum(var.ravel(), 0.0) * self.scale**2,
         )
 
+    def predict_joint(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Posterior mean (M,) and full covariance (M, M) of the latent L at the rows of ``x``
+        (eq. 28a-b with x* a set of points), in units of L; for joint sample paths."""
+        xs = self._standardise(np.atleast_2d(x))
+        if self.model is None and self._chol is not None:  # restored from a state: numpy only
+            from scipy.linalg import solve_triangular
+
+            k = matern32_cross(xs, self._xs, self._ell, self._var, self.ard)
+            v = solve_triangular(self._chol, k.T, lower=True)
+            cov = matern32_cross(xs, xs, self._ell, self._var, self.ard) - v.T @ v
+            return self.predict_mean(x), cov * self.scale**2
+        mean, cov = self.model.predict(xs, full_cov=True, include_likelihood=False)
+        return self.mean_value + self.scale * mean.ravel(), np.asarray(cov) * self.scale**2
+
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:
         """Leave-one-out errors in closed form: e_i = alpha_i / [(K + sigma_n^2 I)^-1]_ii."""
