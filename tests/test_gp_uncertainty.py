@@ -26,7 +26,7 @@ from fbia.iterators.gp_uncertainty import (
     marginalise_surrogate_uncertainty,
     reweight_by_sample_paths,
 )
-from fbia.iterators.posterior import weighted_quantiles
+from fbia.iterators.posterior import summarise, weighted_quantiles
 from fbia.iterators.smc import SmcResult
 
 LO, HI = np.array([100.0, 0.0]), np.array([1000.0, 0.49])  # E [Pa], nu [-]
@@ -99,6 +99,11 @@ def test_starved_design_the_expected_posterior_covers_what_the_mean_only_one_mis
     assert np.all(unc.mean_spread_relative > 0.5) and np.all(unc.std_ratio > 2.0)
     assert unc.temperature < 0.1 and unc.tail_mass < MAX_TAIL_MASS and unc.ess > MIN_ESS
     assert unc.ok, unc.note()
+    # the posterior summaries of gp_smc take the result as it is
+    summary = summarise(ep, 2, [], 30, None)
+    assert np.allclose(summary.mean, ep.mean)
+    bounds = np.array(list(summary.credible_intervals.values()))  # 2.5 %, 50 %, 97.5 %
+    assert np.all((bounds[:, 0] <= mean) & (mean <= bounds[:, 2]))
 
 
 def test_rich_design_the_expected_posterior_is_the_mean_only_one(exact):
