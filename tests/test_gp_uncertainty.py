@@ -87,8 +87,9 @@ def test_starved_design_the_expected_posterior_covers_what_the_mean_only_one_mis
     marg = intervals(ep.particles, ep.weights)
     inside_only = (only[:, 0] <= mean) & (mean <= only[:, 1])
     inside_marg = (marg[:, 0] <= mean) & (mean <= marg[:, 1])
-    # measured: the mean-only 90 % interval of nu misses the exact mean by ~5 of its std and
-    # holds under 1 % of the exact interval; the expected posterior's hold all of both
+    # measured: the mean-only 90 % intervals miss the exact mean in E and nu and hold 47 %
+    # and 0 % of the exact 90 % intervals; the expected posterior's (7 and 9 times wider:
+    # the GP's sigma of L is ~100 at the posterior) hold all of both
     assert not inside_only.all()
     assert covered(only, interval).min() < 0.3
     assert inside_marg.all()
@@ -116,7 +117,7 @@ def test_rich_design_the_expected_posterior_is_the_mean_only_one(exact):
     std = np.sqrt(np.diag(post.cov))
     assert np.all(np.abs(post.mean - exact[0]) < 0.1 * std)  # the mean-only one is right
     assert unc.sigma_median < 1.0  # the GP knows L where the posterior is
-    # measured: shift 0.02 std, std ratio 1.01-1.03
+    # measured: shift 0.005 std, std ratio 1.005 (the pilot on the mean-only particles)
     assert np.all(np.abs(ep.mean - post.mean) < 0.1 * std)
     assert np.all(np.abs(np.sqrt(np.diag(ep.cov)) / std - 1.0) < 0.1)
     assert np.all(np.abs(unc.mean_shift_relative) < 0.1) and np.all(unc.std_ratio < 1.1)
@@ -149,7 +150,7 @@ def test_far_from_the_data_no_mass_goes_to_the_corners():
     expected_likelihood = mu + var / 2
     eup = np.exp(expected_likelihood - expected_likelihood.max())
     assert eup[corner].sum() / eup.sum() > 0.99  # rejected: the corners take it all
-    assert ep.weights[corner].sum() < 0.02  # measured: 0.5 %
+    assert ep.weights[corner].sum() < 0.02  # measured: 6e-11
     assert np.all(np.abs(ep.mean - X0) < 0.1 * (HI - LO))
     assert unc.tail_mass == 0.0  # a flat proposal has no tail
 
