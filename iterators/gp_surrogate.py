@@ -491,17 +491,36 @@ class GpSurrogate:
         """Posterior covariance of L between the rows of ``a`` (M, d) and ``b`` (P, d)
         (eq. 28b off the diagonal), in units of L^2: what conditioning on a new run at a
         point of ``b`` removes from the variance at ``a`` (an adaptive design's criterion)."""
+        from scipy.linalg import solve_triangular
+
         xa = self._standardise(np.atleast_2d(a))
         xb = self._standardise(np.atleast_2d(b))
-        if self.model is not None:
-            w = np.asarray(self.model.posterior.woodbury_inv, dtype=float)
-        else:
-            assert self._chol is not None
-            w = _cho_solve(self._chol, np.eye(len(self._xs)))
+        # k(a, b) - v_a^T v_b with v = L^-1 k(X, .), L the Cholesky factor of K + sigma_n^2 I:
+        # the triangular solves keep the small variances near the data accurate, where the
+        # explicit inverse loses them to cancellation
+        chol = (
+            np.asarray(self.model.posterior.woodbury_chol, dtype=float)
+            if self.model is not None
+            else self._chol
+        )
+        assert chol is not None
         kab = matern32_cross(xa, xb, self._ell, self._var, self.ard)
-        k_ax = matern32_cross(xa, self._xs, self._ell, self._var, self.ard)
-        k_xb = matern32_cross(self._xs, xb, self._ell, self._var, self.ard)
-        return np.asarray((kab - k_ax @ (w @ k_xb)) * self.scale**2)
+        v_a = solve_triangular(
+            chol, matern32_cross(self._xs, xa, self._ell, self._var, self.ard), lower=True
+        )
+        v_b = (
+            v_a
+            if b is a
+            else solve_triangular(
+                chol, matern32_cross(self._xs, xb, self._ell, self._var, self.ard), lower=True
+            )
+        )
+        return np.asarray((kab - v_a.T @ v_b) * self.scale**2)
+
+    def predict_joint(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Posterior mean (M,) and full covariance (M, M) of the latent L at the rows of ``x``
+        (eq. 28a-b with x* a set of points), in units of L; for joint sample paths."""
+        return self.predict_mean(x), self.posterior_covariance(x, x)
 
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:
