@@ -274,6 +274,9 @@ class SequentialMonteCarlo:
         self.training_range = training_range
         self.nfev = 0
         self.n_nonfinite = 0
+        #: One dict per tempering step so far (the result's ``history``; readable while
+        #: :meth:`steps` runs, e.g. after stopping it early).
+        self.history: list[dict[str, Any]] = []
 
     @property
     def dim(self) -> int:
@@ -284,7 +287,12 @@ class SequentialMonteCarlo:
         """log p(x) = sum_j log p_j(x_j) for an array (M, d)."""
         out = np.zeros(len(x))
         for j, prior in enumerate(self.priors):
-            out += prior.logpdf(x[:, j])
+            if prior.kind == "uniform":  # scipy's numbers without its ~0.3 ms per call
+                lo, hi = prior.params["lower"], prior.params["upper"]
+                v = x[:, j]
+                out += np.where((v >= lo) & (v <= hi), -math.log(hi - lo), -np.inf)
+            else:
+                out += prior.logpdf(x[:, j])
         return np.where(np.isnan(out), -np.inf, out)
 
     def _loglik(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -341,6 +349,7 @@ class SequentialMonteCarlo:
         gamma = 0.0
         gammas, ess_hist, accept_hist = [0.0], [float(n)], []
         history: list[dict[str, Any]] = []
+        self.history = history
         log_evidence, log_evidence_var = 0.0, 0.0
         # the segment since the particles last moved or were resampled (evidence error)
         seg_start: NDArray[np.float64] | None = None
