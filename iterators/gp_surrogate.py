@@ -31,7 +31,6 @@ region where the surrogate invents evidence without it showing.
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
 import time
 import warnings
@@ -43,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError
+from .gp_mean import fused_kernels
 from .smc_diagnostics import extrapolation_margin
 
 if TYPE_CHECKING:
@@ -140,73 +140,6 @@ def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.
     from scipy.linalg import cho_solve
 
     return np.asarray(cho_solve((chol, True), b))
-
-
-@functools.cache
-def _fused_kernels() -> Any:
-    """JIT-compiled fused k(x*, X) alpha loops, built on first use (numba imports slowly).
-
-    One pass over the particles (in parallel blocks) and the training points, without the
-    (M, n) cross-covariance matrix: 5-10x faster than the numpy blocks, same numbers up to
-    round-off.
-    """
-    import numba
-
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def product_mean(xs, xt_t, ep_s, em_s, ep_t, em_t, alpha, block):
-        # exp(-|a - b|) = min(e^-a e^b, e^a e^-b): with the exponentials of every particle
-        # (ep_s = e^a, em_s = e^-a) and training coordinate precomputed, the pair loop has no
-        # exp left and vectorises (numba has no vectorised exp without Intel's SVML).
-        m, d = xs.shape
-        n = xt_t.shape[1]
-        out = np.empty(m)
-        n_blocks = (m + block - 1) // block
-        for b in numba.prange(n_blocks):
-            e = np.empty(n)
-            p = np.empty(n)
-            for i in range(b * block, min(m, (b + 1) * block)):
-                e[:] = 1.0
-                p[:] = 1.0
-                for j in range(d):
-                    xij = xs[i, j]
-                    epj = ep_s[i, j]
-                    emj = em_s[i, j]
-                    row = xt_t[j]
-                    rp = ep_t[j]
-                    rm = em_t[j]
-                    for k in range(n):
-                        p[k] *= 1.0 + abs(xij - row[k])
-                        e[k] *= min(emj * rp[k], epj * rm[k])
-                acc = 0.0
-                for k in range(n):
-                    acc += alpha[k] * p[k] * e[k]
-                out[i] = acc
-        return out
-
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def single_mean(xs, xt_t, alpha, block):
-        m, d = xs.shape
-        n = xt_t.shape[1]
-        out = np.empty(m)
-        n_blocks = (m + block - 1) // block
-        for b in numba.prange(n_blocks):
-            r2 = np.empty(n)
-            for i in range(b * block, min(m, (b + 1) * block)):
-                r2[:] = 0.0
-                for j in range(d):
-                    xij = xs[i, j]
-                    row = xt_t[j]
-                    for k in range(n):
-                        t = xij - row[k]
-                        r2[k] += t * t
-                acc = 0.0
-                for k in range(n):
-                    r = np.sqrt(r2[k])
-                    acc += alpha[k] * (1.0 + r) * np.exp(-r)
-                out[i] = acc
-        return out
-
-    return product_mean, single_mean
 
 
 class GpSurrogate:
@@ -442,14 +375,14 @@ class GpSurrogate:
     def predict_mean(self, x: ArrayLike, fused: bool | None = None) -> NDArray[np.float64]:
         """Posterior mean of L at the rows of ``x`` (M, d) (eq. 28a), all points at once.
 
-        ``fused``: compiled numba loops (``None``: from 64 points on; ``True``: always) or
-        numpy blocks (``False``).
+        ``fused``: compiled numba loops (:mod:`.gp_mean`; ``None``: from 64 points on;
+        ``True``: always) or numpy blocks (``False``).
         """
         if not hasattr(self, "_alpha"):
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
         xs = self._standardise(np.atleast_2d(x))
         if fused is not False and (fused or len(xs) >= 64):
-            kernels = _fused_kernels()
+            kernels = fused_kernels()
             scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
             xt_t = np.ascontiguousarray((self._xs * scale).T)
             a = np.ascontiguousarray(xs * scale)
