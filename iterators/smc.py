@@ -26,13 +26,14 @@ evaluations when zeta is close to 1.
 Which to use: one resampling cycle takes log(ess_min) / log(zeta) steps (346 at zeta = 0.998)
 and an informative posterior in a few dimensions needs ten to forty cycles, i.e. thousands of
 steps. ``"every_step"`` costs N n_rej likelihood calls in each of them: 10 000 particles and 30
-MH steps on a 2000-point GP mean are about 0.5 s per step, half an hour per run at zeta =
-0.998. Use it only with few steps (zeta <= 0.95, tens to hundreds of steps) or a likelihood
-that costs microseconds per point. ``"after_resampling"`` moves once per cycle: the same
-settings finish in about ten seconds. The default step limit (``max_steps=None``) is 100
-halvings of the ESS, ceil(100 log 0.5 / log zeta) steps (at least 1000), far more than any
-posterior needs; a run that hits it raises an error that says why (rate of progress,
-collapsed particles, a surrogate extrapolating above its training values) and what to change.
+MH steps on a 2000-point 7-D GP mean are about 0.5 s per step, half an hour per run at zeta =
+0.998. Use it only where the run has few steps (zeta <= 0.95: tens to hundreds).
+``"after_resampling"`` moves once per cycle: the same settings finish in about ten seconds
+(``benchmarks/bench_smc_paper_settings.py``). The default step limit (``max_steps=None``) is
+100 halvings of the ESS, ceil(100 log 0.5 / log zeta) steps (at least 1000), about three
+times what a 7-D posterior 10^4 times narrower than its prior needs; a run that hits it raises
+an error that says why (rate of progress, collapsed particles, a surrogate extrapolating above
+its training values) and what to change.
 The log-evidence log p(Y) = sum_s log sum_i W_{s-1}^i exp((gamma_s - gamma_{s-1}) L_i) is a
 by-product.
 
@@ -217,7 +218,7 @@ class SequentialMonteCarlo:
         ``"every_step"`` (Algorithm 1) or ``"after_resampling"``: Metropolis-Hastings moves
         only in the steps that resample and in the final step to gamma = 1. With zeta close to
         1 (thousands of steps) only ``"after_resampling"`` is affordable on a GP surrogate;
-        ``"every_step"`` suits zeta <= 0.95 or a likelihood of microseconds per point.
+        ``"every_step"`` suits runs of few steps (zeta <= 0.95).
     training_range
         (min, max) of the log-likelihood values a surrogate was trained on: the error of a
         stalled run then says whether the particles sit far above them (extrapolation).
