@@ -9,9 +9,10 @@ key: ``study.toml: [executor] timeout: must be positive, got -1``.
 >>> parse_section(LikelihoodSection, {"noise_std": 0.01}, "study.toml: [likelihood]")
 LikelihoodSection(noise_std=0.01, noise_prior=None)
 >>> parse_section(LikelihoodSection, {"sigma": 0.01}, "study.toml: [likelihood]")
+... # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-fbia.core.errors.ConfigError: study.toml: [likelihood]: unknown key 'sigma'; valid keys: noise_std, noise_prior
+fbia.core.errors.ConfigError: study.toml: [likelihood]: unknown key 'sigma'; valid keys: ...
 """
 
 from __future__ import annotations

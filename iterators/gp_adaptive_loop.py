@@ -38,9 +38,6 @@ from .smc import SmcResult
 
 FloatArray = NDArray[np.float64]
 
-#: how far the GP mean may rise above the best training value (units of L) inside SMC: more
-#: is a surrogate artefact, not evidence
-CAP_MARGIN = 2.0
 #: the largest change of log Z between rounds (plus twice its standard error) that counts
 #: as "the evidence stopped changing"
 EVIDENCE_TOL = 0.5
@@ -133,8 +130,7 @@ def adaptive_design(
         if converged or n_design >= opts.n_train:
             reason = "converged" if converged else "budget"
             break
-        cap = float(y[train].max()) + CAP_MARGIN
-        post = sample(capped(gp, cap), opts.round_particles)
+        post = sample(gp.predict_mean_guarded, opts.round_particles)
         evidence_change = math.inf if log_z is None else abs(post.log_evidence - log_z)
         log_z = post.log_evidence
         moments = Moments.of(post)
@@ -182,15 +178,6 @@ def adaptive_design(
     return AdaptiveOutcome(
         _design(points, loglik, run, train), n_initial, gp, floor, rounds, reason
     )
-
-
-def capped(gp: GpSurrogate, cap: float) -> Callable[[FloatArray], FloatArray]:
-    """The GP mean of L, never above ``cap`` (the extrapolation guard)."""
-
-    def log_likelihood(z: FloatArray) -> FloatArray:
-        return np.minimum(gp.predict_mean(z), cap)
-
-    return log_likelihood
 
 
 def _design(points: FloatArray, loglik: FloatArray, run: SmcRun, train: Any) -> DesignRuns:

@@ -65,7 +65,7 @@ from ..core.parameters import Parameter
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..core.resources import check_memory
 from .gp_adaptive import distinct_draws, soft_floor
-from .gp_adaptive_loop import CAP_MARGIN, ROUND_REJUVENATION, ROUND_ZETA, adaptive_design, capped
+from .gp_adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, adaptive_design
 from .gp_design import finite_bounds, sobol_design
 from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import (
@@ -79,6 +79,7 @@ from .gp_smc_result import (
 )
 from .gp_smc_run import GpSmcState, SmcRun, log_prior, run_status
 from .gp_surrogate import GpSurrogate
+from .gp_uncertainty import marginalise_surrogate_uncertainty
 from .posterior import summarise
 from .smc import SequentialMonteCarlo, SmcResult, SmcState
 
@@ -122,6 +123,11 @@ class GpSmcIterator(IteratorBase):
     ) -> Generator[GpSmcState, None, GpSmcResult]:
         opts = self.options
         run = SmcRun(problem, evaluator, self._inputs(problem), time.perf_counter())
+        if opts.surrogate_uncertainty != "none" and (opts.mode != "surrogate" or run.noise):
+            raise ConfigError(
+                "needs mode = 'surrogate' and a known sigma_N (noise_std, not noise_prior)",
+                "surrogate_uncertainty",
+            )
         self._check_memory(run.n_x)
         adaptive: AdaptiveDesign | None = None
         if opts.mode == "surrogate":
@@ -149,20 +155,32 @@ class GpSmcIterator(IteratorBase):
             self.surrogate = gp
             floor = None if adaptive is None else adaptive.floor
             fit = yield from self._surrogate_stage(run, design, gp, floor)
-            cap = float(gp.y_train.max()) + CAP_MARGIN
-            log_likelihood: Callable[[FloatArray], FloatArray] = capped(gp, cap)
+            log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean_guarded
         else:
             design, fit, gp = None, None, None
             log_likelihood = run.forward_log_likelihood
-        post = yield from self._smc_stage(run, run.joint(log_likelihood))
+        trained = None
+        if gp is not None and run.noise is None:
+            trained = (float(gp.y_train.min()), float(gp.y_train.max()))
+        post = yield from self._smc_stage(run, run.joint(log_likelihood), trained)
         check = None
         if opts.mode == "surrogate" and opts.n_check:
             assert gp is not None
             check = yield from self._check_stage(run, post, gp)
-        laplace = opts.laplace and opts.mode == "surrogate"
+        posterior_particles, uncertainty = post, None
+        if opts.surrogate_uncertainty == "expected_posterior":
+            assert gp is not None
+            posterior_particles, uncertainty = marginalise_surrogate_uncertainty(
+                post,
+                gp,
+                run.sampled_priors,
+                np.random.default_rng([opts.seed, 5]),
+                smc_options=self._smc_settings(),
+            )
+        laplace = opts.laplace and opts.mode == "surrogate" and uncertainty is None
         target = run.joint(log_likelihood)
         posterior = summarise(
-            post,
+            posterior_particles,
             run.n_x,
             run.sampled,
             opts.map_bins,
@@ -178,6 +196,8 @@ class GpSmcIterator(IteratorBase):
                 + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
                 + _noise_note(run, posterior)
+                + ("" if gp is None else _extrapolation_note(run, post, gp))
+                + ("" if uncertainty is None else "; " + uncertainty.note())
                 + (
                     "; the surrogate was not checked at posterior draws (n_check = 0): "
                     "nothing says whether this posterior is right"
@@ -199,6 +219,7 @@ class GpSmcIterator(IteratorBase):
             adaptive=adaptive,
             surrogate=fit,
             check=check,
+            uncertainty=uncertainty,
             posterior=posterior,
             smc=SmcSummary(
                 n_steps=post.n_steps,
@@ -321,22 +342,33 @@ class GpSmcIterator(IteratorBase):
         )
         return fit
 
-    def _smc_stage(
-        self, run: SmcRun, log_likelihood: Callable[[FloatArray], FloatArray]
-    ) -> Generator[GpSmcState, None, SmcResult]:
-        """Stage 4: adaptive tempered SMC (Algorithm 1) on exp(gamma L) p."""
+    def _smc_settings(self) -> dict[str, Any]:
+        """The sampler's settings from the options (the final SMC and its tempered twin)."""
         opts = self.options
+        return {
+            "n_particles": opts.n_particles,
+            "zeta": opts.zeta,
+            "n_rejuvenation": opts.n_rejuvenation,
+            "ess_min": opts.ess_min,
+            "max_steps": opts.max_smc_steps,
+            "rejuvenate": opts.rejuvenate,
+        }
+
+    def _smc_stage(
+        self,
+        run: SmcRun,
+        log_likelihood: Callable[[FloatArray], FloatArray],
+        training_range: tuple[float, float] | None,
+    ) -> Generator[GpSmcState, None, SmcResult]:
+        """Stage 4: adaptive tempered SMC (Algorithm 1) on exp(gamma L) p; the surrogate's
+        training range goes into the message of a run that stalls."""
         sampler = SequentialMonteCarlo(
             log_likelihood,
             run.sampled_priors,
-            n_particles=opts.n_particles,
-            zeta=opts.zeta,
-            n_rejuvenation=opts.n_rejuvenation,
-            ess_min=opts.ess_min,
-            rng=np.random.default_rng([opts.seed, 1]),
+            rng=np.random.default_rng([self.options.seed, 1]),
             names=run.sampled_names,
-            max_steps=opts.max_smc_steps,
-            rejuvenate=opts.rejuvenate,
+            training_range=training_range,
+            **self._smc_settings(),
         )
         gen = sampler.steps()
         while True:
@@ -473,3 +505,16 @@ def _noise_note(run: SmcRun, posterior: ParticlePosterior) -> str:
         return ""
     lo, mid, hi = posterior.credible_intervals[run.noise.name]
     return f"; sigma_N = {mid:.3g} mm (95 % interval {lo:.3g} .. {hi:.3g} mm, inferred)"
+
+
+def _extrapolation_note(run: SmcRun, post: SmcResult, gp: GpSurrogate) -> str:
+    """A warning when posterior mass sits where the GP mean was capped (above the largest
+    training value + its margin: a surrogate artefact, not evidence)."""
+    d = len(run.inputs)
+    mass = float(post.weights[gp.predict_mean(post.particles[:, :d]) >= gp.extrapolation_cap].sum())
+    if mass < 0.01:
+        return ""
+    return (
+        f"; {mass:.0%} of the posterior lies where the surrogate extrapolates above its "
+        "training values (capped there): add runs there, or check the result"
+    )

@@ -110,13 +110,25 @@ class GpSmcOptions(PluginOptions):
         0.5, ge=0, le=1, description="resample when ESS < ess_min N (fraction of N) [-]"
     )
     rejuvenate: Literal["every_step", "after_resampling"] = Field(
-        "every_step",
-        description="when particles move: every tempering step (Algorithm 1) or only in "
-        "steps that resample and the last one (resample-move; far fewer likelihood calls "
-        "when zeta is close to 1) [-]",
+        "after_resampling",
+        description="when particles move: only in steps that resample and the last one "
+        "(resample-move: the same weighted approximation of every tempered density, "
+        "10 000 particles at zeta = 0.998 in seconds) or every tempering step (Algorithm 1 "
+        "as printed; thousands of steps at zeta close to 1 take hours) [-]",
     )
     map_bins: int = Field(
         30, ge=2, description="intervals per x of the MAP histogram under theta (Remark 8) [-]"
     )
     laplace: bool = Field(True, description="Laplace approximation at the MAP (no theta only) [-]")
-    max_smc_steps: int = Field(5000, ge=1, description="limit of tempering steps [-]")
+    max_smc_steps: int | None = Field(
+        None,
+        ge=1,
+        description="limit of tempering steps (None: 100 halvings of the ESS, "
+        "ceil(100 log 0.5 / log zeta), at least 1000) [-]",
+    )
+    surrogate_uncertainty: Literal["none", "expected_posterior"] = Field(
+        "none",
+        description="'expected_posterior': the posterior averaged over joint sample paths of "
+        "the GP (each normalised), so that credible intervals include what the surrogate "
+        "does not know (gp_uncertainty); 'none': SMC on the GP mean (Paper B) [-]",
+    )

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.problem import Result, jsonable
+from .gp_uncertainty import SurrogateUncertainty
 
 FloatArray = NDArray[np.float64]
 
@@ -227,9 +228,10 @@ class GpSmcResult(Result):
         ``surrogate`` or ``direct``.
     priors
         The inputs' descriptions (name, unit, bounds, prior).
-    design, adaptive, surrogate, check, posterior, smc
+    design, adaptive, surrogate, check, uncertainty, posterior, smc
         The stages' records (see the module docstring); ``adaptive`` only with the
-        adaptive design.
+        adaptive design, ``uncertainty`` only with ``surrogate_uncertainty =
+        "expected_posterior"`` (then ``posterior`` is the expected posterior).
     seconds
         Wall time of the analysis.
     """
@@ -242,6 +244,7 @@ class GpSmcResult(Result):
     adaptive: AdaptiveDesign | None = field(default=None, repr=False)
     surrogate: SurrogateFit | None = field(default=None, repr=False)
     check: PosteriorCheck | None = None
+    uncertainty: SurrogateUncertainty | None = field(default=None, repr=False)
     posterior: ParticlePosterior | None = field(default=None, repr=False)
     smc: SmcSummary | None = field(default=None, repr=False)
     seconds: float = 0.0
@@ -283,7 +286,7 @@ class GpSmcResult(Result):
             "priors": self.priors,
             "seconds": self.seconds,
         }
-        for name in ("design", "adaptive", "surrogate", "check", "posterior", "smc"):
+        for name in ("design", "adaptive", "surrogate", "check", "uncertainty", "posterior", "smc"):
             value = getattr(self, name)
             parts[name] = None if value is None else asdict(value)
         out["info"] = {**out["info"], **jsonable(parts)}

@@ -21,22 +21,32 @@ conjugate gradients.
 Only the posterior mean (eq. 28a) is needed inside SMC: :meth:`GpSurrogate.predict_mean`
 evaluates k(x*, X) alpha for all particles at once, with the weight vector
 alpha = (K + sigma_n^2 I)^-1 (y - m) computed once after training; no variances.
+:meth:`GpSurrogate.predict_mean_guarded` caps that mean at the largest training value plus a
+margin (:func:`~fbia.iterators.smc_diagnostics.extrapolation_margin`, chi2_d(0.999) / 2 units
+of L), counts the capped points in ``guard``, and :meth:`GpSurrogate.extrapolated_mass` gives
+the posterior mass an SMC result puts where the cap bites: a sampler cannot be pulled into a
+region where the surrogate invents evidence without it showing.
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
 import time
 import warnings
 from collections.abc import Mapping
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError
+from .gp_mean import fused_kernels
+from .smc_diagnostics import extrapolation_margin
+
+if TYPE_CHECKING:
+    from .smc import SmcResult
 
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
@@ -49,6 +59,16 @@ OPTIMIZERS = ("lbfgsb", "scg")
 #: (max L - min L)^2) during training.
 LENGTHSCALE_BOUNDS = (1e-3, 1e2)
 VARIANCE_BOUNDS = (1e-4, 1e4)
+
+
+@dataclass
+class GuardCounts:
+    """What :meth:`GpSurrogate.predict_mean_guarded` capped: calls and points."""
+
+    calls: int = 0
+    capped_calls: int = 0
+    points: int = 0
+    capped_points: int = 0
 
 
 def blas_single_thread() -> contextlib.AbstractContextManager[Any]:
@@ -122,73 +142,6 @@ def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.
     return np.asarray(cho_solve((chol, True), b))
 
 
-@functools.cache
-def _fused_kernels() -> Any:
-    """JIT-compiled fused k(x*, X) alpha loops, built on first use (numba imports slowly).
-
-    One pass over the particles (in parallel blocks) and the training points, without the
-    (M, n) cross-covariance matrix: 5-10x faster than the numpy blocks, same numbers up to
-    round-off.
-    """
-    import numba
-
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def product_mean(xs, xt_t, ep_s, em_s, ep_t, em_t, alpha, block):
-        # exp(-|a - b|) = min(e^-a e^b, e^a e^-b): with the exponentials of every particle
-        # (ep_s = e^a, em_s = e^-a) and training coordinate precomputed, the pair loop has no
-        # exp left and vectorises (numba has no vectorised exp without Intel's SVML).
-        m, d = xs.shape
-        n = xt_t.shape[1]
-        out = np.empty(m)
-        n_blocks = (m + block - 1) // block
-        for b in numba.prange(n_blocks):
-            e = np.empty(n)
-            p = np.empty(n)
-            for i in range(b * block, min(m, (b + 1) * block)):
-                e[:] = 1.0
-                p[:] = 1.0
-                for j in range(d):
-                    xij = xs[i, j]
-                    epj = ep_s[i, j]
-                    emj = em_s[i, j]
-                    row = xt_t[j]
-                    rp = ep_t[j]
-                    rm = em_t[j]
-                    for k in range(n):
-                        p[k] *= 1.0 + abs(xij - row[k])
-                        e[k] *= min(emj * rp[k], epj * rm[k])
-                acc = 0.0
-                for k in range(n):
-                    acc += alpha[k] * p[k] * e[k]
-                out[i] = acc
-        return out
-
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def single_mean(xs, xt_t, alpha, block):
-        m, d = xs.shape
-        n = xt_t.shape[1]
-        out = np.empty(m)
-        n_blocks = (m + block - 1) // block
-        for b in numba.prange(n_blocks):
-            r2 = np.empty(n)
-            for i in range(b * block, min(m, (b + 1) * block)):
-                r2[:] = 0.0
-                for j in range(d):
-                    xij = xs[i, j]
-                    row = xt_t[j]
-                    for k in range(n):
-                        t = xij - row[k]
-                        r2[k] += t * t
-                acc = 0.0
-                for k in range(n):
-                    r = np.sqrt(r2[k])
-                    acc += alpha[k] * (1.0 + r) * np.exp(-r)
-                out[i] = acc
-        return out
-
-    return product_mean, single_mean
-
-
 class GpSurrogate:
     """GP regression model of the log-likelihood L(x) (Paper B, eq. 26-29).
 
@@ -217,6 +170,10 @@ class GpSurrogate:
         are refined on all points with at most ``polish_iters`` iterations.
     polish_iters
         Iteration limit of that refinement on all points.
+    guard_margin
+        Units of L above the largest training value where :meth:`predict_mean_guarded` caps
+        the mean; ``None``: chi2_d(0.999) / 2 (12.2 for d = 7, see
+        :func:`~fbia.iterators.smc_diagnostics.extrapolation_margin`).
     """
 
     def __init__(
@@ -230,6 +187,7 @@ class GpSurrogate:
         gpy_default: bool = False,
         subset: int = 800,
         polish_iters: int = 60,
+        guard_margin: float | None = None,
     ) -> None:
         if optimizer not in OPTIMIZERS:
             raise ConfigError(
@@ -253,6 +211,10 @@ class GpSurrogate:
         self.model: Any = None
         self.info: dict[str, Any] = {}
         self._chol: NDArray[np.float64] | None = None  # set when restored (from_state)
+        if guard_margin is not None and not guard_margin >= 0:
+            raise ConfigError(f"guard_margin must be >= 0, got {guard_margin}", "gp")
+        self.guard_margin = guard_margin
+        self.guard = GuardCounts()
 
     # -- training -------------------------------------------------------------------------
     def fit(
@@ -444,14 +406,14 @@ class GpSurrogate:
     def predict_mean(self, x: ArrayLike, fused: bool | None = None) -> NDArray[np.float64]:
         """Posterior mean of L at the rows of ``x`` (M, d) (eq. 28a), all points at once.
 
-        ``fused``: compiled numba loops (``None``: from 64 points on; ``True``: always) or
-        numpy blocks (``False``).
+        ``fused``: compiled numba loops (:mod:`.gp_mean`; ``None``: from 64 points on;
+        ``True``: always) or numpy blocks (``False``).
         """
         if not hasattr(self, "_alpha"):
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
         xs = self._standardise(np.atleast_2d(x))
         if fused is not False and (fused or len(xs) >= 64):
-            kernels = _fused_kernels()
+            kernels = fused_kernels()
             scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
             xt_t = np.ascontiguousarray((self._xs * scale).T)
             a = np.ascontiguousarray(xs * scale)
@@ -472,6 +434,30 @@ class GpSurrogate:
         return self.mean_value + self.scale * out
 
     __call__ = predict_mean
+
+    @property
+    def extrapolation_cap(self) -> float:
+        """The largest credible L: the largest training value + ``guard_margin``."""
+        margin = self.guard_margin
+        if margin is None:
+            margin = extrapolation_margin(self.x_train.shape[1])
+        return float(self.y_train.max()) + margin
+
+    def predict_mean_guarded(self, x: ArrayLike) -> NDArray[np.float64]:
+        """:meth:`predict_mean` capped at :attr:`extrapolation_cap` (counted in ``guard``)."""
+        mean = self.predict_mean(x)
+        cap = self.extrapolation_cap
+        n_capped = int(np.count_nonzero(mean > cap))
+        self.guard.calls += 1
+        self.guard.points += len(mean)
+        self.guard.capped_calls += n_capped > 0
+        self.guard.capped_points += n_capped
+        return np.minimum(mean, cap) if n_capped else mean
+
+    def extrapolated_mass(self, result: SmcResult) -> float:
+        """Posterior mass of an SMC result at or above :attr:`extrapolation_cap`: at capped
+        points of a guarded run, above the cap in an unguarded one (0: no extrapolation)."""
+        return float(result.weights[result.log_likelihood >= self.extrapolation_cap].sum())
 
     def predict(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Posterior mean and variance of L (eq. 28a-b), through GPy (for plots, checks)."""

@@ -21,7 +21,19 @@ covariance scaled by ``(a + b * acceptance)**2`` with a = 1/9, b = 8/9 (Paper B 
 With ``rejuvenate="after_resampling"`` the particles move only in the steps that resample
 and in the last one (resample-move, Chopin 2002): the same weighted approximation of every
 pi_gamma, since each move leaves pi_gamma invariant, at a fraction of the likelihood
-evaluations when zeta is close to 1 (hundreds of tempering steps, a few resamplings).
+evaluations when zeta is close to 1.
+
+Which to use: one resampling cycle takes log(ess_min) / log(zeta) steps (346 at zeta = 0.998)
+and an informative posterior in a few dimensions needs ten to forty cycles, i.e. thousands of
+steps. ``"every_step"`` costs N n_rej likelihood calls in each of them: 10 000 particles and 30
+MH steps on a 2000-point 7-D GP mean are about 0.5 s per step, half an hour per run at zeta =
+0.998. Use it only where the run has few steps (zeta <= 0.95: tens to hundreds).
+``"after_resampling"`` moves once per cycle: the same settings finish in about ten seconds
+(``benchmarks/bench_smc_paper_settings.py``). The default step limit (``max_steps=None``) is
+100 halvings of the ESS, ceil(100 log 0.5 / log zeta) steps (at least 1000), about three
+times what a 7-D posterior 10^4 times narrower than its prior needs; a run that hits it raises
+an error that says why (rate of progress, collapsed particles, a surrogate extrapolating above
+its training values) and what to change.
 The log-evidence log p(Y) = sum_s log sum_i W_{s-1}^i exp((gamma_s - gamma_{s-1}) L_i) is a
 by-product.
 
@@ -39,11 +51,28 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq
 
 from ..core.errors import ConfigError
 from ..core.iteration import drain
 from ..core.parameters import Prior
+from .smc_diagnostics import stall_message
+from .smc_tempering import (
+    EssTempering,
+    default_max_steps,
+    ess,
+    logsumexp,
+    systematic_resample,
+)
+
+__all__ = [
+    "SequentialMonteCarlo",
+    "SmcResult",
+    "SmcState",
+    "ess",
+    "logsumexp",
+    "smc",
+    "systematic_resample",
+]
 
 LogLikelihood = Callable[[NDArray[np.float64]], ArrayLike]
 
@@ -52,36 +81,6 @@ SCALE_A = 1.0 / 9.0
 SCALE_B = 8.0 / 9.0
 #: When the particles move: Algorithm 1 (every step) or resample-move.
 REJUVENATE = ("every_step", "after_resampling")
-
-
-def logsumexp(a: NDArray[np.float64]) -> float:
-    """log sum exp(a) of a 1-D array, -inf when all entries are -inf.
-
-    scipy.special.logsumexp gives the same numbers with ~0.3 ms of array-API overhead per
-    call; an SMC run with zeta close to 1 calls this tens of thousands of times.
-    """
-    m = float(a.max()) if a.size else -math.inf
-    if not math.isfinite(m):
-        return m
-    return m + math.log(float(np.exp(a - m).sum()))
-
-
-def ess(log_weights: NDArray[np.float64]) -> float:
-    """Effective sample size 1 / sum(w_i^2) of normalised weights (eq. 14), from log-weights."""
-    m = float(log_weights.max()) if log_weights.size else -math.inf
-    if not math.isfinite(m):
-        return 0.0
-    w = np.exp(log_weights - m)
-    return float(w.sum() ** 2 / np.dot(w, w))
-
-
-def systematic_resample(weights: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.intp]:
-    """Indices of a systematic resampling of normalised ``weights`` (one uniform draw)."""
-    n = len(weights)
-    positions = (rng.random() + np.arange(n)) / n
-    cumulative = np.cumsum(weights)
-    cumulative[-1] = 1.0
-    return np.minimum(np.searchsorted(cumulative, positions, side="right"), n - 1)
 
 
 @dataclass
@@ -212,10 +211,17 @@ class SequentialMonteCarlo:
     names
         Parameter names for results and plots.
     max_steps
-        Stop with an error after this many tempering steps.
+        Stop with an error after this many tempering steps. ``None``: 100 halvings of the
+        ESS, ceil(100 log 0.5 / log zeta) steps and at least 1000 (34 623 at zeta = 0.998),
+        about three times what a 7-D posterior 10^4 times narrower than its prior needs.
     rejuvenate
         ``"every_step"`` (Algorithm 1) or ``"after_resampling"``: Metropolis-Hastings moves
-        only in the steps that resample and in the final step to gamma = 1.
+        only in the steps that resample and in the final step to gamma = 1. With zeta close to
+        1 (thousands of steps) only ``"after_resampling"`` is affordable on a GP surrogate;
+        ``"every_step"`` suits runs of few steps (zeta <= 0.95).
+    training_range
+        (min, max) of the log-likelihood values a surrogate was trained on: the error of a
+        stalled run then says whether the particles sit far above them (extrapolation).
     """
 
     def __init__(
@@ -229,8 +235,9 @@ class SequentialMonteCarlo:
         seed: int | None = None,
         rng: np.random.Generator | None = None,
         names: Sequence[str] | None = None,
-        max_steps: int = 10_000,
+        max_steps: int | None = None,
         rejuvenate: str = "every_step",
+        training_range: tuple[float, float] | None = None,
     ) -> None:
         if not callable(log_likelihood):
             raise ConfigError("log_likelihood must be callable: (N, d) array -> (N,) array", "smc")
@@ -260,9 +267,17 @@ class SequentialMonteCarlo:
         self.ess_min = float(ess_min)
         self.rng = rng if rng is not None else np.random.default_rng(seed)
         self.names = list(names) if names is not None else [f"x{i}" for i in range(len(priors))]
-        self.max_steps = int(max_steps)
+        if max_steps is not None and int(max_steps) < 1:
+            raise ConfigError(f"max_steps must be >= 1 or None, got {max_steps}", "smc")
+        self.max_steps = default_max_steps(self.zeta) if max_steps is None else int(max_steps)
+        if training_range is not None and not training_range[0] <= training_range[1]:
+            raise ConfigError(f"training_range must be (min, max), got {training_range}", "smc")
+        self.training_range = training_range
         self.nfev = 0
         self.n_nonfinite = 0
+        #: One dict per tempering step so far (the result's ``history``; readable while
+        #: :meth:`steps` runs, e.g. after stopping it early).
+        self.history: list[dict[str, Any]] = []
 
     @property
     def dim(self) -> int:
@@ -273,7 +288,12 @@ class SequentialMonteCarlo:
         """log p(x) = sum_j log p_j(x_j) for an array (M, d)."""
         out = np.zeros(len(x))
         for j, prior in enumerate(self.priors):
-            out += prior.logpdf(x[:, j])
+            if prior.kind == "uniform":  # scipy's numbers without its ~0.3 ms per call
+                lo, hi = prior.params["lower"], prior.params["upper"]
+                v = x[:, j]
+                out += np.where((v >= lo) & (v <= hi), -math.log(hi - lo), -np.inf)
+            else:
+                out += prior.logpdf(x[:, j])
         return np.where(np.isnan(out), -np.inf, out)
 
     def _loglik(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -294,59 +314,26 @@ class SequentialMonteCarlo:
         return values
 
     # -- the algorithm --------------------------------------------------------------------
-    def _next_gamma(self, gamma: float, log_w: NDArray[np.float64], loglik: NDArray[np.float64]):
-        """gamma_s with ESS_s = zeta ESS_{s-1}, or 1 when no smaller one exists (Algorithm 1)."""
-        target = self.zeta * ess(log_w)
-        finite = np.isfinite(loglik)
-        # Particles with L = -inf get weight 0 at any gamma > current gamma.
-        lw, ll = log_w[finite], loglik[finite]
-
-        def excess(g: float) -> float:
-            # ESS of the reweighted particles: (sum w)^2 / sum w^2, one exp pass (this runs
-            # ~20 times per tempering step, thousands of steps with zeta close to 1).  The
-            # ESS does not depend on a common factor of the weights: shifting by the largest
-            # new log-weight keeps the largest weight at 1, however small every likelihood
-            # is (shifting by the previous weights underflowed to 0/0 below L = -700).
-            z = lw + (g - gamma) * ll
-            w = np.exp(z - float(z.max()))
-            return float(w.sum() ** 2 / np.dot(w, w)) - target
-
-        if excess(1.0) >= 0.0:
-            return 1.0
-        if excess(gamma) < 0.0:  # dropping the zero-likelihood particles already costs more
-            return float(np.nextafter(gamma, 2.0))
-        return float(brentq(excess, gamma, 1.0, xtol=1e-14, rtol=1e-10))
-
     def _stalled(
-        self, gamma: float, loglik: NDArray[np.float64], log_w: NDArray[np.float64]
+        self,
+        gamma: float,
+        loglik: NDArray[np.float64],
+        log_w: NDArray[np.float64],
+        history: Sequence[dict[str, Any]] = (),
     ) -> str:
         """Why the tempering did not reach gamma = 1 within max_steps, and what to change."""
-        finite = loglik[np.isfinite(loglik)]
-        spread = float(np.ptp(finite)) if finite.size else math.nan
-        alive = int(np.sum(np.exp(log_w) > 1e-3 / len(log_w)))
-        unique = len(np.unique(loglik))
-        # resampling restarts the ESS at N; each step lowers it by the factor zeta, so one
-        # resampling cycle takes log(ess_min) / log(zeta) steps
-        cycle = math.log(max(self.ess_min, 1e-3)) / math.log(self.zeta)
-        why = [
-            f"no convergence to gamma = 1 in {self.max_steps} tempering steps "
-            f"(gamma = {gamma:.3g})",
-            f"with zeta = {self.zeta:g} one resampling cycle takes about {cycle:.0f} steps",
-            f"the log-likelihood spans {spread:.3g} over the particles",
-        ]
-        if unique < 0.1 * len(loglik):
-            why.append(
-                f"the particles have collapsed onto {unique} distinct points (raise "
-                "n_rejuvenation or the proposal's reach)"
-            )
-        elif alive < 0.1 * len(log_w):
-            why.append(f"only {alive} particles carry weight")
-        why.append(
-            "lower zeta (e.g. 0.95), use rejuvenate = 'after_resampling', or raise "
-            "max_steps; a log-likelihood spread far beyond the training range of a surrogate "
-            "is a surrogate artefact (check it with n_check)"
+        return stall_message(
+            gamma=gamma,
+            max_steps=self.max_steps,
+            zeta=self.zeta,
+            ess_min=self.ess_min,
+            loglik=loglik,
+            log_w=log_w,
+            history=history,
+            dim=self.dim,
+            rejuvenate=self.rejuvenate,
+            training_range=self.training_range,
         )
-        return "; ".join(why)
 
     def steps(self) -> Generator[SmcState, None, SmcResult]:
         """Run Algorithm 1; yield after each tempering step, return the :class:`SmcResult`."""
@@ -356,57 +343,70 @@ class SequentialMonteCarlo:
         loglik = self._loglik(x)
         if not np.any(np.isfinite(loglik)):
             raise ConfigError("the log-likelihood is -inf or NaN at every prior draw", "smc")
-        log_w = np.zeros(n) - math.log(n)
+        log_w = np.full(n, -math.log(n))  # normalised after every step
+        ess_now = float(n)
+        tempering = EssTempering(self.zeta, n)
+        inc, u = np.empty(n), np.empty(n)
         gamma = 0.0
-        gammas, ess_hist, accept_hist, history = [0.0], [float(n)], [], []
+        gammas, ess_hist, accept_hist = [0.0], [float(n)], []
+        history: list[dict[str, Any]] = []
+        self.history = history
         log_evidence, log_evidence_var = 0.0, 0.0
+        # the segment since the particles last moved or were resampled (evidence error)
         seg_start: NDArray[np.float64] | None = None
-        seg_inc, seg_log_z = np.zeros(n), 0.0
+        seg_gamma, seg_ess, seg_log_z = 0.0, float(n), 0.0
         acceptance = 1.0
         step = 0
         while gamma < 1.0:
             t0 = time.perf_counter()
             step += 1
             if step > self.max_steps:
-                raise ConfigError(self._stalled(gamma, loglik, log_w), "smc")
-            new_gamma = self._next_gamma(gamma, log_w, loglik)
-            # Reweighting w_s = w_{s-1} exp((gamma_s - gamma_{s-1}) L) and the evidence factor.
-            inc = np.where(np.isfinite(loglik), (new_gamma - gamma) * loglik, -np.inf)
-            log_w_norm = log_w - logsumexp(log_w)
-            log_z_inc = float(logsumexp(log_w_norm + inc))
+                raise ConfigError(self._stalled(gamma, loglik, log_w, history), "smc")
+            new_gamma = tempering.next_gamma(gamma, log_w, loglik, ess_now)
+            t_gamma = time.perf_counter() - t0
+            if seg_start is None:
+                seg_start, seg_gamma, seg_ess, seg_log_z = log_w.copy(), gamma, ess_now, 0.0
+            # Reweighting w_s = w_{s-1} exp((gamma_s - gamma_{s-1}) L) (L = -inf: weight 0), its
+            # evidence factor sum_i W_{s-1}^i exp(...) and the ESS, in one exponential pass.
+            np.multiply(loglik, new_gamma - gamma, out=inc)
+            log_w += inc
+            top = float(log_w.max())
+            np.subtract(log_w, top, out=u)
+            np.exp(u, out=u)
+            s1 = float(u.sum())
+            current_ess = s1 * s1 / float(u @ u)
+            log_z_inc = top + math.log(s1)
+            log_w -= log_z_inc
             log_evidence += log_z_inc
-            if seg_start is None:  # weights where the particles last moved or were resampled
-                seg_start, seg_inc, seg_log_z = log_w_norm, np.zeros(n), 0.0
-            seg_inc = seg_inc + inc
             seg_log_z += log_z_inc
-            log_w = log_w_norm + inc
-            log_w -= logsumexp(log_w)
             gamma = new_gamma
-            current_ess = ess(log_w)
-            resampled = False
-            if current_ess < self.ess_min * n:
-                idx = systematic_resample(np.exp(log_w), rng)
-                x, loglik, log_prior = x[idx], loglik[idx], log_prior[idx]
-                log_w = np.zeros(n) - math.log(n)
-                resampled = True
-            scale = SCALE_A + SCALE_B * acceptance
+            resampled = current_ess < self.ess_min * n
             move = self.n_rejuvenation > 0 and (
                 self.rejuvenate == "every_step" or resampled or gamma >= 1.0
             )
             if move or resampled or gamma >= 1.0:
                 # Variance of the evidence factor of the steps since the particles last moved
                 # or were resampled: one importance-sampling estimate with the same particles
-                # (not independent steps).
-                ratio = np.exp(seg_inc - seg_log_z)
+                # (not independent steps), whose L has not changed since.
+                ratio = np.exp((gamma - seg_gamma) * loglik - seg_log_z)
                 w0 = np.exp(seg_start)
-                log_evidence_var += float(np.sum(w0 * (ratio - 1.0) ** 2)) / max(
-                    ess(seg_start), 1.0
-                )
+                log_evidence_var += float(np.sum(w0 * (ratio - 1.0) ** 2)) / max(seg_ess, 1.0)
                 seg_start = None
+            ess_now = current_ess
+            if resampled:
+                idx = systematic_resample(np.exp(log_w), rng)
+                x, loglik, log_prior = x[idx], loglik[idx], log_prior[idx]
+                log_w = np.full(n, -math.log(n))
+                ess_now = float(n)
+                tempering.invalidate()
+            scale = SCALE_A + SCALE_B * acceptance
+            t_move = time.perf_counter()
             if move:
                 x, loglik, log_prior, acceptance = self._rejuvenate(
                     x, loglik, log_prior, log_w, gamma, scale
                 )
+                tempering.invalidate()
+            t_move = time.perf_counter() - t_move
             gammas.append(gamma)
             ess_hist.append(current_ess)
             accept_hist.append(acceptance)
@@ -421,6 +421,8 @@ class SequentialMonteCarlo:
                     "scale": scale,
                     "nfev": self.nfev,
                     "seconds": time.perf_counter() - t0,
+                    "seconds_gamma": t_gamma,
+                    "seconds_move": t_move,
                 }
             )
             yield SmcState(step, gamma, current_ess, resampled, acceptance, log_evidence, self.nfev)
@@ -504,8 +506,9 @@ def smc(
     seed: int | None = None,
     rng: np.random.Generator | None = None,
     names: Sequence[str] | None = None,
-    max_steps: int = 10_000,
+    max_steps: int | None = None,
     rejuvenate: str = "every_step",
+    training_range: tuple[float, float] | None = None,
 ) -> SmcResult:
     """Sample exp(L(x)) p(x) with adaptive tempered SMC (Paper B, Algorithm 1).
 
@@ -524,5 +527,6 @@ def smc(
         names=names,
         max_steps=max_steps,
         rejuvenate=rejuvenate,
+        training_range=training_range,
     )
     return sampler.run()

@@ -311,11 +311,9 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
 
 
 def test_resample_move_gives_the_algorithm_1_posterior_with_fewer_calls(runs):
-    problem, ref, _ = runs[False]
-    it = fbia.iterator(
-        "gp_smc", n_train=256, n_test=32, **{**FAST, "rejuvenate": "after_resampling"}
-    )
-    result = it.run(problem)
+    problem, result, _ = runs[False]  # the default: resample-move
+    it = fbia.iterator("gp_smc", n_train=256, n_test=32, **{**FAST, "rejuvenate": "every_step"})
+    ref = it.run(problem)  # Algorithm 1 as printed
     smc, smc_ref = result.smc, ref.smc
     assert smc.rejuvenate == "after_resampling" and smc_ref.rejuvenate == "every_step"
     assert smc.steps_with_moves < smc.n_steps
@@ -380,3 +378,22 @@ def test_the_rkhs_residual_vector_does_not_change_the_likelihood():
     post_v = fbia.iterator("gp_smc", n_train=32, **FAST).run(vector)
     post_s = fbia.iterator("gp_smc", n_train=32, **FAST).run(scalar)
     assert post_v.x == post_s.x
+
+
+def test_surrogate_uncertainty_option_widens_a_starved_posterior():
+    """The expected posterior (gp_uncertainty) from the iterator: a 10-run Sobol design whose
+    GP does not know L well gives wider intervals than SMC on the GP mean, and says so."""
+    problem = _problem()
+    opts = {**FAST, "n_train": 10, "n_check": 0, "laplace": False}
+    mean_only = fbia.iterator("gp_smc", **opts).run(problem)
+    marginal = fbia.iterator("gp_smc", surrogate_uncertainty="expected_posterior", **opts).run(
+        problem
+    )
+    assert mean_only.uncertainty is None and marginal.uncertainty is not None
+    assert np.all(marginal.posterior.std > mean_only.posterior.std)
+    assert "GP uncertainty marginalised over" in marginal.message
+    assert marginal.to_dict()["info"]["uncertainty"]["n_paths"] > 0
+    with pytest.raises(fbia.ConfigError, match="surrogate_uncertainty"):
+        fbia.iterator("gp_smc", mode="direct", surrogate_uncertainty="expected_posterior").run(
+            problem
+        )

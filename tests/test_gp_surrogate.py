@@ -128,6 +128,10 @@ def test_fused_numba_mean_equals_numpy_blocks(trained):
     np.testing.assert_allclose(
         gp.predict_mean(x, fused=True), gp.predict_mean(x, fused=False), rtol=0, atol=1e-9
     )
+    for m in (1, 2, 3, 65, 66, 67):  # the product kernel works on groups of four particles
+        np.testing.assert_allclose(
+            gp.predict_mean(x[:m], fused=True), gp.predict_mean(x[:m], fused=False), atol=1e-9
+        )
     if gp.ard:  # length scales so short that e^(sqrt3 x / l) would overflow: numpy blocks
         state = {**gp.state(), "lengthscales": np.array([2e-3, 3e-3])}
         short = GpSurrogate.from_state(state)
@@ -167,3 +171,35 @@ def test_fused_product_kernel_equals_gpys_product_with_exact_gradients():
         xm[i, j] -= h
         fd = (np.sum(dl * k.K(xp)) - np.sum(dl * k.K(xm))) / (2 * h)
         assert abs(fd - grad[i, j]) < 1e-6 * max(1.0, abs(fd))
+
+
+def test_guard_caps_a_mean_that_overshoots_outside_the_data_and_counts_it():
+    """Issue 16, item 4: a concave quadratic peaking at (2, 2), trained on [0, 1]^2. The GP
+    carries the rise on beyond the data (to hundreds of units above the largest training
+    value, above the true function); the guard caps it at max L + chi2_2(0.999) / 2."""
+    from fbia.iterators.smc import SmcResult
+
+    x = qmc.Sobol(2, scramble=True, seed=4).random(64)
+    y = -100.0 * np.sum((x - 2.0) ** 2, axis=1)
+    gp = GpSurrogate(restarts=2).fit(x, y, rng=0)
+    cap = gp.extrapolation_cap
+    assert cap == pytest.approx(y.max() + 13.8155 / 2, abs=1e-3)  # chi2_2(0.999) = 13.8155
+    g = np.linspace(0.0, 3.0, 31)
+    grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    raw = gp.predict_mean(grid)
+    over = raw > cap
+    assert raw.max() > y.max() + 100.0 and 100 < over.sum() < len(grid)
+    assert np.all(over[np.all(grid >= 1.5, axis=1)])  # far beyond the data: all capped
+    guarded = gp.predict_mean_guarded(grid)
+    np.testing.assert_array_equal(guarded, np.where(over, cap, raw))
+    inside = gp.predict_mean_guarded(x)  # a second call, nothing to cap
+    np.testing.assert_array_equal(inside, gp.predict_mean(x))
+    assert gp.guard.calls == 2 and gp.guard.capped_calls == 1
+    assert gp.guard.points == len(grid) + len(x) and gp.guard.capped_points == over.sum()
+    # The posterior mass at capped points of a (here: made-up) SMC result on the guarded mean.
+    weights = np.full(len(grid), 1.0 / len(grid))
+    result = SmcResult(grid, weights, guarded, np.zeros(len(grid)), 0.0, 0.0, [], [], [], 0, [])
+    assert gp.extrapolated_mass(result) == pytest.approx(over.mean())
+    with pytest.raises(fbia.ConfigError, match="guard_margin must be >= 0"):
+        GpSurrogate(guard_margin=-1.0)
+    assert GpSurrogate(guard_margin=0.0).fit(x, y, rng=0).extrapolation_cap == y.max()

@@ -8,6 +8,7 @@ from scipy import stats
 
 import fbia
 from fbia.iterators.smc import SequentialMonteCarlo, ess, systematic_resample
+from fbia.iterators.smc_tempering import EssTempering, default_max_steps
 
 N = 2000
 
@@ -241,3 +242,113 @@ def test_a_stalled_tempering_says_why_and_what_to_change():
     assert "no convergence to gamma = 1 in 20 tempering steps" in text
     assert "one resampling cycle takes about 346 steps" in text
     assert "lower zeta" in text and "spans" in text
+    assert "fewer than two resamplings" in text
+
+
+def _stall(training_range, **kwargs):
+    with pytest.raises(fbia.ConfigError) as err:
+        fbia.smc(
+            lambda x: -1e4 * (x[:, 0] - 0.3) ** 2,
+            [fbia.priors.uniform(0.0, 1.0)],
+            n_particles=200,
+            n_rejuvenation=2,
+            seed=0,
+            training_range=training_range,
+            **kwargs,
+        )
+    return str(err.value)
+
+
+def test_a_stall_says_how_fast_gamma_grows_and_whether_a_surrogate_extrapolates():
+    """Issue 16, item 4: with the training range of a surrogate, the error says whether the
+    particles' L lies beyond its largest value + chi2_1(0.999) / 2 = 5.41, and from the
+    growth of gamma per resampling cycle how many steps gamma = 1 would need."""
+    text = _stall((-1e4, -30.0), zeta=0.9, max_steps=16)
+    assert "gamma grew by a factor" in text and "max_steps of at least" in text
+    assert "above the largest training value, far beyond the margin 5.41" in text
+    assert "That is the surrogate extrapolating" in text
+    text = _stall((-1e4, 0.0), zeta=0.9, max_steps=16)
+    assert "trained on log-likelihoods in [-1e+04, 0]" in text and "no extrapolation" in text
+    with pytest.raises(fbia.ConfigError, match=r"training_range must be \(min, max\)"):
+        fbia.smc(_banana, [fbia.priors.uniform(0, 1)] * 2, training_range=(1.0, 0.0))
+
+
+def test_the_default_step_limit_scales_with_zeta():
+    """100 halvings of the ESS (at least 1000 steps): the paper's zeta = 0.998 is not cut off
+    at a fixed 5000 or 10 000 steps."""
+    assert default_max_steps(0.998) == 34_623
+    assert default_max_steps(0.995) == 13_829
+    assert default_max_steps(0.9) == 1000
+    priors = [fbia.priors.uniform(0, 1)]
+    assert SequentialMonteCarlo(_banana, priors, zeta=0.998).max_steps == 34_623
+    assert SequentialMonteCarlo(_banana, priors, zeta=0.998, max_steps=50).max_steps == 50
+
+
+def _brent_gamma(gamma, log_w, loglik, zeta):
+    """The previous implementation of the tempering rule (Brent's method on the ESS)."""
+    from scipy.optimize import brentq
+
+    target = zeta * ess(log_w)
+    finite = np.isfinite(loglik)
+    lw, ll = log_w[finite], loglik[finite]
+
+    def excess(g):
+        z = lw + (g - gamma) * ll
+        w = np.exp(z - z.max())
+        return w.sum() ** 2 / np.dot(w, w) - target
+
+    if excess(1.0) >= 0.0:
+        return 1.0
+    if excess(gamma) < 0.0:
+        return float(np.nextafter(gamma, 2.0))
+    return brentq(excess, gamma, 1.0, xtol=1e-14, rtol=1e-10)
+
+
+@pytest.mark.parametrize("case", ["equal", "unequal", "minus_inf", "to_one"])
+def test_newton_on_log_ess_finds_the_same_gamma_as_brent(case):
+    rng = np.random.default_rng(7)
+    n = 5000
+    loglik = -0.5 * rng.chisquare(5, size=n) * 1e3
+    log_w = np.full(n, -math.log(n))
+    gamma, zeta = 0.0, 0.998
+    if case == "unequal":  # weights not a function of L (after moves in Algorithm 1)
+        log_w = rng.normal(size=n)
+        gamma = 0.3
+    if case == "minus_inf":
+        loglik[rng.random(n) < 0.001] = -np.inf
+    if case == "to_one":
+        loglik *= 1e-6
+    tempering = EssTempering(zeta, n)
+    for _ in range(5):  # a few steps: the later ones start from the previous increments
+        g = tempering.next_gamma(gamma, log_w, loglik, ess(log_w))
+        assert g == pytest.approx(_brent_gamma(gamma, log_w, loglik, zeta), rel=1e-9, abs=0)
+        assert g > gamma
+        log_w = log_w + np.where(np.isfinite(loglik), (g - gamma) * loglik, -np.inf)
+        log_w -= np.logaddexp.reduce(log_w)
+        gamma = g
+        if gamma >= 1.0:
+            break
+    assert (gamma == 1.0) == (case == "to_one")
+    assert tempering.evaluations <= (12 if case == "unequal" else 16)
+
+
+def test_a_sharp_posterior_needs_thousands_of_steps_and_is_still_exact():
+    """The paper's zeta = 0.998 on a posterior 10^4 times narrower than its prior in 3-D:
+    about 7000 tempering steps, more than the old fixed limit of 5000 (gp_smc) allowed.
+    Conjugate: posterior N(y / (1 + s^2), s^2 / (1 + s^2)) per direction, evidence closed."""
+    s, y = 1e-4, np.array([0.3, -1.2, 2.0])
+    post = fbia.smc(
+        lambda x: -0.5 * np.sum((x - y) ** 2, axis=1) / s**2 - 1.5 * math.log(2 * math.pi * s**2),
+        [fbia.priors.normal(0.0, 1.0)] * 3,
+        n_particles=1000,
+        zeta=0.998,
+        n_rejuvenation=5,
+        seed=4,
+        rejuvenate="after_resampling",
+    )
+    assert 5000 < post.n_steps < 20_000 and post.gammas[-1] == 1.0
+    mean, sd = y / (1 + s**2), s / math.sqrt(1 + s**2)
+    np.testing.assert_array_less(np.abs(post.mean - mean), 4 * 1.5 * sd / math.sqrt(1000))
+    np.testing.assert_allclose(np.sqrt(np.diag(post.cov)), sd, rtol=0.15)
+    log_z = float(np.sum(stats.norm(0.0, math.sqrt(1 + s**2)).logpdf(y)))
+    assert abs(post.log_evidence - log_z) < 4 * post.log_evidence_se + 0.05
