@@ -3,7 +3,8 @@
 A Sobol start of ``n_initial`` runs (+ ``n_test`` held-out points), then per round: GP on
 the runs so far (L with a soft floor) -> SMC on the GP mean (``round_particles``, a coarse
 tempering) -> stop if the last round converged or the budget ``n_train`` is spent -> a batch
-of runs (posterior draws + the EIV rule) through the evaluator in one call (parallel
+of runs (posterior draws, draws from the tempered posterior exp(mu / 4) p, the EIV rule)
+through the evaluator in one call (parallel
 workers) -> the surrogate's error at the posterior draws, predicted before they are used.
 The last GP is always trained on every run; the final SMC (``n_particles``, ``zeta``, ...)
 and the posterior check are the iterator's.
@@ -44,6 +45,9 @@ EVIDENCE_TOL = 0.5
 #: the rounds' SMC: a coarse tempering (its posterior only steers the design)
 ROUND_ZETA = 0.9
 ROUND_REJUVENATION = 5
+#: the tempering of the wide posterior exp(beta mu) p that a quarter of each batch is drawn
+#: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further)
+WIDE_TEMPERATURE = 0.25
 #: fits a GP to (x, y), warm-started from earlier hyperparameters when given
 FitGp = Callable[[FloatArray, FloatArray, Mapping[str, Any] | None], GpSurrogate]
 #: SMC on a log-likelihood with a number of particles (the rounds' coarse settings)
@@ -138,8 +142,9 @@ def adaptive_design(
             (math.inf, math.inf) if previous is None else posterior_shift(previous, moments)
         )
         n_batch = min(batch_size(opts, n_design, slots), opts.n_train - n_design)
+        wide = sample(_tempered(gp, WIDE_TEMPERATURE), opts.round_particles)
         batch, n_draws = select_batch(
-            gp, post, n_batch, run.inputs, lambda z: log_prior(run.inputs, z), rng
+            gp, post, n_batch, run.inputs, lambda z: log_prior(run.inputs, z), rng, wide
         )
         new = run.evaluate(batch)
         new_loglik = run.log_likelihoods(new)
@@ -178,6 +183,13 @@ def adaptive_design(
     return AdaptiveOutcome(
         _design(points, loglik, run, train), n_initial, gp, floor, rounds, reason
     )
+
+
+def _tempered(gp: GpSurrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
+    def log_likelihood(z: FloatArray) -> FloatArray:
+        return beta * gp.predict_mean_guarded(z)
+
+    return log_likelihood
 
 
 def _design(points: FloatArray, loglik: FloatArray, run: SmcRun, train: Any) -> DesignRuns:

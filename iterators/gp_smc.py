@@ -168,16 +168,18 @@ class GpSmcIterator(IteratorBase):
             assert gp is not None
             check = yield from self._check_stage(run, post, gp)
         posterior_particles, uncertainty = post, None
-        if opts.surrogate_uncertainty == "expected_posterior":
-            assert gp is not None
-            posterior_particles, uncertainty = marginalise_surrogate_uncertainty(
+        wanted = opts.surrogate_uncertainty == "expected_posterior"
+        if gp is not None and run.noise is None and (wanted or opts.uncertainty_check):
+            expected, uncertainty = marginalise_surrogate_uncertainty(
                 post,
                 gp,
                 run.sampled_priors,
                 np.random.default_rng([opts.seed, 5]),
                 smc_options=self._smc_settings(),
             )
-        laplace = opts.laplace and opts.mode == "surrogate" and uncertainty is None
+            if wanted:
+                posterior_particles = expected
+        laplace = opts.laplace and opts.mode == "surrogate" and not wanted
         target = run.joint(log_likelihood)
         posterior = summarise(
             posterior_particles,
@@ -186,7 +188,7 @@ class GpSmcIterator(IteratorBase):
             opts.map_bins,
             (lambda z: target(z) + log_prior(run.sampled, z)) if laplace else None,
         )
-        status = run_status(opts.mode, check)
+        status = run_status(opts.mode, check, uncertainty)
         return GpSmcResult(
             status=status,
             success=status == "completed",
@@ -197,7 +199,8 @@ class GpSmcIterator(IteratorBase):
                 + ("" if check is None else check.note())
                 + _noise_note(run, posterior)
                 + ("" if gp is None else _extrapolation_note(run, post, gp))
-                + ("" if uncertainty is None else "; " + uncertainty.note())
+                + ("" if uncertainty is None or not wanted else "; " + uncertainty.note())
+                + ("" if uncertainty is None else uncertainty.reliability_note())
                 + (
                     "; the surrogate was not checked at posterior draws (n_check = 0): "
                     "nothing says whether this posterior is right"

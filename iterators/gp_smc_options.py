@@ -126,6 +126,13 @@ class GpSmcOptions(PluginOptions):
         description="limit of tempering steps (None: 100 halvings of the ESS, "
         "ceil(100 log 0.5 / log zeta), at least 1000) [-]",
     )
+    uncertainty_check: bool = Field(
+        True,
+        description="compare the posterior with its average over the GP's sample paths "
+        "(gp_uncertainty): if the GP's own uncertainty moves a mean by more than 0.3 std or "
+        "a std by more than a factor 1.5, the status is 'unreliable' (surrogate mode, known "
+        "sigma_N; a few seconds) [-]",
+    )
     surrogate_uncertainty: Literal["none", "expected_posterior"] = Field(
         "none",
         description="'expected_posterior': the posterior averaged over joint sample paths of "

@@ -23,6 +23,7 @@ from ..core.likelihood import (
 from ..core.parameters import Parameter, Prior
 from ..core.problem import Evaluation, InverseProblem
 from .gp_smc_result import PosteriorCheck
+from .gp_uncertainty import SurrogateUncertainty
 
 FloatArray = NDArray[np.float64]
 
@@ -130,11 +131,16 @@ class SmcRun:
         return self.log_likelihoods(evs)
 
 
-def run_status(mode: str, check: PosteriorCheck | None) -> str:
+def run_status(
+    mode: str, check: PosteriorCheck | None, uncertainty: SurrogateUncertainty | None = None
+) -> str:
     """``completed`` (direct SMC, or a surrogate whose error at posterior draws is well below
-    1 in L), ``unreliable`` (it is not) or ``unchecked`` (the check was switched off)."""
+    1 in L and whose own uncertainty does not move the posterior), ``unreliable`` (either
+    fails) or ``unchecked`` (the check was switched off)."""
     if mode != "surrogate":
         return "completed"
+    if uncertainty is not None and uncertainty.moves_posterior:
+        return "unreliable"
     if check is None:
         return "unchecked"
     return "completed" if check.reliable else "unreliable"

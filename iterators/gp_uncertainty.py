@@ -94,6 +94,10 @@ TAIL = 0.05
 MAX_TAIL_MASS = 0.2
 #: Fewer effective points than this in the averaged weights: the result is noisy.
 MIN_ESS = 100.0
+#: The GP's uncertainty may move a posterior mean by this many std, or change a std by this
+#: factor, before the mean-only posterior counts as unreliable (the accuracy gp_smc aims at).
+MAX_SHIFT = 0.3
+MAX_STD_RATIO = 1.5
 #: A pilot on the mean-only particles that is at most this much wider is the result.
 PILOT_RATIO = 1.2
 
@@ -166,6 +170,34 @@ class SurrogateUncertainty:
     @property
     def ok(self) -> bool:
         return not self.warnings
+
+    @property
+    def moves_posterior(self) -> bool:
+        """Whether the GP's own uncertainty moves a mean by more than :data:`MAX_SHIFT`
+        posterior std or changes a std by more than a factor :data:`MAX_STD_RATIO`: then the
+        surrogate does not know where the posterior is, whatever its error at draws from it."""
+        ratio = np.asarray(self.std_ratio, dtype=float)
+        shift = np.abs(np.asarray(self.mean_shift_relative, dtype=float))
+        return bool(
+            np.any(shift > MAX_SHIFT)
+            or np.any(ratio > MAX_STD_RATIO)
+            or np.any(ratio < 1.0 / MAX_STD_RATIO)
+        )
+
+    def reliability_note(self) -> str:
+        """For a result message: how far the GP's uncertainty moves the posterior."""
+        ratio = float(np.max(self.std_ratio))
+        shift = float(np.max(np.abs(self.mean_shift_relative)))
+        text = (
+            f"; averaged over the GP's sample paths the posterior widens by up to x{ratio:.2g} "
+            f"and moves by up to {shift:.2g} std"
+        )
+        if self.moves_posterior:
+            text += (
+                " (the surrogate does not know where the posterior ends: the posterior is "
+                "not reliable; raise n_train)"
+            )
+        return text
 
     def note(self) -> str:
         """One sentence for a result message."""

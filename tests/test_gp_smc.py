@@ -389,8 +389,12 @@ def test_surrogate_uncertainty_option_widens_a_starved_posterior():
     marginal = fbia.iterator("gp_smc", surrogate_uncertainty="expected_posterior", **opts).run(
         problem
     )
-    assert mean_only.uncertainty is None and marginal.uncertainty is not None
+    assert marginal.uncertainty is not None
     assert np.all(marginal.posterior.std > mean_only.posterior.std)
+    # the mean-only run is told that the GP's own uncertainty moves its posterior (the
+    # uncertainty check is on by default), with no forward run at posterior draws needed
+    assert mean_only.uncertainty.moves_posterior and mean_only.status == "unreliable"
+    assert "does not know where the posterior ends" in mean_only.message
     assert "GP uncertainty marginalised over" in marginal.message
     assert marginal.to_dict()["info"]["uncertainty"]["n_paths"] > 0
     with pytest.raises(fbia.ConfigError, match="surrogate_uncertainty"):
