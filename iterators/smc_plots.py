@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2, gaussian_kde
 
 from ..core.errors import ConfigError
+from ..core.likelihood import noise_parameter
 from ..core.parameters import Parameter
 from ..core.problem import InverseProblem
 from .gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
@@ -87,6 +88,10 @@ def plot_gp_smc_result(
             out.append(_design_only(r, inputs, folder))
         return out
     labels = [_label(p) for p in inputs]
+    # the posterior's inputs: the design's, and sigma_N when it was inferred
+    noise = noise_parameter(problem)
+    sampled = inputs if noise is None else [*inputs, noise]
+    sampled_labels = [_label(p) for p in sampled]
     n_x = int(_post(r).n_x)
     refits: dict[int, GpSurrogate | None] = {}
     surrogate = r.surrogate is not None
@@ -102,11 +107,11 @@ def plot_gp_smc_result(
     if n_x >= 2 and "particles" in wanted:
         out.append(_particles(r, labels, folder))
     if n_x >= 2 and "marginals_2d" in wanted:
-        out.append(_pairwise(r, inputs, labels, folder))
+        out.append(_pairwise(r, sampled, sampled_labels, folder))
     if "marginals_1d" in wanted:
-        out.append(_marginals(r, inputs, labels, folder))
+        out.append(_marginals(r, sampled, sampled_labels, folder))
     if "parallel_axes" in wanted:
-        out.append(_parallel_axes(r, labels, folder))
+        out.append(_parallel_axes(r, sampled_labels, folder))
     return out
 
 

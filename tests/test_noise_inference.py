@@ -119,7 +119,7 @@ def exact():
     return problem, mean, std
 
 
-def test_sigma_n_posterior_matches_quadrature(exact):
+def test_sigma_n_posterior_matches_quadrature(exact, tmp_path):
     problem, mean, std = exact
     result = fbia.iterator("gp_smc", n_train=60, n_particles=3000, n_rejuvenation=8, zeta=0.95).run(
         problem
@@ -134,3 +134,8 @@ def test_sigma_n_posterior_matches_quadrature(exact):
     lo, _, hi = result.posterior.credible_intervals["sigma_N"]
     assert lo < NOISE < hi
     assert "sigma_N = " in result.message and "inferred" in result.message
+    # its marginal is drawn beside the parameters'
+    from fbia.iterators.gp_smc import GpSmcIterator
+
+    (path,) = GpSmcIterator.write_plots(result, problem, tmp_path, figures=["marginals_1d"])
+    assert path.name == "marginals_1d.png" and path.stat().st_size > 10_000
