@@ -5,7 +5,9 @@ the runs so far (L with a soft floor) -> SMC on the GP mean (``round_particles``
 tempering) -> stop if the last round converged or the budget ``n_train`` is spent -> a batch
 of runs (posterior draws, draws from the tempered posterior exp(mu / 4) p, the EIV rule)
 through the evaluator in one call (parallel
-workers) -> the surrogate's error at the posterior draws, predicted before they are used.
+workers) -> the surrogate's error at the posterior draws, predicted before they are used; a round
+that looks converged is also checked against the posterior averaged over the GP's sample
+paths (the GP must not be unsure where the posterior ends).
 The last GP is always trained on every run; the final SMC (``n_particles``, ``zeta``, ...)
 and the posterior check are the iterator's.
 """
@@ -35,6 +37,7 @@ from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import RELIABLE_RMSE, AdaptiveRound, DesignRuns
 from .gp_smc_run import GpSmcState, SmcRun, log_prior
 from .gp_surrogate import GpSurrogate
+from .gp_uncertainty import marginalise_surrogate_uncertainty
 from .smc import SmcResult
 
 FloatArray = NDArray[np.float64]
@@ -162,6 +165,8 @@ def adaptive_design(
             and n_valid > 0
             and rmse < RELIABLE_RMSE
         )
+        if converged:  # and the GP's own uncertainty does not move the posterior either
+            converged = not _gp_unsure(gp, post, run, opts, rng)
         entry = AdaptiveRound(
             round=len(rounds) + 1,
             n_runs=n_design,
@@ -183,6 +188,25 @@ def adaptive_design(
     return AdaptiveOutcome(
         _design(points, loglik, run, train), n_initial, gp, floor, rounds, reason
     )
+
+
+def _gp_unsure(
+    gp: GpSurrogate, post: SmcResult, run: SmcRun, opts: GpSmcOptions, rng: np.random.Generator
+) -> bool:
+    """Whether the posterior averaged over the GP's sample paths differs from the round's
+    (gp_smc's uncertainty check, on the round's coarse posterior)."""
+    _, uncertainty = marginalise_surrogate_uncertainty(
+        post,
+        gp,
+        run.priors,
+        rng,
+        smc_options={
+            "n_particles": opts.round_particles,
+            "zeta": ROUND_ZETA,
+            "n_rejuvenation": ROUND_REJUVENATION,
+        },
+    )
+    return uncertainty.moves_posterior
 
 
 def _tempered(gp: GpSurrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
