@@ -189,7 +189,7 @@ class SurrogateUncertainty:
         ratio = float(np.max(self.std_ratio))
         shift = float(np.max(np.abs(self.mean_shift_relative)))
         text = (
-            f"; averaged over the GP's sample paths the posterior widens by up to x{ratio:.2g} "
+            f"; averaged over the GP's sample paths the posterior widens by up to x{ratio:.3g} "
             f"and moves by up to {shift:.2g} std"
         )
         if self.moves_posterior:
