@@ -165,7 +165,9 @@ def adaptive_design(
             and n_valid > 0
             and rmse < RELIABLE_RMSE
         )
-        if converged:  # and the GP's own uncertainty does not move the posterior either
+        if converged and run.noise is None and opts.uncertainty_check:
+            # and the GP's own uncertainty does not move the posterior either (the final
+            # status's check; with sigma_N inferred the GP models its profile, not L)
             converged = not _gp_unsure(gp, post, run, opts, rng)
         entry = AdaptiveRound(
             round=len(rounds) + 1,
