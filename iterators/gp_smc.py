@@ -299,6 +299,7 @@ class GpSmcIterator(IteratorBase):
             mean_offset=opts.mean_offset,
             subset=opts.gp_subset,
             polish_iters=opts.gp_polish_iters,
+            trend=opts.gp_trend,
         ).fit(x, y, rng=np.random.default_rng(opts.seed), start=start)
 
     def _round_smc(

@@ -95,6 +95,12 @@ class GpSmcOptions(PluginOptions):
     gp_polish_iters: int = Field(
         20, ge=1, description="iterations of that refinement on all points [-]"
     )
+    gp_trend: Literal["constant", "quadratic"] = Field(
+        "constant",
+        description="the GP's prior mean: 'constant' (Remark 10) or 'quadratic' (a concave "
+        "quadratic fitted to the best runs, so that the surrogate follows a tilted ridge "
+        "beyond the runs; gp_trend; better in 2-D, worse in the 6 + 1-D benchmark) [-]",
+    )
     nugget_factor: float = Field(
         1e-5, gt=0, description="nugget sigma_n^2 = factor (max L - min L) [-]"
     )

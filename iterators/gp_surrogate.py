@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError
 from .gp_mean import fused_kernels
+from .gp_trend import QuadraticTrend
 from .smc_diagnostics import extrapolation_margin
 
 if TYPE_CHECKING:
@@ -188,6 +189,7 @@ class GpSurrogate:
         subset: int = 800,
         polish_iters: int = 60,
         guard_margin: float | None = None,
+        trend: str = "constant",
     ) -> None:
         if optimizer not in OPTIMIZERS:
             raise ConfigError(
@@ -214,6 +216,10 @@ class GpSurrogate:
         if guard_margin is not None and not guard_margin >= 0:
             raise ConfigError(f"guard_margin must be >= 0, got {guard_margin}", "gp")
         self.guard_margin = guard_margin
+        if trend not in ("constant", "quadratic"):
+            raise ConfigError(f"unknown GP trend {trend!r}; valid: constant, quadratic", "gp")
+        self.trend_kind = trend
+        self.trend: QuadraticTrend | None = None
         self.guard = GuardCounts()
 
     # -- training -------------------------------------------------------------------------
@@ -255,14 +261,17 @@ class GpSurrogate:
         self.x_mean = x.mean(axis=0)
         self.x_std = x.std(axis=0)
         self.x_std[self.x_std == 0] = 1.0
-        y_range = float(y.max() - y.min())
+        # the prior mean: Remark 10's constant, or a concave quadratic (gp_trend) plus 0
+        self.trend = QuadraticTrend.fit(x, y) if self.trend_kind == "quadratic" else None
+        y_fit = y if self.trend is None else y - self.trend(x)
+        y_range = float(y_fit.max() - y_fit.min())
         # Output scale: the data are fitted as (y - m) / scale; the nugget stays
         # nugget_factor * range in units of L^2 (Paper B), i.e. nugget_factor * range / scale^2.
-        self.scale = y_range if y_range > 0 else max(1.0, abs(float(y.max())))
-        self.mean_value = float(y.min() - self.mean_offset * y_range)  # Remark 10
+        self.scale = y_range if y_range > 0 else max(1.0, abs(float(y_fit.max())))
+        self.mean_value = float(y.min() - self.mean_offset * y_range) if self.trend is None else 0.0
         self.nugget = self.nugget_factor * (y_range if y_range > 0 else self.scale)
         xs = self._standardise(x)
-        ys = ((y - self.mean_value) / self.scale)[:, None]
+        ys = ((y_fit - self.mean_value) / self.scale)[:, None]
         gpy = _gpy()
         d = x.shape[1]
         if self.ard:
@@ -299,6 +308,7 @@ class GpSurrogate:
                 nugget_factor=self.nugget_factor,
                 mean_offset=self.mean_offset,
                 subset=self.subset,
+                trend=self.trend_kind,
             ).fit(x[: self.subset], y[: self.subset], rng)
             hp = pre.hyperparameters()
             ratio = np.asarray(hp["x_std"]) / self.x_std
@@ -419,21 +429,27 @@ class GpSurrogate:
             a = np.ascontiguousarray(xs * scale)
             if not self.ard:
                 raw = kernels[1](a, xt_t, self._alpha, 32)
-                return self.mean_value + self.scale * self._var * raw
+                return self._prior_mean(x) + self.scale * self._var * raw
             # Scaled inputs too far out for e^a (tiny length scales): the numpy blocks below.
             if max(np.abs(a).max(), np.abs(xt_t).max()) < _EXP_FREE_RANGE:
                 raw = kernels[0](
                     a, xt_t, np.exp(a), np.exp(-a), np.exp(xt_t), np.exp(-xt_t), self._alpha, 32
                 )
-                return self.mean_value + self.scale * self._var * raw
+                return self._prior_mean(x) + self.scale * self._var * raw
         out = np.empty(len(xs))
         rows = max(1, _BLOCK // max(1, len(self._xs)))
         for i in range(0, len(xs), rows):
             k = matern32_cross(xs[i : i + rows], self._xs, self._ell, self._var, self.ard)
             out[i : i + rows] = k @ self._alpha
-        return self.mean_value + self.scale * out
+        return self._prior_mean(x) + self.scale * out
 
     __call__ = predict_mean
+
+    def _prior_mean(self, x: ArrayLike) -> NDArray[np.float64]:
+        """The GP's prior mean of L at the rows of ``x``: constant, or the quadratic trend."""
+        if self.trend is None:
+            return np.full(len(np.atleast_2d(x)), self.mean_value)
+        return self.trend(np.atleast_2d(np.asarray(x, dtype=float)))
 
     @property
     def extrapolation_cap(self) -> float:
@@ -469,7 +485,7 @@ class GpSurrogate:
             return self.predict_mean(x), np.maximum(var_s, 0.0) * self.scale**2
         mean, var = self.model.predict(xs, include_likelihood=False)
         return (
-            self.mean_value + self.scale * mean.ravel(),
+            self._prior_mean(x) + self.scale * mean.ravel(),
             np.maximum(var.ravel(), 0.0) * self.scale**2,
         )
 
@@ -546,6 +562,7 @@ class GpSurrogate:
             "nugget_variance": self.nugget,
             "prior_mean": self.mean_value,
             "scale": self.scale,
+            "trend": None if self.trend is None else self.trend.state(),
         }
 
     @classmethod
@@ -558,6 +575,9 @@ class GpSurrogate:
         gp.x_std = np.asarray(state["x_std"], dtype=float)
         gp.scale = float(state["scale"])
         gp.mean_value = float(state["prior_mean"])
+        if state.get("trend") is not None:
+            gp.trend = QuadraticTrend.from_state(state["trend"])
+            gp.trend_kind = "quadratic"
         gp.nugget = float(state["nugget_variance"])
         gp._ell = np.asarray(state["lengthscales"], dtype=float)
         gp._var = float(state["signal_variance"]) / gp.scale**2
@@ -566,7 +586,7 @@ class GpSurrogate:
         k[np.diag_indices_from(k)] += gp.nugget / gp.scale**2
         chol = np.asarray(np.linalg.cholesky(k), dtype=np.float64)
         gp._chol = chol
-        ys = (gp.y_train - gp.mean_value) / gp.scale
+        ys = (gp.y_train - gp._prior_mean(gp.x_train)) / gp.scale
         gp._alpha = _cho_solve(chol, ys)
         gp.info = {"n_train": len(ys), "restored": True}
         return gp
