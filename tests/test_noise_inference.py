@@ -139,3 +139,14 @@ def test_sigma_n_posterior_matches_quadrature(exact, tmp_path):
 
     (path,) = GpSmcIterator.write_plots(result, problem, tmp_path, figures=["marginals_1d"])
     assert path.name == "marginals_1d.png" and path.stat().st_size > 10_000
+
+
+def test_the_example_study_infers_sigma_n(tmp_path):
+    from pathlib import Path
+
+    example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_noise.toml"
+    result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
+    assert result.status == "completed" and result.names == ["E", "nu", "sigma_N"]
+    lo, _, hi = result.posterior.credible_intervals["sigma_N"]
+    assert lo < NOISE < hi
+    assert (tmp_path / "out" / "plots" / "marginals_1d.png").exists()
