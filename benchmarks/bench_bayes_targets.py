@@ -360,6 +360,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the data noise and of gp_smc")
     ap.add_argument("--skip-paper", action="store_true", help="skip the fixed-design runs")
     ap.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="run the pipeline under test with this many gp_smc seeds (seed, seed + 1, ...) "
+        "on the same data and print its pass rate (one case is one draw of its design)",
+    )
+    ap.add_argument(
         "--paper-smc-limit",
         type=float,
         default=1200.0,
@@ -394,6 +401,16 @@ def main(argv: list[str] | None = None) -> int:
         print_run(case, ref, pipe, BUDGET[name])
         ok, words = verdict(ref, pipe, n_x, BUDGET[name])
         line = f"SUMMARY {name}: pipeline {'PASS' if ok else 'FAIL'} ({words})"
+        if args.repeats > 1:
+            passed = [ok]
+            for k in range(1, args.repeats):
+                again = run_pipeline(case, "pipeline", {**opts, "seed": args.seed + k}, [])
+                ok_k, words_k = verdict(ref, again, n_x, BUDGET[name])
+                status = again.result.status if again.result is not None else again.error
+                verdict_k = "PASS" if ok_k else "FAIL"
+                print(f"    gp_smc seed {args.seed + k}: {verdict_k} ({words_k}), {status}")
+                passed.append(ok_k)
+            line += f"; {sum(passed)} of {len(passed)} gp_smc seeds pass"
         if not args.skip_paper:
             paper = {**PAPER[name], "seed": args.seed}
             if args.quick:
