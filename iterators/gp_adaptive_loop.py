@@ -34,7 +34,7 @@ from .gp_adaptive import (
 )
 from .gp_design import sobol_design
 from .gp_smc_options import GpSmcOptions
-from .gp_smc_result import RELIABLE_RMSE, AdaptiveRound, DesignRuns
+from .gp_smc_result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound, DesignRuns
 from .gp_smc_run import GpSmcState, SmcRun, log_prior
 from .gp_surrogate import GpSurrogate
 from .gp_uncertainty import marginalise_surrogate_uncertainty
@@ -62,11 +62,8 @@ class AdaptiveOutcome:
     """What the rounds leave: every design run, the GP on all of them, the rounds."""
 
     design: DesignRuns
-    n_initial: int
     gp: GpSurrogate | None  # None when fewer than 2 runs succeeded
-    floor: float
-    rounds: list[AdaptiveRound]
-    stop_reason: str
+    summary: AdaptiveDesign
 
 
 def parallel_slots(evaluator: Evaluator) -> int:
@@ -124,9 +121,8 @@ def adaptive_design(
         t0 = time.perf_counter()
         use = train & np.isfinite(loglik)
         if use.sum() < 2:
-            return AdaptiveOutcome(
-                _design(points, loglik, run, train), n_initial, None, floor, rounds, "failed"
-            )
+            summary = AdaptiveDesign(n_initial, rounds, "failed", floor)
+            return AdaptiveOutcome(_design(points, loglik, run, train), None, summary)
         l_max = float(loglik[use].max())
         floor = l_max - floor_depth(l_max, log_z)
         # a failed design run counts as an unlikely point (at the floor): the models fail at
@@ -187,9 +183,8 @@ def adaptive_design(
         hyper = gp.hyperparameters()
         previous = moments
         yield GpSmcState("round", entry.describe(), run.record("round", **entry.to_record()))
-    return AdaptiveOutcome(
-        _design(points, loglik, run, train), n_initial, gp, floor, rounds, reason
-    )
+    summary = AdaptiveDesign(n_initial, rounds, reason, floor)
+    return AdaptiveOutcome(_design(points, loglik, run, train), gp, summary)
 
 
 def _gp_unsure(

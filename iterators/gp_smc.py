@@ -143,13 +143,7 @@ class GpSmcIterator(IteratorBase):
                 outcome = yield from adaptive_design(
                     run, opts, self._fit_gp, lambda ll, n: self._round_smc(run, ll, n)
                 )
-                design, gp = outcome.design, outcome.gp
-                adaptive = AdaptiveDesign(
-                    n_initial=outcome.n_initial,
-                    rounds=outcome.rounds,
-                    stop_reason=outcome.stop_reason,
-                    floor=outcome.floor,
-                )
+                design, gp, adaptive = outcome.design, outcome.gp, outcome.summary
             if gp is None:
                 return self._finish_failed(run, design)
             self.surrogate = gp
@@ -198,7 +192,7 @@ class GpSmcIterator(IteratorBase):
                 + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
                 + _noise_note(run, posterior)
-                + ("" if gp is None else _extrapolation_note(run, post, gp))
+                + ("" if gp is None else _extrapolation_note(post, gp))
                 + ("" if uncertainty is None or not wanted else "; " + uncertainty.note())
                 + ("" if uncertainty is None else uncertainty.reliability_note())
                 + (
@@ -511,11 +505,10 @@ def _noise_note(run: SmcRun, posterior: ParticlePosterior) -> str:
     return f"; sigma_N = {mid:.3g} mm (95 % interval {lo:.3g} .. {hi:.3g} mm, inferred)"
 
 
-def _extrapolation_note(run: SmcRun, post: SmcResult, gp: GpSurrogate) -> str:
+def _extrapolation_note(post: SmcResult, gp: GpSurrogate) -> str:
     """A warning when posterior mass sits where the GP mean was capped (above the largest
     training value + its margin: a surrogate artefact, not evidence)."""
-    d = len(run.inputs)
-    mass = float(post.weights[gp.predict_mean(post.particles[:, :d]) >= gp.extrapolation_cap].sum())
+    mass = gp.extrapolated_mass(post)
     if mass < 0.01:
         return ""
     return (

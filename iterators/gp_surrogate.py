@@ -471,9 +471,11 @@ class GpSurrogate:
         return np.minimum(mean, cap) if n_capped else mean
 
     def extrapolated_mass(self, result: SmcResult) -> float:
-        """Posterior mass of an SMC result at or above :attr:`extrapolation_cap`: at capped
-        points of a guarded run, above the cap in an unguarded one (0: no extrapolation)."""
-        return float(result.weights[result.log_likelihood >= self.extrapolation_cap].sum())
+        """Posterior mass of an SMC result where the GP mean reaches :attr:`extrapolation_cap`
+        (capped in a guarded run; 0: no extrapolation). The GP's inputs are the leading
+        columns of the particles (a sampled sigma_N, whose L is not the GP's, comes after)."""
+        mean = self.predict_mean(result.particles[:, : self.x_train.shape[1]])
+        return float(result.weights[mean >= self.extrapolation_cap].sum())
 
     def predict(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Posterior mean and variance of L (eq. 28a-b), through GPy (for plots, checks)."""
