@@ -69,6 +69,7 @@ PIPELINE: dict[str, dict[str, Any]] = {
 #: parameters" and Remark 9 / last example); "sobol" is today's "box"
 _PAPER_2D = {
     "design": "sobol",
+    "surrogate": "log_likelihood",
     "n_train": 1000,
     "n_particles": 5000,
     "n_rejuvenation": 20,
@@ -80,6 +81,7 @@ PAPER: dict[str, dict[str, Any]] = {
     "2d_inflow": _PAPER_2D,
     "7d": {
         "design": "sobol",
+        "surrogate": "log_likelihood",
         "n_train": 2000,
         "ard": True,
         "n_particles": 10_000,

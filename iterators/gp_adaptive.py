@@ -59,7 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.parameters import Parameter
-from .gp_surrogate import GpSurrogate
+from .gp_residuals import Surrogate
 from .smc import SmcResult
 
 FloatArray = NDArray[np.float64]
@@ -125,9 +125,7 @@ def distinct_draws(post: SmcResult, n: int, rng: np.random.Generator) -> FloatAr
     return np.asarray(post.particles[order[np.sort(first)][:n]])
 
 
-def validation_error(
-    gp: GpSurrogate, x: FloatArray, log_likelihood: FloatArray
-) -> tuple[float, int]:
+def validation_error(gp: Surrogate, x: FloatArray, log_likelihood: FloatArray) -> tuple[float, int]:
     """RMSE of the GP mean against L at points it was not trained on (finite L only)."""
     ok = np.isfinite(log_likelihood)
     if not ok.any():
@@ -137,7 +135,7 @@ def validation_error(
 
 
 def select_batch(
-    gp: GpSurrogate,
+    gp: Surrogate,
     post: SmcResult,
     n_points: int,
     inputs: Sequence[Parameter],
@@ -185,7 +183,7 @@ def _candidates(
 
 
 def _greedy_eiv(
-    gp: GpSurrogate,
+    gp: Surrogate,
     integ: FloatArray,
     cand: FloatArray,
     n: int,

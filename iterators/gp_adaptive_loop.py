@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Generator, Mapping
+from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.evaluator import Evaluator
+from ..core.problem import Evaluation
 from .gp_adaptive import (
     Moments,
     floor_depth,
@@ -33,10 +34,10 @@ from .gp_adaptive import (
     validation_error,
 )
 from .gp_design import sobol_design
+from .gp_residuals import Surrogate
 from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound, DesignRuns
 from .gp_smc_run import GpSmcState, SmcRun, log_prior
-from .gp_surrogate import GpSurrogate
 from .gp_uncertainty import marginalise_surrogate_uncertainty
 from .smc import SmcResult
 
@@ -51,8 +52,11 @@ ROUND_REJUVENATION = 5
 #: the tempering of the wide posterior exp(beta mu) p that a quarter of each batch is drawn
 #: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further)
 WIDE_TEMPERATURE = 0.25
-#: fits a GP to (x, y), warm-started from earlier hyperparameters when given
-FitGp = Callable[[FloatArray, FloatArray, Mapping[str, Any] | None], GpSurrogate]
+#: fits the surrogate to (x, y) and the runs' records (a residual emulator uses their
+#: residuals), warm-started from earlier hyperparameters when given
+FitGp = Callable[
+    [FloatArray, FloatArray, Mapping[str, Any] | None, Sequence[Evaluation]], Surrogate
+]
 #: SMC on a log-likelihood with a number of particles (the rounds' coarse settings)
 Sample = Callable[[Callable[[FloatArray], FloatArray], int], SmcResult]
 
@@ -62,7 +66,7 @@ class AdaptiveOutcome:
     """What the rounds leave: every design run, the GP on all of them, the rounds."""
 
     design: DesignRuns
-    gp: GpSurrogate | None  # None when fewer than 2 runs succeeded
+    gp: Surrogate | None  # None when fewer than 2 runs succeeded
     summary: AdaptiveDesign
 
 
@@ -115,7 +119,7 @@ def adaptive_design(
     hyper: Mapping[str, Any] | None = None
     log_z: float | None = None
     converged = False
-    gp: GpSurrogate | None = None
+    gp: Surrogate | None = None
     floor = -math.inf
     while True:
         t0 = time.perf_counter()
@@ -128,7 +132,8 @@ def adaptive_design(
         # a failed design run counts as an unlikely point (at the floor): the models fail at
         # extreme parameters, and the criterion must not send batch after batch there
         y = soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
-        gp = fit_gp(points[train], y[train], hyper)
+        records = [run.evaluations[i] for i in np.flatnonzero(train)]
+        gp = fit_gp(points[train], y[train], hyper, records)
         n_design = int(train.sum())
         if converged or n_design >= opts.n_train:
             reason = "converged" if converged else "budget"
@@ -188,7 +193,7 @@ def adaptive_design(
 
 
 def _gp_unsure(
-    gp: GpSurrogate, post: SmcResult, run: SmcRun, opts: GpSmcOptions, rng: np.random.Generator
+    gp: Surrogate, post: SmcResult, run: SmcRun, opts: GpSmcOptions, rng: np.random.Generator
 ) -> bool:
     """Whether the posterior averaged over the GP's sample paths differs from the round's
     (gp_smc's uncertainty check, on the round's coarse posterior)."""
@@ -206,7 +211,7 @@ def _gp_unsure(
     return uncertainty.moves_posterior
 
 
-def _tempered(gp: GpSurrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
+def _tempered(gp: Surrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
     def log_likelihood(z: FloatArray) -> FloatArray:
         return beta * gp.predict_mean_guarded(z)
 

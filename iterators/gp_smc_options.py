@@ -38,6 +38,14 @@ class GpSmcOptions(PluginOptions):
         description="held-out forward runs (the next Sobol points) for the surrogate "
         "error (Paper B Remark 9 uses 100) [-]",
     )
+    surrogate: Literal["auto", "residuals", "log_likelihood"] = Field(
+        "auto",
+        description="what the GP models: 'residuals': the measure's residual vectors "
+        "(principal components, one GP each; L from the emulated residuals, gp_residuals), "
+        "'log_likelihood': L itself (Paper B); 'auto': residuals where the measure's "
+        "distance is the norm of residual vectors of one length and every observation has "
+        "the same sigma_N, else L [-]",
+    )
     design: Literal["adaptive", "sobol"] = Field(
         "adaptive",
         description="'adaptive': a small Sobol start, then rounds of SMC on the surrogate and "

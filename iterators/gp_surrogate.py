@@ -528,10 +528,13 @@ class GpSurrogate:
 
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:
-        """Leave-one-out errors in closed form: e_i = alpha_i / [(K + sigma_n^2 I)^-1]_ii."""
+        """Leave-one-out errors (:meth:`loo_predictions`)."""
+        return self._errors(self.y_train - self.loo_predictions(), self.y_train, prefix="loo")
+
+    def loo_predictions(self) -> NDArray[np.float64]:
+        """Leave-one-out predictions in closed form: y_i - alpha_i / [(K + sigma_n^2 I)^-1]_ii."""
         kinv_diag = np.diag(np.asarray(self.model.posterior.woodbury_inv))
-        res = self.scale * self._alpha / kinv_diag
-        return self._errors(res, self.y_train, prefix="loo")
+        return np.asarray(self.y_train - self.scale * self._alpha / kinv_diag)
 
     def test_error(self, x: ArrayLike, y: ArrayLike) -> dict[str, float]:
         """Errors of the posterior mean at held-out points (Paper B Remark 9, Fig. 12)."""

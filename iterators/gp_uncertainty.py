@@ -75,7 +75,7 @@ from numpy.typing import NDArray
 
 from ..core.errors import ConfigError
 from ..core.parameters import Prior
-from .gp_surrogate import GpSurrogate
+from .gp_residuals import Surrogate
 from .smc import SmcResult, ess, smc
 
 FloatArray = NDArray[np.float64]
@@ -212,7 +212,7 @@ class SurrogateUncertainty:
 
 def reweight_by_sample_paths(
     proposal: SmcResult,
-    surrogate: GpSurrogate,
+    surrogate: Surrogate,
     rng: np.random.Generator,
     n_paths: int = 200,
     n_points: int = 2000,
@@ -382,7 +382,7 @@ def _diagnose(
 
 def marginalise_surrogate_uncertainty(
     post: SmcResult,
-    surrogate: GpSurrogate,
+    surrogate: Surrogate,
     priors: Sequence[Prior],
     rng: np.random.Generator,
     n_paths: int = 200,
@@ -481,7 +481,7 @@ def proposal_temperature(pilot: SurrogateUncertainty) -> float:
 
 
 def tempered_proposal(
-    surrogate: GpSurrogate,
+    surrogate: Surrogate,
     priors: Sequence[Prior],
     temperature: float,
     rng: np.random.Generator,

@@ -24,8 +24,8 @@ import numpy as np
 from ..core.errors import ConfigError
 from ..core.parameters import Parameter, Prior
 from ..core.problem import jsonable
+from .gp_residuals import restore_surrogate
 from .gp_smc_result import FloatArray, GpSmcResult, LaplaceApproximation, ParticlePosterior
-from .gp_surrogate import GpSurrogate
 from .smc import SmcResult, systematic_resample
 
 __all__ = [
@@ -170,7 +170,7 @@ def hpd_mass(result: GpSmcResult, point: Mapping[str, float]) -> float:
     if missing:
         raise ConfigError(f"no value for {', '.join(missing)}", "hpd_mass")
     z = np.array([[float(point[n]) for n in result.names]])
-    gp = GpSurrogate.from_state(fit.state)
+    gp = restore_surrogate(fit.state)
     log_prior = sum(
         float(Prior.from_spec(p["prior"]).logpdf(z[0, j])) for j, p in enumerate(result.priors)
     )

@@ -40,6 +40,7 @@ from ..core.errors import ConfigError
 from ..core.likelihood import noise_parameter
 from ..core.parameters import Parameter
 from ..core.problem import InverseProblem
+from .gp_residuals import restore_surrogate
 from .gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
 from .gp_surrogate import GpSurrogate
 from .smc import systematic_resample
@@ -96,7 +97,7 @@ def plot_gp_smc_result(
     refits: dict[int, GpSurrogate | None] = {}
     surrogate = r.surrogate is not None
     if surrogate and n_x >= 2 and "surrogate_fields" in wanted:
-        gp = GpSurrogate.from_state(_fit(r).state)
+        gp = restore_surrogate(_fit(r).state)
         out.append(_surrogate_fields(gp, r, inputs, labels, folder))
     if surrogate and len(inputs) == 2 and "gp_convergence" in wanted:
         out.append(_gp_convergence(r, inputs, labels, folder, refits))
