@@ -347,7 +347,15 @@ class _Reader:
         name = meta.name or self.path.stem
         self.seed = meta.seed
         output = self.folder / meta.output
-        store = None if meta.store is None else self.folder / meta.store
+        store = None
+        if meta.store is not None:
+            store = self.folder / meta.store
+            named = Path(meta.store).name
+            if meta.store.endswith(("/", "\\")) or named in ("", ".", "..") or store.is_dir():
+                raise ConfigError(
+                    f"{meta.store!r} is a folder: name the store's file, e.g. 'runs.sqlite'",
+                    self.where("[study]", "store"),
+                )
 
         self.model_name, model = self.plugin("forward_model", "model")
         try:
