@@ -114,7 +114,8 @@ def run_study(
 ) -> Result:
     """Run a study and write its output folder (default: the study's ``output``).
 
-    With an iterator: opens the study store ``<output>/store.sqlite`` (resuming: every run
+    With an iterator: opens the study store, ``<output>/store.sqlite`` or the file that
+    ``[study] store`` names (studies of one model may share it) (resuming: every run
     stored there for the same problem is reused, never run again), builds the evaluator from
     ``[executor]`` (``workers`` and ``address`` override it), drives the iterator step by step
     with a progress display, stores every evaluation the moment it finishes (and appends it to
@@ -148,7 +149,8 @@ def run_study(
         return _forward(study, None, out, echo, started)
     problem = study.problem
     executor = study.executor.with_workers(workers).with_address(address)
-    with OutputLock(out, "fbia run"), StudyStore(out / STORE_NAME, fresh=fresh) as store:
+    store_path = study.store if study.store is not None else out / STORE_NAME
+    with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh) as store:
         if fresh:
             clear_runs(out / "runs")
         store.bind(problem)

@@ -170,6 +170,7 @@ class Study:
     name: str
     seed: int
     output: Path
+    store: Path | None  # the study store's file when not <output>/store.sqlite
     model: ForwardModel
     model_name: str
     measure: Discrepancy
@@ -297,6 +298,7 @@ class Study:
             f"executor   {self.executor.label()}",
             f"seed       {self.seed}",
             f"output     {self.output}",
+            *([] if self.store is None else [f"store      {self.store}"]),
         ]
         return "\n".join(lines)
 

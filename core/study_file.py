@@ -12,6 +12,9 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     name = "flow_cell"          # default: the file's stem
     seed = 1                    # every random choice derives from it (default 0)
     output = "output"           # output folder, relative to the study file (default "output")
+    store = "../runs.sqlite"    # the study store, relative to the study file (default
+                                # <output>/store.sqlite): studies of one model that name the
+                                # same store share its forward runs (one study at a time)
 
     [model]                     # a forward model from the registry (`fbia plugins`)
     name = "analytic_mound_2d"
@@ -140,7 +143,7 @@ T = TypeVar("T")
 
 #: Top-level sections of a study file and what each holds.
 SECTIONS: dict[str, str] = {
-    "study": "name, seed, output folder",
+    "study": "name, seed, output folder, store",
     "model": "forward model name and options",
     "parameters": "calibration parameters (array of tables)",
     "uncertain": "uncertain inputs with priors (array of tables)",
@@ -344,6 +347,15 @@ class _Reader:
         name = meta.name or self.path.stem
         self.seed = meta.seed
         output = self.folder / meta.output
+        store = None
+        if meta.store is not None:
+            store = self.folder / meta.store
+            named = Path(meta.store).name
+            if meta.store.endswith(("/", "\\")) or named in ("", ".", "..") or store.is_dir():
+                raise ConfigError(
+                    f"{meta.store!r} is a folder: name the store's file, e.g. 'runs.sqlite'",
+                    self.where("[study]", "store"),
+                )
 
         self.model_name, model = self.plugin("forward_model", "model")
         try:
@@ -407,6 +419,7 @@ class _Reader:
             name=name,
             seed=self.seed,
             output=output,
+            store=store,
             model=model,
             model_name=self.model_name,
             measure=measure,

@@ -173,6 +173,7 @@ class StudySection(Section):
     name: Text | None = None
     seed: Annotated[Integer, Field(ge=0)] = 0
     output: Folder = "output"
+    store: Text | None = None  # the study store's file; default <output>/store.sqlite
 
 
 class LikelihoodSection(Section):

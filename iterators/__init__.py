@@ -15,3 +15,6 @@ def register_iterators(register):
     from .sobol_indices import SobolIndicesIterator
 
     register("sobol_indices", SobolIndicesIterator)
+    from .surrogate_convergence import SurrogateConvergenceIterator
+
+    register("surrogate_convergence", SurrogateConvergenceIterator)

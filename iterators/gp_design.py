@@ -67,3 +67,14 @@ def unit_to_inputs(
                 raise ConfigError("needs finite bounds or a prior for the design", p.name)
             out[:, j] = p.prior.ppf(np.clip(u[:, j], 1e-9, 1 - 1e-9))
     return out
+
+
+def search_box(parameters: Sequence[Parameter], x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Lower and upper corners of the box in which to search or draw over the inputs: the
+    bounds, or the range of the points ``x`` (rows of inputs) for an input without finite
+    bounds."""
+    lower, upper = np.min(x, axis=0), np.max(x, axis=0)
+    for j, p in enumerate(parameters):
+        if p.bounds is not None and finite_bounds(p):
+            lower[j], upper[j] = p.bounds
+    return lower, upper

@@ -98,6 +98,11 @@ def edit(old: str, new: str) -> str:
 #: what a plugin offers, only its start, so that a plugin's new option breaks nothing here)
 BAD_CASES = [
     (
+        "store-is-a-folder",
+        edit('output = "out"', 'output = "out"\nstore = "data"'),
+        "study.toml: [study] store: 'data' is a folder: name the store's file, e.g. 'runs.sqlite'",
+    ),
+    (
         "toml-syntax",
         edit("seed = 3", "seed = "),
         "study.toml: TOML syntax error: Invalid value (at line 3, column 8)",

@@ -1,0 +1,79 @@
+"""The result of ``surrogate_convergence``: one row per n_train (the GP, its ML point and its
+held-out error) and the design it was trained on."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.problem import Result, jsonable
+
+__all__ = ["ConvergenceRow", "SurrogateConvergenceResult"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ConvergenceRow:
+    """The GP trained on the first ``n_train`` design points."""
+
+    n_train: int
+    n_used: int  # successful runs among them (the GP's training set)
+    ml_point: dict[str, float]  # maximum of the GP mean over the box
+    ml_log_likelihood: float  # the GP mean there
+    test_rmse: float  # error of the GP mean at the held-out runs, in L (nan: none)
+    test_max_abs: float
+    test_relative_l2: float  # ||error|| / ||L_test - mean L_test||
+    reference_distance: float  # |ML point - reference| in units of the box (nan: none)
+    state: dict[str, Any] = field(repr=False, compare=False)  # the GP (GpSurrogate.state)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The row without the GP's state (for result.json)."""
+        return {k: v for k, v in asdict(self).items() if k != "state"}
+
+
+@dataclass
+class SurrogateConvergenceResult(Result):
+    """:class:`~fbia.core.problem.Result` of ``surrogate_convergence``: one
+    :class:`ConvergenceRow` per n_train, the design and which of its points are held out."""
+
+    names: list[str] = field(default_factory=list)
+    rows: list[ConvergenceRow] = field(default_factory=list)
+    points: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    log_likelihood: FloatArray = field(default_factory=lambda: np.zeros(0))
+    n_test: int = 0
+    reference: dict[str, float] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        parts = {
+            "rows": [row.to_dict() for row in self.rows],
+            "n_test": self.n_test,
+            "reference": self.reference,
+        }
+        out["info"] = {**out["info"], **jsonable(parts)}
+        return out
+
+    def table(self) -> str:
+        """One line per n_train: runs used, ML point, GP mean there, held-out error."""
+        head = f"{'n_train':>7} {'used':>5} " + " ".join(f"{n:>10}" for n in self.names)
+        head += f" {'L at ML':>10} {'test RMSE':>10} {'test rel':>9}"
+        if self.reference is not None:
+            head += f" {'|ML-ref|':>9}"
+        lines = [head]
+        for r in self.rows:
+            line = f"{r.n_train:>7} {r.n_used:>5} " + " ".join(
+                f"{r.ml_point[n]:>10.4g}" for n in self.names
+            )
+            line += f" {r.ml_log_likelihood:>10.4g} {r.test_rmse:>10.3g} {r.test_relative_l2:>9.3g}"
+            if self.reference is not None:
+                line += f" {r.reference_distance:>9.3g}"
+            lines.append(line)
+        return "\n".join(lines)
+
+    def summary(self) -> str:
+        text = super().summary()
+        return text if not self.rows else f"{text}\n{self.table()}"
