@@ -174,6 +174,7 @@ class _Session:
     started: str
     echo: Echo
     executor_info: dict[str, Any] = field(default_factory=dict)
+    t0: float = field(default_factory=time.perf_counter)
 
     def finish(self, result: Result, quiet: bool = False) -> None:
         _finish(
@@ -231,6 +232,14 @@ def _run_stored(
         result.info["warnings"] = warnings
     result.info.setdefault("files", files)
     session.finish(result)
+    if study.paper is not None:  # published numbers beside the result: report.md
+        from .paper_report import write_paper_report
+
+        pngs = [f for v in files.values() for f in (v if isinstance(v, list) else [v])]
+        report_md = write_paper_report(
+            study, result, out, time.perf_counter() - session.t0, [str(f) for f in pngs]
+        )
+        echo(f"comparison with {study.paper.source}: {report_md}")
     return result
 
 

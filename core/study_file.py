@@ -73,6 +73,14 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
                                 # | moab | oar (dask-jobqueue) with `workers` workers
     cluster_options = { cores = 8, memory = "16GB", walltime = "04:00:00" }  # passed through
 
+    [paper]                     # optional: published numbers beside the result, written to
+    source = "Paper A, Table 2" # report.md and paper.json (format: fbia.core.paper)
+    [[paper.values]]
+    quantity = "mean.E"         # a name of Result.quantities()
+    paper = 400.0
+    rule = "relative"           # relative | absolute | magnitude | equal | same_sign |
+    tolerance = 0.01            # above | below (with than = "...") | none
+
 Resume: every finished run is stored in ``<output>/store.sqlite`` the moment it ends.  Running
 the study again on the same output folder reuses every stored forward run of the same model
 (options, fixed inputs) at the same inputs and runs only the others; a new likelihood noise
@@ -108,6 +116,7 @@ from typing import Any, TypeVar
 from .errors import ConfigError
 from .interface import Interface
 from .observation import MeasurementPoints, Observation, check_coordinate
+from .paper import read_paper
 from .parameters import Parameter, Prior
 from .registry import Registry, default_registry
 from .study import (
@@ -151,6 +160,7 @@ SECTIONS: dict[str, str] = {
     "likelihood": "noise_std, or noise_prior (sigma_N inferred)",
     "iterator": "iterator name and options",
     "executor": "serial, processes or dask; workers, time-out, cluster",
+    "paper": "published numbers to put beside the result (fbia.core.paper)",
 }
 
 
@@ -401,6 +411,7 @@ class _Reader:
             self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
         )
         executor = self.read_executor()
+        paper = read_paper(raw["paper"], self.file) if "paper" in raw else None
 
         study = Study(
             path=self.path,
@@ -424,6 +435,7 @@ class _Reader:
             raw=raw,
             text=text,
             sha256=hashlib.sha256(raw_bytes).hexdigest(),
+            paper=paper,
         )
         if synthetic is None:
             _ = study.problem  # no forward run needed: check the whole problem now
