@@ -51,6 +51,7 @@ class PaperRecord:
     nfev: int
     finished: str
     rows: tuple[Comparison, ...]
+    reused: int = 0  # runs this session took from the store instead of running them
 
     def to_dict(self) -> dict[str, Any]:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "rows"}
@@ -68,9 +69,15 @@ class PaperRecord:
 
 
 def write_paper_report(
-    study: Study, result: Result, out: Path, wall_time: float, files: Sequence[str] = ()
+    study: Study,
+    result: Result,
+    out: Path,
+    wall_time: float,
+    files: Sequence[str] = (),
+    reused: int = 0,
 ) -> Path:
-    """Compare ``result`` with ``study.paper``; write ``report.md`` and ``paper.json``."""
+    """Compare ``result`` with ``study.paper``; write ``report.md`` and ``paper.json``
+    (``reused``: how many runs the session took from the store)."""
     spec = study.paper
     assert spec is not None
     rows = tuple(compare(spec, result.quantities()))
@@ -86,6 +93,7 @@ def write_paper_report(
         nfev=result.nfev,
         finished=str(result.provenance.get("finished", "")),
         rows=rows,
+        reused=reused,
     )
     out.mkdir(parents=True, exist_ok=True)
     (out / RECORD_NAME).write_text(json.dumps(record.to_dict(), indent=1), encoding="utf-8")
@@ -122,10 +130,11 @@ def _report(
 
 
 def _times(record: PaperRecord) -> str:
+    reused = f" ({record.reused} runs taken from the store, not run again)" if record.reused else ""
     return (
-        f"Measured: {record.wall_time:.1f} s wall time of this session; the {record.nfev} "
-        f"forward runs of the result took {record.forward_time:.1f} s together (runs reused "
-        "from the store count with their original time)."
+        f"Measured: {record.wall_time:.1f} s wall time of this session{reused}; the "
+        f"{record.nfev} forward runs of the result took {record.forward_time:.1f} s together "
+        "(runs taken from the store count with the time they took when they ran)."
     )
 
 
@@ -219,7 +228,8 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
         "them all and regenerates this page). Each table puts the published number beside "
         "fbia's, with the rule by which it counts as agreeing and why it differs.",
         "",
-        "| study | source | agree | status | wall time | forward runs |",
+        "| study | source | agree | status | wall time of the last session | forward runs "
+        "(their summed time) |",
         "|---|---|---|---|---|---|",
     ]
     root = target.parent.resolve()
@@ -227,7 +237,8 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
         good, judged = verdict(rec.rows)
         lines.append(
             f"| [{rec.study}](#{_anchor(rec.study)}) | {rec.source} | {good} / {judged} | "
-            f"{rec.status} | {rec.wall_time:.0f} s | {rec.nfev} ({rec.forward_time:.0f} s) |"
+            f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
+            f"{rec.nfev} ({rec.forward_time:.0f} s) |"
         )
     for path, rec in records:
         study_file = _rel_or_abs(Path(rec.study_file), root)

@@ -236,8 +236,9 @@ def _run_stored(
         from .paper_report import write_paper_report
 
         pngs = [f for v in files.values() for f in (v if isinstance(v, list) else [v])]
+        wall = time.perf_counter() - session.t0
         report_md = write_paper_report(
-            study, result, out, time.perf_counter() - session.t0, [str(f) for f in pngs]
+            study, result, out, wall, [str(f) for f in pngs], reused=totals["reused"]
         )
         echo(f"comparison with {study.paper.source}: {report_md}")
     return result

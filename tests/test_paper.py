@@ -242,6 +242,12 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     assert "- [plots/interfaces.png](plots/interfaces.png)" in report
     record = PaperRecord.read(out / "paper.json")
     assert record.nfev > 0 and record.wall_time > 0 and len(record.rows) == 4
+    assert record.reused == 0 and record.forward_time > 0
+    assert main(["run", "study.toml"]) == 0  # resumed: every run from the store
+    again = PaperRecord.read(out / "paper.json")
+    assert again.reused == again.nfev == record.nfev
+    assert again.forward_time == pytest.approx(record.forward_time)  # the runs' own times
+    assert "runs taken from the store, not run again" in (out / "report.md").read_text()
     assert main(["reproductions", "docs/summary.md", "."]) == 0
     page = (tmp_path / "docs" / "summary.md").read_text()
     assert "| [tiny](#tiny) | Toy paper, Table 9 | 3 / 4 | " in page
