@@ -149,9 +149,14 @@ class Comparison:
         )
 
 
-def read_paper(raw: Any, file: str) -> PaperSpec:
-    """The ``[paper]`` table of the study file ``file``, checked (one ConfigError per fault)."""
+def read_paper(raw: Any, file: str, has_iterator: bool = True) -> PaperSpec:
+    """The ``[paper]`` table of the study file ``file``, checked (one ConfigError per fault);
+    ``has_iterator``: whether the study has an ``[iterator]``, whose result it compares."""
     where = f"{file}: [paper]"
+    if not has_iterator:
+        raise ConfigError(
+            "a [paper] table compares an iterator's result with the paper: give [iterator]", where
+        )
     section = parse_section(PaperSection, raw, where)
     if not section.values:
         raise ConfigError("no [[paper.values]]: give at least one published number", where)

@@ -168,16 +168,21 @@ def _num(x: float | None) -> str:
 
 
 def _settings(study: Study) -> list[str]:
-    def opts(obj: Any) -> str:
-        given = plugin_options(obj, exclude_defaults=True)
-        return ", ".join(f"{k} = {v!r}" for k, v in given.items()) or "defaults"
+    def opts(obj: Any, section: str) -> str:
+        """The options the study file sets (also where they equal the default), then those
+        that differ from the default for another reason (e.g. a seed from the study)."""
+        raw = study.raw.get(section, {})
+        written = dict(raw.get("options", {})) if isinstance(raw, dict) else {}
+        given = {**written, **plugin_options(obj, exclude_defaults=True)}
+        text = ", ".join(f"{k} = {v!r}" for k, v in given.items())
+        return f"{text}; the other options at their defaults" if text else "defaults"
 
     lines = [
-        f"- model `{study.model_name}`: {opts(study.model)}",
-        f"- measure `{study.measure_name}`: {opts(study.measure)}",
+        f"- model `{study.model_name}`: {opts(study.model, 'model')}",
+        f"- measure `{study.measure_name}`: {opts(study.measure, 'measure')}",
     ]
     if study.iterator is not None:
-        lines.append(f"- iterator `{study.iterator_name}`: {opts(study.iterator)}")
+        lines.append(f"- iterator `{study.iterator_name}`: {opts(study.iterator, 'iterator')}")
     params = "; ".join(
         f"{p.name} in [{p.bounds[0]:g}, {p.bounds[1]:g}]" if p.bounds else p.name
         for p in study.parameters

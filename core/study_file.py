@@ -73,13 +73,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
                                 # | moab | oar (dask-jobqueue) with `workers` workers
     cluster_options = { cores = 8, memory = "16GB", walltime = "04:00:00" }  # passed through
 
-    [paper]                     # optional: published numbers beside the result, written to
-    source = "Paper A, Table 2" # report.md and paper.json (format: fbia.core.paper)
-    [[paper.values]]
-    quantity = "mean.E"         # a name of Result.quantities()
-    paper = 400.0
-    rule = "relative"           # relative | absolute | magnitude | equal | same_sign |
-    tolerance = 0.01            # above | below (with than = "...") | none
+    [paper]                     # published numbers beside the result (fbia.core.paper)
+    source = "Paper A, Table 2" # [[paper.values]]: quantity, paper, unit, rule, tolerance, ...
 
 Resume: every finished run is stored in ``<output>/store.sqlite`` the moment it ends.  Running
 the study again on the same output folder reuses every stored forward run of the same model
@@ -411,7 +406,9 @@ class _Reader:
             self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
         )
         executor = self.read_executor()
-        paper = read_paper(raw["paper"], self.file) if "paper" in raw else None
+        paper = (
+            read_paper(raw["paper"], self.file, iterator is not None) if "paper" in raw else None
+        )
 
         study = Study(
             path=self.path,

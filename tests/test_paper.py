@@ -240,6 +240,9 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     assert "| x.nu | 0.35 | 0.3 | -0.05 | -14.3 % | **no** (within 0.01) |" in report
     assert "| E above nu | > x.nu (0.3) | 400 |  |  | yes (> x.nu) |" in report
     assert "- [plots/interfaces.png](plots/interfaces.png)" in report
+    assert (
+        "- model `analytic_mound_2d`: n_points = 41; the other options at their defaults" in report
+    )
     record = PaperRecord.read(out / "paper.json")
     assert record.nfev > 0 and record.wall_time > 0 and len(record.rows) == 4
     assert record.reused == 0 and record.forward_time > 0
@@ -268,6 +271,17 @@ def test_a_run_that_names_an_unknown_quantity_fails_with_the_list(tmp_path, monk
         "study.toml: [[paper.values]] #4 quantity: the result has no quantity 'pm.E'; "
         "available: converged, err_grad, err_res, iterations, mean.E, mean.err_res, mean.nu, "
     ), line
+
+
+def test_a_paper_table_needs_an_iterator(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    without = STUDY.split("[iterator]")[0] + '[executor]\nkind = "serial"\n'
+    write_study(tmp_path, without + PAPER)
+    assert main(["validate", "study.toml"]) == 2
+    assert one_error_line(capsys) == (
+        "study.toml: [paper]: a [paper] table compares an iterator's result with the paper: "
+        "give [iterator]"
+    )
 
 
 def test_summary_refuses_a_foreign_json(tmp_path):
