@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.fbia-installed
 TYPECHECK := build/typecheck
 
-.PHONY: demo test test-slow lint typecheck pytest bench clean
+.PHONY: demo test test-slow lint typecheck pytest bench clean reproduce
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -42,6 +42,14 @@ pytest: $(STAMP)
 # Long verification runs (finer meshes, full studies): not part of `make test`.
 test-slow: $(STAMP)
 	$(BIN)/pytest -m slow
+
+# The papers' examples (examples/paper_*/<example>/study*.toml, each with a [paper] table):
+# long (see each example's README for its measured time); every study runs on its own
+# [executor], so `kind = "dask"` spreads it over a cluster. Then docs/reproductions.md.
+REPRODUCE ?= $(sort $(wildcard examples/paper_*/*/study*.toml))
+reproduce: $(STAMP)
+	@for f in $(REPRODUCE); do echo "== $$f"; $(BIN)/fbia run $$f || exit 1; done
+	$(BIN)/fbia reproductions docs/reproductions.md $(sort $(wildcard examples/paper_*))
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -7,6 +7,7 @@
     fbia run study.toml [--workers N] [--output DIR] [--fresh] [--retry-failed]
                         [--address tcp://HOST:PORT]
     fbia plugins [--json]
+    fbia reproductions OUT.md DIR [DIR ...]   the summary of the paper.json files below DIRs
     fbia --version
 
 ``fbia run`` on an output folder that holds a study store resumes the study: every stored run
@@ -105,6 +106,13 @@ def _parser() -> argparse.ArgumentParser:
         help="run on the Dask scheduler at this address (overrides [executor])",
     )
 
+    rp = sub.add_parser(
+        "reproductions",
+        help="summarise the comparisons with the papers (paper.json below the folders)",
+    )
+    rp.add_argument("summary", metavar="OUT", help="the markdown page to write")
+    rp.add_argument("folders", metavar="DIR", nargs="+", help="folders to search")
+
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     return p
@@ -127,6 +135,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "forward": _forward,
             "run": _run,
             "plugins": _plugins,
+            "reproductions": _reproductions,
         }[args.command]
         return command(args)
     except _UsageError as exc:
@@ -228,6 +237,14 @@ def _run(args: argparse.Namespace) -> int:
     )
     if study.iterator is None and not result.success:
         return _fail(result.message, 1)
+    return 0
+
+
+def _reproductions(args: argparse.Namespace) -> int:
+    from .paper_report import write_summary
+
+    path, n = write_summary(args.summary, args.folders)
+    print(f"{path}: {n} studies")
     return 0
 
 

@@ -451,6 +451,15 @@ class Result:
         path.write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False, default=str))
         return path
 
+    def quantities(self) -> dict[str, float]:
+        """The numbers a study may compare with a paper (``[paper]``, :mod:`fbia.core.paper`):
+        ``x.<name>`` per parameter of the point estimate, ``converged`` (1 if ``success``,
+        else 0), ``nfev`` and ``n_failed``; iterators' results add their own."""
+        out = {f"x.{k}": float(v) for k, v in (self.x or {}).items()}
+        out.update(converged=float(self.success), nfev=float(self.nfev))
+        out["n_failed"] = float(self.n_failed)
+        return out
+
     def summary(self) -> str:
         lines = [f"{self.iterator or 'result'}: {self.status} - {self.message}"]
         if self.x:

@@ -176,6 +176,7 @@ class _Session:
     started: str
     echo: Echo
     executor_info: dict[str, Any] = field(default_factory=dict)
+    t0: float = field(default_factory=time.perf_counter)
 
     def finish(self, result: Result, quiet: bool = False) -> None:
         _finish(
@@ -233,6 +234,15 @@ def _run_stored(
         result.info["warnings"] = warnings
     result.info.setdefault("files", files)
     session.finish(result)
+    if study.paper is not None:  # published numbers beside the result: report.md
+        from .paper_report import write_paper_report
+
+        pngs = [f for v in files.values() for f in (v if isinstance(v, list) else [v])]
+        wall = time.perf_counter() - session.t0
+        report_md = write_paper_report(
+            study, result, out, wall, [str(f) for f in pngs], reused=totals["reused"]
+        )
+        echo(f"comparison with {study.paper.source}: {report_md}")
     return result
 
 

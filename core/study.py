@@ -20,6 +20,7 @@ from .executors import make_evaluator
 from .iteration import InverseIterator
 from .observation import Observation
 from .options import plugin_options
+from .paper import PaperSpec
 from .parameters import Parameter, Prior
 from .problem import Evaluation, InverseProblem
 from .protocols import Discrepancy, ForwardModel
@@ -188,6 +189,7 @@ class Study:
     raw: dict[str, Any] = field(repr=False)
     text: str = field(repr=False)
     sha256: str = ""
+    paper: PaperSpec | None = field(default=None, repr=False)  # [paper]: published numbers
 
     @property
     def file(self) -> str:
@@ -297,6 +299,11 @@ class Study:
             f"iterator   {self.iterator_name or '(none: one forward run)'}",
             f"executor   {self.executor.label()}",
             f"seed       {self.seed}",
+            *(
+                [f"paper      {self.paper.source} ({len(self.paper.values)} values)"]
+                if self.paper is not None
+                else []
+            ),
             f"output     {self.output}",
             *([] if self.store is None else [f"store      {self.store}"]),
         ]

@@ -76,6 +76,9 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
                                 # | moab | oar (dask-jobqueue) with `workers` workers
     cluster_options = { cores = 8, memory = "16GB", walltime = "04:00:00" }  # passed through
 
+    [paper]                     # published numbers beside the result (fbia.core.paper)
+    source = "Paper A, Table 2" # [[paper.values]]: quantity, paper, unit, rule, tolerance, ...
+
 Resume: every finished run is stored in ``<output>/store.sqlite`` the moment it ends.  Running
 the study again on the same output folder reuses every stored forward run of the same model
 (options, fixed inputs) at the same inputs and runs only the others; a new likelihood noise
@@ -111,6 +114,7 @@ from typing import Any, TypeVar
 from .errors import ConfigError
 from .interface import Interface
 from .observation import MeasurementPoints, Observation, check_coordinate
+from .paper import read_paper
 from .parameters import Parameter, Prior
 from .registry import Registry, default_registry
 from .study import (
@@ -154,6 +158,7 @@ SECTIONS: dict[str, str] = {
     "likelihood": "noise_std, or noise_prior (sigma_N inferred)",
     "iterator": "iterator name and options",
     "executor": "serial, processes or dask; workers, time-out, cluster",
+    "paper": "published numbers to put beside the result (fbia.core.paper)",
 }
 
 
@@ -413,6 +418,9 @@ class _Reader:
             self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
         )
         executor = self.read_executor()
+        paper = (
+            read_paper(raw["paper"], self.file, iterator is not None) if "paper" in raw else None
+        )
 
         study = Study(
             path=self.path,
@@ -437,6 +445,7 @@ class _Reader:
             raw=raw,
             text=text,
             sha256=hashlib.sha256(raw_bytes).hexdigest(),
+            paper=paper,
         )
         if synthetic is None:
             _ = study.problem  # no forward run needed: check the whole problem now

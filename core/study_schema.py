@@ -33,6 +33,8 @@ __all__ = [
     "ExecutorSection",
     "LikelihoodSection",
     "ObservationSection",
+    "PaperSection",
+    "PaperValueSection",
     "ParameterSection",
     "PluginSection",
     "StudySection",
@@ -228,6 +230,33 @@ class ExecutorSection(Section):
         return self
 
 
+#: what "agrees" can mean for a [[paper.values]] entry (fbia.core.paper.RULES explains each)
+PAPER_RULES = ("relative", "absolute", "magnitude", "equal", "same_sign", "above", "below", "none")
+
+
+class PaperValueSection(Section):
+    """One ``[[paper.values]]`` table: a published number beside a quantity of the result."""
+
+    quantity: Text
+    paper: Number | None = None
+    unit: Label = ""
+    rule: Literal[
+        "relative", "absolute", "magnitude", "equal", "same_sign", "above", "below", "none"
+    ] = "relative"
+    tolerance: Annotated[Number, Field(ge=0)] | None = None
+    than: Text | None = None
+    label: Label = ""
+    why: Label = ""
+
+
+class PaperSection(Section):
+    """``[paper]``: where the published numbers come from, and the numbers."""
+
+    source: Text
+    note: Label = ""
+    values: list[Table] = Field(default_factory=list)
+
+
 class _KeyError(ValueError):
     """A cross-key rule that failed, and the key it is reported at."""
 
@@ -238,7 +267,7 @@ class _KeyError(ValueError):
 
 S = TypeVar("S", bound=Section)
 
-_LITERAL_NAMES = {"kind": "executor", "cluster": "cluster", "noise": "noise"}
+_LITERAL_NAMES = {"kind": "executor", "cluster": "cluster", "noise": "noise", "rule": "rule"}
 
 
 def parse_section(model: type[S], value: Any, where: str) -> S:

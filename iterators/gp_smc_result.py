@@ -277,6 +277,26 @@ class GpSmcResult(Result):
                 )
         return "\n".join(lines)
 
+    def quantities(self) -> dict[str, float]:
+        """Besides :meth:`Result.quantities` (``x.<name>`` is the MAP): per input of the
+        posterior (x, theta, an inferred sigma_N) ``map.<name>`` (x only), ``pm.<name>``
+        (posterior mean), ``sd.<name>`` (posterior std), ``q2.5.<name>``, ``q97.5.<name>``
+        (95 % interval); ``log_evidence``."""
+        out = super().quantities()
+        post = self.posterior
+        if post is None:
+            return out
+        std = np.sqrt(np.maximum(np.diag(post.cov_all), 0.0))
+        for j, name in enumerate(post.names):
+            if j < len(post.map):
+                out[f"map.{name}"] = float(post.map[j])
+            out[f"pm.{name}"] = float(post.mean_all[j])
+            out[f"sd.{name}"] = float(std[j])
+            lo, _, hi = post.credible_intervals[name]
+            out[f"q2.5.{name}"], out[f"q97.5.{name}"] = float(lo), float(hi)
+        out["log_evidence"] = float(post.log_evidence)
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()
         parts: dict[str, Any] = {

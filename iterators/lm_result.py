@@ -172,6 +172,46 @@ class LMResult(Result):
         )
         return out
 
+    def quantities(self) -> dict[str, float]:
+        """Besides :meth:`Result.quantities`: ``err_res``, ``err_grad``, ``iterations`` of the
+        best start; per start k (1-based, and by its label from ``x0_labels``, spaces as
+        ``_``) ``start.<k>.<name>``, ``.err_res``, ``.err_grad``, ``.iterations``, ``.nfev``,
+        ``.converged`` (1/0), ``.at_bound`` (parameters on a bound) (NaN where the start gave
+        no result); over the starts with a result ``mean.<q>`` and ``std.<q>`` (population
+        std, ddof 0) of every parameter and err_res, and ``n_starts``, ``n_results``,
+        ``n_converged``."""
+        out = super().quantities()
+        nan = math.nan
+        for key in ("err_res", "err_grad"):
+            value = getattr(self, key)
+            out[key] = nan if value is None else float(value)
+        out["iterations"] = float(self.iterations)
+        with_x = [s for s in self.starts if s["x"] is not None]
+        for s in self.starts:
+            x = s["x"] or {}
+            row = {n: float(x.get(n, nan)) for n in self.names}
+            row.update(
+                err_res=nan if s["err_res"] is None else float(s["err_res"]),
+                err_grad=nan if s["err_grad"] is None else float(s["err_grad"]),
+                iterations=float(s["iterations"]),
+                nfev=float(s["nfev"]),
+                converged=float(bool(s["success"])),
+                at_bound=float(len(s["at_bound"])),
+            )
+            keys = [str(s["start"])]
+            if s.get("label"):
+                keys.append("_".join(str(s["label"]).split()))
+            for key in keys:
+                out.update({f"start.{key}.{q}": v for q, v in row.items()})
+        for q in [*self.names, "err_res"]:
+            values = [float(s["x"][q] if q in self.names else s["err_res"]) for s in with_x]
+            out[f"mean.{q}"] = float(np.mean(values)) if values else nan
+            out[f"std.{q}"] = float(np.std(values)) if values else nan
+        out["n_starts"] = float(len(self.starts))
+        out["n_results"] = float(len(with_x))
+        out["n_converged"] = float(sum(bool(s["success"]) for s in self.starts))
+        return out
+
     def table(self) -> str:
         """The multi-start comparison as a text table (one row per initial guess)."""
         head = ["#", "status", *[f"{n}*" for n in self.names], "err_res", "iter", "nfev", "note"]

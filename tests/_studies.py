@@ -112,7 +112,7 @@ BAD_CASES = [
         STUDY + "\n[solver]\ntol = 1\n",
         "study.toml: unknown section [solver]; valid sections: [study], [model], [parameters], "
         "[uncertain], [fixed], [observations], [synthetic], [measure], [likelihood], "
-        "[iterator], [executor]",
+        "[iterator], [executor], [paper]",
     ),
     (
         "unknown-key",

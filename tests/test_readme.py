@@ -121,13 +121,19 @@ def test_make_targets_exist():
 def test_cli_lines_run(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(ROOT)
     commands = cli_lines("fbia")
-    assert {args[1] for args in commands} == {"validate", "forward", "run", "plugins"}
+    assert {args[1] for args in commands} == {
+        "validate",
+        "forward",
+        "run",
+        "plugins",
+        "reproductions",
+    }
     for args in commands:
         for arg in args[2:]:
             if arg.endswith(".toml"):
                 assert (ROOT / arg).is_file(), f"README names a missing file {arg}"
-        if args[1] == "run":
-            continue  # minutes of work: `make demo` runs it
+        if args[1] in ("run", "reproductions"):
+            continue  # minutes of work: `make demo` / `make reproduce` run them
         extra = ["--output", str(tmp_path / "forward")] if args[1] == "forward" else []
         assert fbia_main(args[1:] + extra) == 0, capsys.readouterr().err
     assert "analytic_mound_2d" in capsys.readouterr().out

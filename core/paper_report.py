@@ -1,0 +1,280 @@
+"""``report.md`` and ``paper.json`` of a study with a ``[paper]`` table, and the summary page.
+
+:func:`write_paper_report` is called by :func:`fbia.core.runner.run_study` when the study has
+a ``[paper]`` table (:mod:`fbia.core.paper`): it writes into the output folder
+
+* ``report.md``: the table **quantity | paper | fbia | difference | rel. | agrees? | why**,
+  the measured times (this session's wall time and the summed wall time of the forward runs,
+  which stays meaningful when a session reused stored runs), the settings (model, measure,
+  iterator options, synthetic data, executor), links to the figures and the result's summary;
+* ``paper.json``: the same rows and times, typed (:class:`PaperRecord`), for the summary.
+
+:func:`write_summary` (``fbia reproductions OUT.md DIR ...``) collects every ``paper.json``
+below the given folders into one page (``docs/reproductions.md``): per study the source,
+the verdict (rows that agree of rows judged), the times and the full table, so that the page
+reads on its own where the output folders are not checked in.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .errors import ConfigError
+from .options import plugin_options
+from .paper import Comparison, compare, verdict
+from .problem import Result
+from .study import Study
+
+__all__ = ["PaperRecord", "write_paper_report", "write_summary"]
+
+RECORD_NAME = "paper.json"
+REPORT_NAME = "report.md"
+
+
+@dataclass(frozen=True)
+class PaperRecord:
+    """What ``paper.json`` holds: one study's comparison with the paper, and its times."""
+
+    study: str
+    study_file: str
+    source: str
+    note: str
+    status: str
+    wall_time: float  # s, this session (start to the end of the extras)
+    forward_time: float  # s, summed wall time of the result's forward runs (stored ones too)
+    nfev: int
+    finished: str
+    rows: tuple[Comparison, ...]
+    reused: int = 0  # runs this session took from the store instead of running them
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "rows"}
+        out["rows"] = [r.to_dict() for r in self.rows]
+        return out
+
+    @classmethod
+    def read(cls, path: Path) -> PaperRecord:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            rows = tuple(Comparison.from_dict(r) for r in data.pop("rows"))
+            return cls(**data, rows=rows)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ConfigError(f"not a paper.json of fbia: {exc}", str(path)) from None
+
+
+def write_paper_report(
+    study: Study,
+    result: Result,
+    out: Path,
+    wall_time: float,
+    files: Sequence[str] = (),
+    reused: int = 0,
+) -> Path:
+    """Compare ``result`` with ``study.paper``; write ``report.md`` and ``paper.json``
+    (``reused``: how many runs the session took from the store)."""
+    spec = study.paper
+    assert spec is not None
+    rows = tuple(compare(spec, result.quantities()))
+    forward = sum(e.time for e in result.evaluations if math.isfinite(e.time))
+    record = PaperRecord(
+        study=study.name,
+        study_file=str(study.path.resolve()),
+        source=spec.source,
+        note=spec.note,
+        status=result.status,
+        wall_time=wall_time,
+        forward_time=forward,
+        nfev=result.nfev,
+        finished=str(result.provenance.get("finished", "")),
+        rows=rows,
+        reused=reused,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / RECORD_NAME).write_text(json.dumps(record.to_dict(), indent=1), encoding="utf-8")
+    figures = sorted({Path(f) for f in files if str(f).endswith(".png")})
+    text = _report(study, result, record, out, figures)
+    path = out / REPORT_NAME
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _report(
+    study: Study, result: Result, record: PaperRecord, out: Path, figures: Sequence[Path]
+) -> str:
+    good, judged = verdict(record.rows)
+    lines = [
+        f"# {study.name}: fbia beside {record.source}",
+        "",
+        f"Study file `{study.path.name}`; result: **{result.status}** ({result.message}).",
+        f"{good} of {judged} published numbers agree by their rule.",
+        "",
+        _times(record),
+        "",
+    ]
+    if record.note:
+        lines += [record.note, ""]
+    lines += ["## Paper and fbia", "", *comparison_table(record.rows), ""]
+    lines += ["## Settings", "", *_settings(study), ""]
+    if figures:
+        lines += ["## Figures", ""]
+        lines += [f"- [{_rel(f, out)}]({_rel(f, out)})" for f in figures]
+        lines.append("")
+    lines += ["## Result", "", "```", result.summary(), "```", ""]
+    return "\n".join(lines)
+
+
+def _times(record: PaperRecord) -> str:
+    reused = f" ({record.reused} runs taken from the store, not run again)" if record.reused else ""
+    return (
+        f"Measured: {record.wall_time:.1f} s wall time of this session{reused}; the "
+        f"{record.nfev} forward runs of the result took {record.forward_time:.1f} s together "
+        "(runs taken from the store count with the time they took when they ran)."
+    )
+
+
+def comparison_table(rows: Sequence[Comparison]) -> list[str]:
+    """The markdown table of a comparison: quantity | paper | fbia | difference | rel. |
+    agrees? | why."""
+    out = [
+        "| quantity | paper | fbia | difference | rel. | agrees? | why |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        v = r.value
+        unit = f" {v.unit}" if v.unit else ""
+        paper = f"{_num(v.paper)}{unit}" if v.paper is not None else v.criterion()
+        if v.rule in ("above", "below") and r.reference is not None:
+            paper = f"{v.criterion()} ({_num(r.reference)})"
+        fbia = f"{_num(r.fbia)}{unit}"
+        diff = "" if r.abs_diff is None else _num(r.abs_diff)
+        rel = "" if r.rel_diff is None else f"{100 * r.rel_diff:+.3g} %"
+        mark = {True: "yes", False: "**no**", None: "-"}[r.agrees]
+        agrees = f"{mark} ({v.criterion()})" if r.agrees is not None else mark
+        why = v.why.replace("|", "\\|")
+        out.append(f"| {v.name} | {paper} | {fbia} | {diff} | {rel} | {agrees} | {why} |")
+    return out
+
+
+def _num(x: float | None) -> str:
+    if x is None or not math.isfinite(x):
+        return "no result" if x is not None else "-"
+    return f"{x:.4g}"
+
+
+def _settings(study: Study) -> list[str]:
+    def opts(obj: Any, section: str) -> str:
+        """The options the study file sets (also where they equal the default), then those
+        that differ from the default for another reason (e.g. a seed from the study)."""
+        raw = study.raw.get(section, {})
+        written = dict(raw.get("options", {})) if isinstance(raw, dict) else {}
+        given = {**written, **plugin_options(obj, exclude_defaults=True)}
+        text = ", ".join(f"{k} = {v!r}" for k, v in given.items())
+        return f"{text}; the other options at their defaults" if text else "defaults"
+
+    lines = [
+        f"- model `{study.model_name}`: {opts(study.model, 'model')}",
+        f"- measure `{study.measure_name}`: {opts(study.measure, 'measure')}",
+    ]
+    if study.iterator is not None:
+        lines.append(f"- iterator `{study.iterator_name}`: {opts(study.iterator, 'iterator')}")
+    params = "; ".join(
+        f"{p.name} in [{p.bounds[0]:g}, {p.bounds[1]:g}]" if p.bounds else p.name
+        for p in study.parameters
+    )
+    lines.append(f"- parameters: {params}")
+    if study.synthetic is not None:
+        s = study.synthetic
+        truth = ", ".join(f"{k} = {v:g}" for k, v in s.truth.items())
+        pts = f", {s.points} measurement points" if s.points else ""
+        lines.append(
+            f"- synthetic data: truth {truth}; noise {s.noise_std:g} mm ({s.noise}, seed "
+            f"{s.seed}){pts}; states {s.coordinates}"
+        )
+    if study.fixed:
+        lines.append(f"- fixed: {study.fixed}")
+    lines.append(f"- executor: {study.executor.label()}; seed {study.seed}")
+    return lines
+
+
+def _rel(path: Path, start: Path) -> str:
+    return Path(os.path.relpath(path, start)).as_posix()
+
+
+def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Path, int]:
+    """Collect every ``paper.json`` below ``folders`` into the markdown page ``target``.
+
+    Returns the page and the number of studies on it; a folder without any is an error (a
+    summary of nothing would hide that the examples were not run).
+    """
+    target = Path(target)
+    records: list[tuple[Path, PaperRecord]] = []
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise ConfigError("not a folder", str(folder))
+        found = sorted(folder.rglob(RECORD_NAME))
+        if not found:
+            raise ConfigError(
+                f"no {RECORD_NAME} below it: run the examples first (make reproduce)",
+                str(folder),
+            )
+        records += [(p, PaperRecord.read(p)) for p in found]
+    lines = [
+        "# Reproductions of the papers' examples",
+        "",
+        "Generated by `fbia reproductions` from the `paper.json` files that `fbia run` writes "
+        "beside `report.md` for every study with a `[paper]` table (`make reproduce` runs "
+        "them all and regenerates this page). Each table puts the published number beside "
+        "fbia's, with the rule by which it counts as agreeing and why it differs.",
+        "",
+        "| study | source | agree | status | wall time of the last session | forward runs "
+        "(their summed time) |",
+        "|---|---|---|---|---|---|",
+    ]
+    root = target.parent.resolve()
+    for _, rec in records:
+        good, judged = verdict(rec.rows)
+        lines.append(
+            f"| [{rec.study}](#{_anchor(rec.study)}) | {rec.source} | {good} / {judged} | "
+            f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
+            f"{rec.nfev} ({rec.forward_time:.0f} s) |"
+        )
+    for path, rec in records:
+        study_file = _rel_or_abs(Path(rec.study_file), root)
+        report = _rel_or_abs(path.parent / REPORT_NAME, root)
+        lines += [
+            "",
+            f"## {rec.study}",
+            "",
+            f"{rec.source}. Study file [{study_file}]({study_file}); full report "
+            f"`{report}` (written by the run, not checked in). Result status: {rec.status}; "
+            f"finished {rec.finished}.",
+            "",
+            _times(rec),
+            "",
+        ]
+        if rec.note:
+            lines += [rec.note, ""]
+        lines += comparison_table(rec.rows)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return target, len(records)
+
+
+def _anchor(title: str) -> str:
+    """GitHub's anchor of a heading."""
+    keep = "".join(c for c in title.lower() if c.isalnum() or c in " -_")
+    return keep.replace(" ", "-")
+
+
+def _rel_or_abs(path: Path, root: Path) -> str:
+    try:
+        return _rel(path.resolve(), root)
+    except ValueError:
+        return path.as_posix()
