@@ -28,11 +28,14 @@ verdict; the last lines are one summary per case.
 
 The pipeline options per case are the tables below; change them there.
 
-Measured on 2 cores (2026-11-25, fbia at the adaptive design's introduction): 2-D PASS with
-83 runs (fixed design: PASS with 1008); 2-D + inflow FAIL with 100 runs (0.35 std off, std
-ratio 0.64; fixed design at 1008 runs: 1.36 std off); 6 + 1-D FAIL with 1000 runs (0.42 std
-off, std ratio 0.78, 4 of 6 parameters within the targets; fixed design at 2008 runs: 6.3 std
-off, std x10). Every failing result had the status 'unreliable'.
+Measured on 2 cores (2026-11-25, the default residual emulator, gp_residuals): 2-D PASS with
+50 runs; 2-D + inflow PASS with 100 runs (0.02 std off, std ratio 1.02; 5 of 5 gp_smc seeds
+pass with 52-100 runs); 6 + 1-D PASS with 264 runs (0.07 std off, std ratio 0.96, 49 s
+excluding the runs). The paper's pipeline (fixed Sobol design, GP of L) at the paper's budget:
+2-D PASS with 1008 runs; 2-D + inflow FAIL with 1008 (1.36 std off); 6 + 1-D FAIL with 2008
+(E2 6.3 std off, std x10), both flagged 'unreliable'. Before the residual emulator, the adaptive
+design with a GP of L failed 2-D + inflow at 100 runs (0.35 std off) and 6 + 1-D at 1000
+(0.42 std off).
 """
 
 from __future__ import annotations

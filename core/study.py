@@ -314,3 +314,16 @@ def _opts(obj: Any) -> str:
     """The options that differ from their defaults, e.g. ``(n_points=81)``."""
     given = plugin_options(obj, exclude_defaults=True)
     return "(" + ", ".join(f"{k}={v!r}" for k, v in given.items()) + ")" if given else ""
+
+
+def store_file(folder: Path, store: str | None, where: str) -> Path | None:
+    """The study store a study file names (relative to its ``folder``), None for the default
+    ``<output>/store.sqlite``; a folder is an error (``where``: the file and key)."""
+    if store is None:
+        return None
+    path = folder / store
+    if store.endswith(("/", "\\")) or Path(store).name in ("", ".", "..") or path.is_dir():
+        raise ConfigError(
+            f"{store!r} is a folder: name the store's file, e.g. 'runs.sqlite'", where
+        )
+    return path

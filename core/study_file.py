@@ -106,8 +106,7 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-import typing
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -125,6 +124,7 @@ from .study import (
     SyntheticSpec,
     check_scheduler_address,
     derived_seed,
+    store_file,
 )
 from .study_schema import (
     ExecutorSection,
@@ -137,6 +137,8 @@ from .study_schema import (
     UncertainSection,
     as_number,
     as_table,
+    checked,
+    is_path_type,
     kind_of,
     parse_section,
 )
@@ -218,7 +220,7 @@ class _Reader:
         return f"{self.file}: {section}" + (f" {key}" if key else "")
 
     def table(self, value: Any, where: str) -> dict[str, Any]:
-        return _checked(as_table, value, where)
+        return checked(as_table, value, where)
 
     def tables(self, value: Any, where: str) -> list[dict[str, Any]]:
         if isinstance(value, dict):
@@ -228,7 +230,7 @@ class _Reader:
         return value
 
     def number(self, value: Any, where: str) -> float:
-        return _checked(as_number, value, where)
+        return checked(as_number, value, where)
 
     def numbers(self, value: Any, where: str) -> dict[str, float]:
         table = self.table(value, where)
@@ -281,7 +283,7 @@ class _Reader:
         fields = getattr(schema, "model_fields", {})
         for key, value in options.items():
             spec = fields.get(key)
-            if spec is None or not isinstance(value, str) or not _is_path_type(spec.annotation):
+            if spec is None or not isinstance(value, str) or not is_path_type(spec.annotation):
                 continue
             path = Path(value).expanduser()
             path = path if path.is_absolute() else (self.folder / path).resolve()
@@ -352,15 +354,7 @@ class _Reader:
         name = meta.name or self.path.stem
         self.seed = meta.seed
         output = self.folder / meta.output
-        store = None
-        if meta.store is not None:
-            store = self.folder / meta.store
-            named = Path(meta.store).name
-            if meta.store.endswith(("/", "\\")) or named in ("", ".", "..") or store.is_dir():
-                raise ConfigError(
-                    f"{meta.store!r} is a folder: name the store's file, e.g. 'runs.sqlite'",
-                    self.where("[study]", "store"),
-                )
+        store = store_file(self.folder, meta.store, self.where("[study]", "store"))
 
         self.model_name, model = self.plugin("forward_model", "model")
         try:
@@ -576,19 +570,6 @@ class _Reader:
             spec.cluster,
             dict(spec.cluster_options),
         )
-
-
-def _checked(check: Callable[[Any], T], value: Any, where: str) -> T:
-    """A value through a section-schema check, its complaint as a located ConfigError."""
-    try:
-        return check(value)
-    except ValueError as exc:
-        raise ConfigError(str(exc), where) from None
-
-
-def _is_path_type(annotation: Any) -> bool:
-    """Whether an option's type is ``Path`` or a union with it (``Path | None``)."""
-    return annotation is Path or Path in typing.get_args(annotation)
 
 
 def _model_dim(model: Any) -> int | None:

@@ -18,6 +18,9 @@ fbia.core.errors.ConfigError: study.toml: [likelihood]: unknown key 'sigma'; val
 from __future__ import annotations
 
 import math
+import typing
+from collections.abc import Callable
+from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
 import pydantic
@@ -27,7 +30,11 @@ from .cluster_options import check_cluster_options
 from .errors import ConfigError
 from .isolation import isolation_mode
 
+_T = TypeVar("_T")
+
 __all__ = [
+    "checked",
+    "is_path_type",
     "CLUSTERS",
     "NOISE_KINDS",
     "ExecutorSection",
@@ -313,3 +320,16 @@ def _message(err: Any, where: str) -> tuple[str, str]:
         options = err["ctx"]["expected"].replace("'", "").replace(" or ", ", ")
         return f"unknown {_LITERAL_NAMES.get(key, key)} {value!r}; valid: {options}", at
     return f"{err['msg']} (got {value!r})", at
+
+
+def checked(check: Callable[[Any], _T], value: Any, where: str) -> _T:
+    """A value through a section-schema check, its complaint as a located ConfigError."""
+    try:
+        return check(value)
+    except ValueError as exc:
+        raise ConfigError(str(exc), where) from None
+
+
+def is_path_type(annotation: Any) -> bool:
+    """Whether an option's type is ``Path`` or a union with it (``Path | None``)."""
+    return annotation is Path or Path in typing.get_args(annotation)
