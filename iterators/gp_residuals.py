@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,11 +37,8 @@ from numpy.typing import ArrayLike, NDArray
 from ..core.errors import ConfigError
 from ..core.likelihood import MIN_SQUARED_DISTANCE
 from ..core.problem import Evaluation
-from .gp_surrogate import GpSurrogate, GuardCounts
-from .smc_diagnostics import extrapolation_margin
-
-if TYPE_CHECKING:
-    from .smc import SmcResult
+from .gp_guard import ExtrapolationGuard, GuardCounts
+from .gp_surrogate import GpSurrogate
 
 FloatArray = NDArray[np.float64]
 
@@ -129,7 +126,7 @@ def residual_link(
     return ResidualLink(scale, None, n), ""
 
 
-class ResidualSurrogate:
+class ResidualSurrogate(ExtrapolationGuard):
     """L of eq. 5 (or its profile over sigma_N) from a GP emulator of the residuals.
 
     Parameters
@@ -312,30 +309,6 @@ class ResidualSurrogate:
             second += 0.5 * np.diag(c) ** 2
         cov[np.diag_indices_from(cov)] += second
         return mean, cov
-
-    @property
-    def extrapolation_cap(self) -> float:
-        """The largest credible L: the best run's + ``guard_margin`` (as GpSurrogate)."""
-        margin = self.guard_margin
-        if margin is None:
-            margin = extrapolation_margin(self.x_train.shape[1])
-        return float(self.y_train.max()) + margin
-
-    def predict_mean_guarded(self, x: ArrayLike) -> FloatArray:
-        """:meth:`predict_mean` capped at :attr:`extrapolation_cap` (counted in ``guard``)."""
-        mean = self.predict_mean(x)
-        cap = self.extrapolation_cap
-        n_capped = int(np.count_nonzero(mean > cap))
-        self.guard.calls += 1
-        self.guard.points += len(mean)
-        self.guard.capped_calls += n_capped > 0
-        self.guard.capped_points += n_capped
-        return np.minimum(mean, cap) if n_capped else mean
-
-    def extrapolated_mass(self, result: SmcResult) -> float:
-        """Posterior mass where the mean reaches the cap (see GpSurrogate)."""
-        mean = self.predict_mean(result.particles[:, : self.x_train.shape[1]])
-        return float(result.weights[mean >= self.extrapolation_cap].sum())
 
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:

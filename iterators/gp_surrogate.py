@@ -35,19 +35,15 @@ import math
 import time
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError
+from .gp_guard import ExtrapolationGuard, GuardCounts
 from .gp_mean import fused_kernels
 from .gp_trend import QuadraticTrend
-from .smc_diagnostics import extrapolation_margin
-
-if TYPE_CHECKING:
-    from .smc import SmcResult
 
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
@@ -60,16 +56,6 @@ OPTIMIZERS = ("lbfgsb", "scg")
 #: (max L - min L)^2) during training.
 LENGTHSCALE_BOUNDS = (1e-3, 1e2)
 VARIANCE_BOUNDS = (1e-4, 1e4)
-
-
-@dataclass
-class GuardCounts:
-    """What :meth:`GpSurrogate.predict_mean_guarded` capped: calls and points."""
-
-    calls: int = 0
-    capped_calls: int = 0
-    points: int = 0
-    capped_points: int = 0
 
 
 def blas_single_thread() -> contextlib.AbstractContextManager[Any]:
@@ -143,7 +129,7 @@ def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.
     return np.asarray(cho_solve((chol, True), b))
 
 
-class GpSurrogate:
+class GpSurrogate(ExtrapolationGuard):
     """GP regression model of the log-likelihood L(x) (Paper B, eq. 26-29).
 
     Parameters
@@ -450,32 +436,6 @@ class GpSurrogate:
         if self.trend is None:
             return np.full(len(np.atleast_2d(x)), self.mean_value)
         return self.trend(np.atleast_2d(np.asarray(x, dtype=float)))
-
-    @property
-    def extrapolation_cap(self) -> float:
-        """The largest credible L: the largest training value + ``guard_margin``."""
-        margin = self.guard_margin
-        if margin is None:
-            margin = extrapolation_margin(self.x_train.shape[1])
-        return float(self.y_train.max()) + margin
-
-    def predict_mean_guarded(self, x: ArrayLike) -> NDArray[np.float64]:
-        """:meth:`predict_mean` capped at :attr:`extrapolation_cap` (counted in ``guard``)."""
-        mean = self.predict_mean(x)
-        cap = self.extrapolation_cap
-        n_capped = int(np.count_nonzero(mean > cap))
-        self.guard.calls += 1
-        self.guard.points += len(mean)
-        self.guard.capped_calls += n_capped > 0
-        self.guard.capped_points += n_capped
-        return np.minimum(mean, cap) if n_capped else mean
-
-    def extrapolated_mass(self, result: SmcResult) -> float:
-        """Posterior mass of an SMC result where the GP mean reaches :attr:`extrapolation_cap`
-        (capped in a guarded run; 0: no extrapolation). The GP's inputs are the leading
-        columns of the particles (a sampled sigma_N, whose L is not the GP's, comes after)."""
-        mean = self.predict_mean(result.particles[:, : self.x_train.shape[1]])
-        return float(result.weights[mean >= self.extrapolation_cap].sum())
 
     def predict(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Posterior mean and variance of L (eq. 28a-b), through GPy (for plots, checks)."""
