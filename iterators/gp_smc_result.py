@@ -264,6 +264,14 @@ class GpSmcResult(Result):
                 f"    {name:<12} {post.mean_all[j]:<12.6g} {std[j]:<12.4g} "
                 f"{lo:.6g} / {mid:.6g} / {hi:.6g}"
             )
+        if self.surrogate is not None:
+            info = self.surrogate.summary
+            lines.append(
+                f"  surrogate: residual emulator, {info.get('components')} principal "
+                f"components of {info.get('n_residuals')} residuals"
+                if info.get("surrogate") == "residuals"
+                else "  surrogate: GP of L (Paper B)"
+            )
         if self.adaptive is not None:
             lines.append(
                 f"  adaptive design: {self.adaptive.n_initial} start runs, "

@@ -127,8 +127,10 @@ def test_the_iterator_uses_the_emulator_or_says_why_not():
     auto = fbia.iterator("gp_smc", n_train=24, **FAST).run(problem)
     assert auto.surrogate.summary["surrogate"] == "residuals"
     assert auto.surrogate.state["kind"] == "residuals"
+    assert "surrogate: residual emulator" in auto.summary()
     plain = fbia.iterator("gp_smc", n_train=24, surrogate="log_likelihood", **FAST).run(problem)
     assert "surrogate" not in plain.surrogate.summary
+    assert "surrogate: GP of L (Paper B)" in plain.summary()
     # two observations with different noise: "auto" falls back to a GP of L and says so
     two = _problem()
     obs = two.observations[0]
