@@ -12,7 +12,9 @@ a ``[paper]`` table (:mod:`fbia.core.paper`): it writes into the output folder
 :func:`write_summary` (``fbia reproductions OUT.md DIR ...``) collects every ``paper.json``
 below the given folders into one page (``docs/reproductions.md``): per study the source,
 the verdict (rows that agree of rows judged), the times and the full table, so that the page
-reads on its own where the output folders are not checked in.
+reads on its own where the output folders are not checked in; and per example the section
+``## Measured times`` of its README (the wall time of a fresh run, which a session that took
+its runs from the store cannot measure).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +38,8 @@ __all__ = ["PaperRecord", "write_paper_report", "write_summary"]
 
 RECORD_NAME = "paper.json"
 REPORT_NAME = "report.md"
+#: the section of an example's README that the summary page copies (fresh-run wall times)
+TIMES_HEADING = "Measured times"
 
 
 @dataclass(frozen=True)
@@ -245,6 +250,7 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
             f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
             f"{rec.nfev} ({rec.forward_time:.0f} s) |"
         )
+    lines += _measured_times([path for path, _ in records], [Path(f) for f in folders], root)
     for path, rec in records:
         study_file = _rel_or_abs(Path(rec.study_file), root)
         report = _rel_or_abs(path.parent / REPORT_NAME, root)
@@ -265,6 +271,73 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return target, len(records)
+
+
+def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path) -> list[str]:
+    """Per example (the nearest folder above a ``paper.json`` that holds a README.md, within
+    ``folders``) its README's section ``## Measured times``: the wall time of a fresh run,
+    which a session that took its runs from the store cannot measure. Links rebased to
+    ``root``."""
+    tops = [f.resolve() for f in folders]
+    examples: list[Path] = []
+    for path in records:
+        folder = path.resolve().parent
+        while not (folder / "README.md").is_file() and folder not in tops:
+            if folder.parent == folder:
+                break
+            folder = folder.parent
+        if (folder / "README.md").is_file() and folder not in examples:
+            examples.append(folder)
+    lines: list[str] = []
+    for folder in examples:
+        section = _section(folder / "README.md", TIMES_HEADING)
+        if section:
+            link, name = _rel_or_abs(folder, root), _rel_or_abs(folder, Path.cwd().resolve())
+            rebased = [_rebase_links(line, folder, root) for line in section]
+            lines += ["", f"### [{name}]({link}/README.md)", "", *rebased]
+    if lines:
+        lines = [
+            "",
+            f"## {TIMES_HEADING} per example",
+            "",
+            "The wall time of a fresh run of each example, as its README states it (the table "
+            "above gives each study's last session, which may have taken its runs from the "
+            "store).",
+            *lines,
+        ]
+    return lines
+
+
+def _section(readme: Path, heading: str) -> list[str]:
+    """The body of the ``## heading`` section of a markdown file (empty if it has none)."""
+    body: list[str] | None = None
+    for line in readme.read_text(encoding="utf-8").splitlines():
+        if body is not None and line.startswith("## "):
+            break
+        if body is not None:
+            body.append(line)
+        elif line.strip() == f"## {heading}":
+            body = []
+    while body and not body[0].strip():
+        body.pop(0)
+    while body and not body[-1].strip():
+        body.pop()
+    return body or []
+
+
+def _rebase_links(line: str, start: Path, root: Path) -> str:
+    """``line`` with its relative markdown links, written from ``start``, made relative to
+    ``root``."""
+
+    def rebase(match: re.Match[str]) -> str:
+        link = match.group(1)
+        if "://" in link or link.startswith(("#", "/", "mailto:")):
+            return match.group(0)
+        path, _, anchor = link.partition("#")
+        new = _rel(Path(os.path.normpath(start / path)), root)
+        return f"]({new}{'#' + anchor if anchor else ''})"
+
+    return re.sub(r"\]\(([^)\s]+)\)", rebase, line)
 
 
 def _anchor(title: str) -> str:

@@ -289,8 +289,19 @@ class GpSmcResult(Result):
         """Besides :meth:`Result.quantities` (``x.<name>`` is the MAP): per input of the
         posterior (x, theta, an inferred sigma_N) ``map.<name>`` (x only), ``pm.<name>``
         (posterior mean), ``sd.<name>`` (posterior std), ``q2.5.<name>``, ``q97.5.<name>``
-        (95 % interval); ``log_evidence``."""
+        (95 % interval); ``log_evidence``; ``check.rmse`` (the surrogate's error in L at the
+        posterior draws); ``design.n_failed`` and per input ``design.failed_min.<name>``,
+        ``design.failed_max.<name>``: where the design's failed runs lie (NaN if none failed)."""
         out = super().quantities()
+        if self.check is not None:
+            out["check.rmse"] = float(self.check.rmse)
+        if self.design is not None:
+            failed = self.design.points[~self.design.ok]
+            out["design.n_failed"] = float(len(failed))
+            for j, name in enumerate(self.names[: self.design.points.shape[1]]):
+                column = failed[:, j]
+                out[f"design.failed_min.{name}"] = float(column.min()) if len(column) else np.nan
+                out[f"design.failed_max.{name}"] = float(column.max()) if len(column) else np.nan
         post = self.posterior
         if post is None:
             return out

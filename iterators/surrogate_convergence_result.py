@@ -57,6 +57,25 @@ class SurrogateConvergenceResult(Result):
         out["info"] = {**out["info"], **jsonable(parts)}
         return out
 
+    def quantities(self) -> dict[str, float]:
+        """Besides :meth:`Result.quantities` (``x.<name>`` is the ML point of the largest
+        n_train): per row ``n_train.<n>.<name>`` (its ML point), ``n_train.<n>.distance``
+        (|ML point - reference| in box units, NaN without a reference), ``.test_rmse``,
+        ``.test_max_abs``, ``.test_relative_l2`` (held-out error in L), ``.n_used`` and
+        ``.ml_log_likelihood``; ``n_test``."""
+        out = super().quantities()
+        for r in self.rows:
+            key = f"n_train.{r.n_train}"
+            out.update({f"{key}.{name}": float(v) for name, v in r.ml_point.items()})
+            out[f"{key}.distance"] = float(r.reference_distance)
+            out[f"{key}.test_rmse"] = float(r.test_rmse)
+            out[f"{key}.test_max_abs"] = float(r.test_max_abs)
+            out[f"{key}.test_relative_l2"] = float(r.test_relative_l2)
+            out[f"{key}.n_used"] = float(r.n_used)
+            out[f"{key}.ml_log_likelihood"] = float(r.ml_log_likelihood)
+        out["n_test"] = float(self.n_test)
+        return out
+
     def table(self) -> str:
         """One line per n_train: runs used, ML point, GP mean there, held-out error."""
         head = f"{'n_train':>7} {'used':>5} " + " ".join(f"{n:>10}" for n in self.names)

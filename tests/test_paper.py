@@ -13,7 +13,8 @@ import fbia
 from fbia.core.cli import main
 from fbia.core.paper import compare, lookup, read_paper
 from fbia.core.paper_report import PaperRecord, comparison_table, write_summary
-from fbia.iterators.gp_smc_result import GpSmcResult, ParticlePosterior
+from fbia.iterators.gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, PosteriorCheck
+from fbia.iterators.surrogate_convergence_result import ConvergenceRow, SurrogateConvergenceResult
 
 PAPER = """
 [paper]
@@ -215,6 +216,54 @@ def test_gp_smc_quantities_are_map_mean_and_std():
     q = res.quantities()
     assert (q["map.E"], q["pm.E"], q["sd.E"], q["pm.nu"]) == (310.0, 400.0, 100.0, 0.2)
     assert (q["q2.5.E"], q["q97.5.nu"], q["x.nu"]) == (300.0, 0.3, 0.15)
+    assert "check.rmse" not in q and "design.n_failed" not in q  # stages that did not run
+    res.design = DesignRuns(
+        points=np.array([[150.0, -0.5], [120.0, 0.2], [600.0, 0.1]]),
+        log_likelihood=np.array([-np.inf, -np.inf, -3.0]),
+        status=["failed", "failed", "ok"],
+        train_mask=np.ones(3, dtype=bool),
+    )
+    res.check = PosteriorCheck(4, 0, np.zeros((4, 2)), np.zeros(4), 0.25, 0.5, 0.1)
+    q = res.quantities()
+    assert (q["check.rmse"], q["design.n_failed"]) == (0.25, 2.0)
+    assert (q["design.failed_min.E"], q["design.failed_max.E"]) == (120.0, 150.0)
+    assert (q["design.failed_min.nu"], q["design.failed_max.nu"]) == (-0.5, 0.2)
+    res.design = DesignRuns(res.design.points[2:], np.array([-3.0]), ["ok"], np.ones(1, bool))
+    q = res.quantities()
+    assert q["design.n_failed"] == 0.0 and math.isnan(q["design.failed_max.E"])
+
+
+def test_surrogate_convergence_quantities_per_n_train():
+    def row(n: int, e: float, distance: float, rmse: float) -> ConvergenceRow:
+        return ConvergenceRow(
+            n, n - 1, {"E": e, "nu": 0.3}, -1.0, rmse, 2 * rmse, 0.1, distance, {}
+        )
+
+    res = SurrogateConvergenceResult(
+        status="completed",
+        success=True,
+        message="",
+        x={"E": 401.0, "nu": 0.3},
+        names=["E", "nu"],
+        rows=[row(10, 190.0, 0.37, 6.7), row(200, 401.0, 0.004, 0.6)],
+        n_test=100,
+    )
+    q = res.quantities()
+    assert (q["n_train.10.E"], q["n_train.10.distance"], q["n_train.10.test_rmse"]) == (
+        190.0,
+        0.37,
+        6.7,
+    )
+    assert (q["n_train.200.nu"], q["n_train.200.n_used"], q["n_train.200.test_max_abs"]) == (
+        0.3,
+        199.0,
+        1.2,
+    )
+    assert (q["x.E"], q["n_test"], q["n_train.200.ml_log_likelihood"]) == (401.0, 100.0, -1.0)
+    spec = _spec(
+        [{"quantity": "n_train.200.distance", "rule": "below", "than": "n_train.10.distance"}]
+    )
+    assert compare(spec, q)[0].agrees is True
 
 
 def test_comparison_table_has_the_published_and_fbia_columns():
@@ -255,6 +304,16 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     page = (tmp_path / "docs" / "summary.md").read_text()
     assert "| [tiny](#tiny) | Toy paper, Table 9 | 3 / 4 | " in page
     assert "Study file [../study.toml](../study.toml)" in page
+    assert "## Measured times per example" not in page  # no README: nothing to copy
+    (tmp_path / "README.md").write_text(
+        "# Toy\n\n## Measured times\n\nA fresh run: 3 s ([the study](study.toml), "
+        "[web](https://x.org/a), [here](#toy)).\n\n## Other\n\nnot copied\n"
+    )
+    assert main(["reproductions", "docs/summary.md", "."]) == 0
+    page = (tmp_path / "docs" / "summary.md").read_text()
+    assert "## Measured times per example\n" in page and "not copied" not in page
+    assert "### [.](../README.md)\n\nA fresh run: 3 s ([the study](../study.toml), " in page
+    assert "[web](https://x.org/a), [here](#toy))." in page
     capsys.readouterr()
     assert main(["reproductions", "s.md", "data"]) == 2
     assert one_error_line(capsys) == (

@@ -22,9 +22,13 @@ BOX = {"E": 700.0, "nu": 1.3}  # widths of the bounds
 
 
 def _quick(folder: Path, example: str, name: str, edits: dict[str, str]) -> Path:
-    """The example's study file with ``edits`` (text replacements), in ``folder/example``;
-    its store ``../output/...`` then lies in ``folder/output``."""
+    """The example's study file with ``edits`` (text replacements) and without its ``[paper]``
+    table (a quick size does not reproduce the paper's numbers; the table names quantities,
+    such as n_train = 200, that it lacks), in ``folder/example``; its store
+    ``../output/...`` then lies in ``folder/output``."""
     text = (EXAMPLES / example / name).read_text()
+    assert "\n[paper]\n" in text
+    text = text.split("\n[paper]\n")[0]
     for old, new in edits.items():
         assert old in text, old
         text = text.replace(old, new)
