@@ -216,6 +216,10 @@ def test_gp_smc_quantities_are_map_mean_and_std():
     q = res.quantities()
     assert (q["map.E"], q["pm.E"], q["sd.E"], q["pm.nu"]) == (310.0, 400.0, 100.0, 0.2)
     assert (q["q2.5.E"], q["q97.5.nu"], q["x.nu"]) == (300.0, 0.3, 0.15)
+    # the marginal's peak: the heavier particle's bin (the first and last of 30 over 300-500)
+    assert q["mode.E"] == pytest.approx(300.0 + 200.0 / 60)
+    post.weights[:] = [0.2, 0.8]
+    assert res.quantities()["mode.E"] == pytest.approx(500.0 - 200.0 / 60)
     assert "check.rmse" not in q and "design.n_failed" not in q  # stages that did not run
     res.design = DesignRuns(
         points=np.array([[150.0, -0.5], [120.0, 0.2], [600.0, 0.1]]),
