@@ -107,25 +107,27 @@ def residual_link(
     records: Sequence[Evaluation],
     sigmas: Sequence[float] | None,
     count: int | None,
-) -> tuple[ResidualLink | None, str]:
+) -> tuple[ResidualLink | None, FloatArray, str]:
     """The link for runs ``records`` with noise ``sigmas`` per observation (None: sigma_N is
-    inferred) and n of eq. 5 ``count`` (None: the residual count); or None and why the
+    inferred) and n of eq. 5 ``count`` (None: the residual count), and the runs' residual
+    vectors (:func:`residual_vectors`, what the emulator is fitted to); or None and why the
     residuals cannot stand for L."""
+    none = np.empty((0, 0))
     if sigmas is not None and any(s != sigmas[0] for s in sigmas):
-        return None, "the observations have different sigma_N"
+        return None, none, "the observations have different sigma_N"
     r, why = residual_vectors(records)
     if why:
-        return None, why
+        return None, none, why
     ok = np.all(np.isfinite(r), axis=1) if r.size else np.zeros(len(r), dtype=bool)
     if not ok.any():
-        return None, "no successful run"
+        return None, none, "no successful run"
     n = count if count is not None else r.shape[1]
     if sigmas is not None:
         sigma = float(sigmas[0])
-        return ResidualLink(sigma, -0.5 * n * math.log(2.0 * math.pi * sigma**2), None), ""
+        return ResidualLink(sigma, -0.5 * n * math.log(2.0 * math.pi * sigma**2), None), r, ""
     best = float(np.min(np.sum(r[ok] ** 2, axis=1)))
     scale = math.sqrt(max(best / max(n, 1), MIN_SQUARED_DISTANCE))
-    return ResidualLink(scale, None, n), ""
+    return ResidualLink(scale, None, n), r, ""
 
 
 class ResidualSurrogate(ExtrapolationGuard):
@@ -275,9 +277,12 @@ class ResidualSurrogate(ExtrapolationGuard):
 
     __call__ = predict_mean
 
-    def _gradients(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """The plug-in L and dL / dt_j (M, k) at the rows of ``x``."""
-        t = self._scores(x)
+    def _gradients(
+        self, x: ArrayLike, t: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """The plug-in L and dL / dt_j (M, k) at the rows of ``x`` (``t``: their scores,
+        when already predicted)."""
+        t = self._scores(x) if t is None else t
         half_sq = self._half_sq(t)
         # dQ / dt_j = u^ . v_j = (mean . v_j) + t_j (orthonormal basis)
         dq = self._mean_coef[None, :] + t
@@ -286,8 +291,11 @@ class ResidualSurrogate(ExtrapolationGuard):
     def predict(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Mean (plug-in) and variance of L: sum_j (dL/dt_j)^2 s_j^2 + sum_j s_j^4 / 2 (the
         second-order term, exact for L = C - Q)."""
-        mean, grad = self._gradients(x)
-        var = np.column_stack([gp.predict(x)[1] for gp in self.components])
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        per_component = [gp.predict(x) for gp in self.components]
+        t = np.column_stack([m for m, _ in per_component])
+        var = np.column_stack([v for _, v in per_component])
+        mean, grad = self._gradients(x, t)
         return mean, np.asarray(np.sum(grad**2 * var + 0.5 * var**2, axis=1))
 
     def posterior_covariance(self, a: ArrayLike, b: ArrayLike) -> FloatArray:

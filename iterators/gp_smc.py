@@ -37,8 +37,8 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
    vectors with GPs of their principal components and computes L from the emulated
    residuals (:mod:`fbia.iterators.gp_residuals`): the residuals are smooth in the
    parameters where L is a thin ridge, so far fewer runs give the same accuracy (2-D under
-   the uncertain inflow: 72-100 runs instead of not converging within 100; 6 + 1-D: 221
-   runs). Where residuals cannot give L (observations with different sigma_N, a distance
+   the uncertain inflow: 52-100 runs instead of not converging within 100; 6 + 1-D:
+   221-264 runs). Where residuals cannot give L (observations with different sigma_N, a distance
    that is not the norm of residual vectors of one length) it falls back to Paper B's GP of
    L (:mod:`fbia.iterators.gp_surrogate`, eq. 26-29, Remarks 9-10) and says so;
    ``surrogate = "log_likelihood"`` always uses that GP (to reproduce the paper).
@@ -75,7 +75,7 @@ from ..core.resources import check_memory
 from .gp_adaptive import distinct_draws, soft_floor
 from .gp_adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, adaptive_design
 from .gp_design import finite_bounds, sobol_design
-from .gp_residuals import ResidualSurrogate, Surrogate, residual_link, residual_vectors
+from .gp_residuals import ResidualSurrogate, Surrogate, residual_link
 from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import (
     AdaptiveDesign,
@@ -318,7 +318,7 @@ class GpSmcIterator(IteratorBase):
         rng = np.random.default_rng(opts.seed)
         link = None
         if opts.surrogate != "log_likelihood":
-            link, why = residual_link(
+            link, residuals, why = residual_link(
                 records, None if run.noise is not None else run.sigmas, run.noise_n or run.count
             )
             if link is None and opts.surrogate == "residuals":
@@ -334,7 +334,7 @@ class GpSmcIterator(IteratorBase):
                 polish_iters=opts.gp_polish_iters,
             ).fit(
                 x,
-                residual_vectors(records)[0],
+                residuals,
                 rng=rng,
                 start=start if start and "components" in start else None,
             )

@@ -52,9 +52,10 @@ def _exact(x):
 def fitted():
     rng = np.random.default_rng(0)
     x = rng.uniform(0.0, 0.6, (40, 2))
-    link, why = residual_link(_records(x), [SIGMA], None)
+    link, r, why = residual_link(_records(x), [SIGMA], None)
     assert why == "" and link is not None
-    return x, ResidualSurrogate(link).fit(x, residual_vectors(_records(x))[0], rng=0)
+    np.testing.assert_array_equal(r, residual_vectors(_records(x))[0])
+    return x, ResidualSurrogate(link).fit(x, r, rng=0)
 
 
 def test_training_values_are_eq_5_and_the_mean_follows_l(fitted):
@@ -101,23 +102,23 @@ def test_state_round_trip_and_guard(fitted):
 def test_profile_link_gives_the_profile_log_likelihood():
     x = np.random.default_rng(3).uniform(0.0, 0.6, (30, 2))
     records = _records(x)
-    link, _ = residual_link(records, None, None)
+    link, r, _ = residual_link(records, None, None)
     assert link is not None and link.constant is None and link.count == len(T)
-    s = ResidualSurrogate(link).fit(x, residual_vectors(records)[0], rng=0)
+    s = ResidualSurrogate(link).fit(x, r, rng=0)
     np.testing.assert_allclose(s.y_train, [profile_log_likelihood(ev) for ev in records])
 
 
 def test_when_residuals_cannot_stand_for_l():
     x = np.random.default_rng(4).uniform(0.0, 0.6, (4, 2))
     records = _records(x)
-    assert residual_link(records, [0.1, 0.2], None) == (None, "the observations have different "
-                                                          "sigma_N")  # fmt: skip
+    assert residual_link(records, [0.1, 0.2], None)[::2] == (None, "the observations have "
+                                                               "different sigma_N")  # fmt: skip
     short = [*records[:3], fbia.Evaluation(index=3, x={}, residuals=np.zeros(3), distances=[0.0])]
-    assert "differ in length" in residual_link(short, [SIGMA], None)[1]
+    assert "differ in length" in residual_link(short, [SIGMA], None)[2]
     not_norm = [fbia.Evaluation(index=0, x={}, residuals=np.ones(3), distances=[1.0])]
-    assert "not the norm" in residual_link(not_norm, [SIGMA], None)[1]
+    assert "not the norm" in residual_link(not_norm, [SIGMA], None)[2]
     failed = fbia.Evaluation(index=0, x={}, status="failed", message="boom")
-    assert residual_link([failed], [SIGMA], None) == (None, "no successful run")
+    assert residual_link([failed], [SIGMA], None)[::2] == (None, "no successful run")
     with pytest.raises(fbia.ConfigError, match="count"):
         ResidualSurrogate(ResidualLink(1.0, None, None))
 
