@@ -221,8 +221,9 @@ class PoolExecutor:
                 # A worker died and took the pool down with every run under way.  Runs that
                 # had not started are submitted again.  If one run had started, it is the one
                 # that died; if several had, each is repeated alone to tell the run that kills
-                # its process from those that were only in the same pool.
-                self._shutdown()
+                # its process from those that were only in the same pool.  The broken pool's
+                # other workers are stopped, not waited for (see _shutdown).
+                self._shutdown(kill=True)
                 suspects = [j for j in lost if (j[1] / _STARTED).exists()]
                 if not suspects:
                     for job in lost:
@@ -235,7 +236,7 @@ class PoolExecutor:
                 else:
                     for job in suspects:
                         if self._round(problem, [job], done, finish):
-                            self._shutdown()
+                            self._shutdown(kill=True)
                             done[job[0]] = _died(
                                 job, f"{_DIED}; it died again when repeated alone", finish
                             )
@@ -275,9 +276,12 @@ class PoolExecutor:
 
     def _shutdown(self, kill: bool = False) -> None:
         if self._pool is not None:
-            if kill:
+            if kill or getattr(self._pool, "_broken", False):
                 # The standard library has no public way to stop running workers before
-                # Python 3.14 (ProcessPoolExecutor.terminate_workers).
+                # Python 3.14 (ProcessPoolExecutor.terminate_workers).  A broken pool's
+                # workers are stopped too: CPython 3.11 can start a worker while it marks the
+                # pool broken (a submit racing the worker's death), terminates only the
+                # workers it knew of, then waits for the new one forever in shutdown().
                 for proc in list(getattr(self._pool, "_processes", {}).values()):
                     proc.terminate()
             self._pool.shutdown(wait=True, cancel_futures=True)
