@@ -34,6 +34,7 @@ from .gp_adaptive import (
     validation_error,
 )
 from .gp_design import sobol_design
+from .gp_feasibility import fit_feasibility
 from .gp_residuals import Surrogate
 from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound, DesignRuns
@@ -134,11 +135,13 @@ def adaptive_design(
         y = soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
         records = [run.evaluations[i] for i in np.flatnonzero(train)]
         gp = fit_gp(points[train], y[train], hyper, records)
+        if opts.failures == "classify":
+            gp.feasibility = fit_feasibility(points[train], np.isfinite(loglik[train]))
         n_design = int(train.sum())
         if converged or n_design >= opts.n_train:
             reason = "converged" if converged else "budget"
             break
-        post = sample(gp.predict_mean_guarded, opts.round_particles)
+        post = sample(gp.feasible(gp.predict_mean_guarded), opts.round_particles)
         evidence_change = math.inf if log_z is None else abs(post.log_evidence - log_z)
         log_z = post.log_evidence
         moments = Moments.of(post)
@@ -213,7 +216,7 @@ def _gp_unsure(
 
 def _tempered(gp: Surrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
     def log_likelihood(z: FloatArray) -> FloatArray:
-        return beta * gp.predict_mean_guarded(z)
+        return beta * gp.predict_mean_guarded(z) + gp.log_feasibility(z)
 
     return log_likelihood
 

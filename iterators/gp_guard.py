@@ -5,17 +5,20 @@ L far above the best training run is an artefact of the surrogate, not evidence:
 the mean is capped at the largest training value + a margin (by default chi2_d(0.999) / 2,
 :func:`~fbia.iterators.smc_diagnostics.extrapolation_margin`), the capped calls and points are
 counted, and :meth:`ExtrapolationGuard.extrapolated_mass` says how much posterior mass sat at
-the cap.
+the cap. :meth:`ExtrapolationGuard.feasible` adds the factor of :mod:`~.gp_feasibility` (where
+the forward model runs) to an SMC target when the design had failed runs.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .gp_feasibility import Feasibility
 from .smc_diagnostics import extrapolation_margin
 
 if TYPE_CHECKING:
@@ -40,6 +43,9 @@ class ExtrapolationGuard:
     guard: GuardCounts
     x_train: NDArray[np.float64]
     y_train: NDArray[np.float64]
+    #: where the forward model runs (:mod:`~.gp_feasibility`; None: every run succeeded, or
+    #: gp_smc's ``failures = "ignore"``)
+    feasibility: Feasibility | None = None
 
     def predict_mean(self, x: ArrayLike) -> NDArray[np.float64]:
         raise NotImplementedError
@@ -62,6 +68,23 @@ class ExtrapolationGuard:
         self.guard.capped_calls += n_capped > 0
         self.guard.capped_points += n_capped
         return np.minimum(mean, cap) if n_capped else mean
+
+    def log_feasibility(self, x: ArrayLike) -> NDArray[np.float64]:
+        """log c(x) of :mod:`~.gp_feasibility` at the rows of ``x`` (0 without a classifier);
+        columns after the classifier's inputs (a sampled sigma_N) are ignored."""
+        z = np.atleast_2d(np.asarray(x, dtype=float))
+        if self.feasibility is None:
+            return np.zeros(len(z))
+        return self.feasibility.log_factor(z[:, : self.feasibility.dim])
+
+    def feasible(
+        self, log_likelihood: Callable[[NDArray[np.float64]], NDArray[np.float64]]
+    ) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+        """The SMC log-target ``log_likelihood(z) + log c(z)``: the posterior stays where the
+        forward model runs."""
+        if self.feasibility is None:
+            return log_likelihood
+        return lambda z: log_likelihood(z) + self.log_feasibility(z)
 
     def extrapolated_mass(self, result: SmcResult) -> float:
         """Posterior mass of an SMC result where the mean reaches :attr:`extrapolation_cap`

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..core.errors import ConfigError
 from ..core.likelihood import MIN_SQUARED_DISTANCE
 from ..core.problem import Evaluation
+from .gp_feasibility import Feasibility
 from .gp_guard import ExtrapolationGuard, GuardCounts
 from .gp_surrogate import GpSurrogate
 
@@ -381,6 +382,11 @@ Surrogate = GpSurrogate | ResidualSurrogate
 
 def restore_surrogate(state: Mapping[str, Any]) -> Surrogate:
     """The trained surrogate of a result's ``SurrogateFit.state``, whichever kind."""
-    if state.get("kind") == "residuals":
-        return ResidualSurrogate.from_state(state)
-    return GpSurrogate.from_state(state)
+    surrogate: Surrogate = (
+        ResidualSurrogate.from_state(state)
+        if state.get("kind") == "residuals"
+        else GpSurrogate.from_state(state)
+    )
+    if state.get("feasibility") is not None:
+        surrogate.feasibility = Feasibility.from_state(state["feasibility"])
+    return surrogate

@@ -27,7 +27,10 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
    ``n_train`` with the same seed extends the design by the next points of the same
    sequence, and :meth:`GpSmcIterator.reuse` keeps an earlier result's runs so only the new
    points run. Failed runs are excluded from training (the adaptive design keeps them at its
-   floor) and kept in the result (``Result.evaluations``, ``result.design.status``).
+   floor) and kept in the result (``Result.evaluations``, ``result.design.status``); with
+   ``failures = "classify"`` (default) a GP classifier of them multiplies the SMC target by
+   min(1, 2 P_ok), so the posterior stays where the forward model runs
+   (:mod:`fbia.iterators.gp_feasibility`).
 2. **Likelihood** (eq. 4-5): per observation k with noise sigma_k (``Observation.noise_std``,
    else ``problem.noise_std``), L = sum_k [-n_k/2 log(2 pi sigma_k^2) - D_k^2 / (2 sigma_k^2)],
    n_k the number of individual measurements (the residual count of the measure; 1 for rkhs).
@@ -75,6 +78,7 @@ from ..core.resources import check_memory
 from .gp_adaptive import distinct_draws, soft_floor
 from .gp_adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, adaptive_design
 from .gp_design import finite_bounds, sobol_design
+from .gp_feasibility import feasibility_note, feasibility_summary, fit_feasibility
 from .gp_residuals import ResidualSurrogate, Surrogate, residual_link
 from .gp_smc_options import GpSmcOptions
 from .gp_smc_result import (
@@ -157,6 +161,9 @@ class GpSmcIterator(IteratorBase):
                         [run.evaluations[i] for i in np.flatnonzero(use)],
                     )
                 )
+                if gp is not None and opts.failures == "classify":
+                    train = design.train_mask
+                    gp.feasibility = fit_feasibility(design.points[train], design.ok[train])
             else:
                 outcome = yield from adaptive_design(
                     run,
@@ -177,7 +184,9 @@ class GpSmcIterator(IteratorBase):
         trained = None
         if gp is not None and run.noise is None:
             trained = (float(gp.y_train.min()), float(gp.y_train.max()))
-        post = yield from self._smc_stage(run, run.joint(log_likelihood), trained)
+        # the SMC target: L (or its profile over sigma_N) where the forward model runs
+        target = run.joint(log_likelihood) if gp is None else gp.feasible(run.joint(log_likelihood))
+        post = yield from self._smc_stage(run, target, trained)
         check = None
         if opts.mode == "surrogate" and opts.n_check:
             assert gp is not None
@@ -195,7 +204,6 @@ class GpSmcIterator(IteratorBase):
             if wanted:
                 posterior_particles = expected
         laplace = opts.laplace and opts.mode == "surrogate" and not wanted
-        target = run.joint(log_likelihood)
         posterior = summarise(
             posterior_particles,
             run.n_x,
@@ -215,6 +223,7 @@ class GpSmcIterator(IteratorBase):
                 + ("" if check is None else check.note())
                 + _noise_note(run, posterior)
                 + ("" if gp is None else _extrapolation_note(post, gp))
+                + ("" if gp is None else feasibility_note(gp.feasibility))
                 + ("" if uncertainty is None or not wanted else "; " + uncertainty.note())
                 + ("" if uncertainty is None else uncertainty.reliability_note())
                 + (
@@ -381,8 +390,11 @@ class GpSmcIterator(IteratorBase):
             quality.update(gp.test_error(design.points[test], held_out))
         best = int(np.argmax(np.where(use, design.log_likelihood, -np.inf)))
         fit = SurrogateFit(
-            summary={**gp.describe(), **quality},
-            state=gp.state(),
+            summary={**gp.describe(), **quality, **feasibility_summary(gp.feasibility)},
+            state={
+                **gp.state(),
+                "feasibility": None if gp.feasibility is None else gp.feasibility.state(),
+            },
             best_x=design.points[best],
             best_log_likelihood=float(design.log_likelihood[best]),
         )

@@ -46,6 +46,13 @@ class GpSmcOptions(PluginOptions):
         "distance is the norm of residual vectors of one length and every observation has "
         "the same sigma_N, else L [-]",
     )
+    failures: Literal["classify", "ignore"] = Field(
+        "classify",
+        description="failed forward runs: 'classify' keeps the posterior where the model runs "
+        "(a GP classifier of the design's failed runs multiplies the SMC target by "
+        "min(1, 2 P_ok), gp_feasibility); 'ignore' leaves them out of the surrogate and "
+        "nothing else (Paper B) [-]",
+    )
     design: Literal["adaptive", "sobol"] = Field(
         "adaptive",
         description="'adaptive': a small Sobol start, then rounds of SMC on the surrogate and "

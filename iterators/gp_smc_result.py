@@ -142,6 +142,10 @@ class SurrogateFit:
 #: the largest surrogate RMSE in L at posterior draws that counts as "well below 1": an error
 #: of 0.5 changes posterior density ratios by up to a factor e^0.5 = 1.65
 RELIABLE_RMSE = 0.5
+#: the largest share of posterior draws at which the forward model may fail: more (3 or more
+#: of 8) says the posterior holds mass where the model produces no state (for a share of 10 %
+#: in truth, 3 of 8 happens with probability 0.04)
+RELIABLE_FAILED_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -160,8 +164,14 @@ class PosteriorCheck:
     @property
     def reliable(self) -> bool:
         """Whether the surrogate's error at the posterior draws is well below 1 in L
-        (:data:`RELIABLE_RMSE`); False when no draw could be checked."""
-        return bool(self.n > 0 and self.rmse < RELIABLE_RMSE)
+        (:data:`RELIABLE_RMSE`) and the model ran at all but a few of them
+        (:data:`RELIABLE_FAILED_SHARE`); False when no draw could be checked."""
+        return bool(self.n > 0 and self.rmse < RELIABLE_RMSE and not self.fails_often)
+
+    @property
+    def fails_often(self) -> bool:
+        """Whether more than :data:`RELIABLE_FAILED_SHARE` of the draws failed."""
+        return self.n_failed > RELIABLE_FAILED_SHARE * (self.n + self.n_failed)
 
     def note(self) -> str:
         """The check in the result message, with a warning when it failed."""
@@ -171,7 +181,14 @@ class PosteriorCheck:
                 "posterior draws failed (the posterior is not reliable)"
             )
         text = f"; surrogate RMSE {self.rmse:.3g} in L at {self.n} posterior draws"
-        if not self.reliable:
+        if self.fails_often:
+            text += (
+                f"; the forward model failed at {self.n_failed} of {self.n + self.n_failed} "
+                "posterior draws: the posterior holds mass where the model produces no state "
+                "(the posterior is not reliable; failures = 'classify' keeps it where the "
+                "model runs)"
+            )
+        elif not self.reliable:
             text += (
                 f" (not well below 1, limit {RELIABLE_RMSE:g}: the posterior is not reliable; "
                 "train on more runs)"

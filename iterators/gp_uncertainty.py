@@ -30,11 +30,12 @@ Estimator (self-normalised importance sampling, one weight vector per path):
 
 1. a weighted particle set of a proposal q(x) ~ exp(g(x)) p(x) whose log-target g is the
    ``log_likelihood`` stored in its :class:`~fbia.iterators.smc.SmcResult` (the mean-only
-   posterior: g = mu; :func:`tempered_proposal`: g = beta mu, wider);
+   posterior: g = mu; :func:`tempered_proposal`: g = beta mu, wider; either + log c, the
+   factor of where the forward model runs, :mod:`~fbia.iterators.gp_feasibility`);
 2. ``n_points`` distinct particles of it (all, or a systematic resampling), base weights w;
 3. ``n_paths`` joint sample paths f_k of the GP at these points (full posterior
    covariance, Cholesky with jitter);
-4. per path, w_k ~ w exp(f_k - g), normalised (the prior cancels); the result's weights are
+4. per path, w_k ~ w exp(f_k + log c - g), normalised (the prior cancels); the result's weights are
    the average of the K normalised vectors.
 
 :func:`marginalise_surrogate_uncertainty` first reweights the mean-only particles (a pilot,
@@ -246,7 +247,9 @@ def reweight_by_sample_paths(
     t0 = time.perf_counter()
     idx, base = _distinct_points(proposal, n_points, rng)
     x = proposal.particles[idx]
-    g = proposal.log_likelihood[idx]
+    # the proposal's log-likelihood carries the factor of where the model runs (a prior-side
+    # term, gp_feasibility): it stays in the target, only the GP's mean is replaced by paths
+    g = proposal.log_likelihood[idx] - surrogate.log_feasibility(x)
     mu, cov = surrogate.predict_joint(x)
     paths, jitter = _sample_paths(mu, cov, n_paths, rng)
     with np.errstate(invalid="ignore", over="ignore"):
@@ -493,4 +496,9 @@ def tempered_proposal(
     out. ``smc_options`` go to :func:`fbia.smc` (n_particles, zeta, ...)."""
     if not 0.0 < temperature <= 1.0:
         raise ConfigError(f"temperature must lie in (0, 1], got {temperature}", "ep")
-    return smc(lambda z: temperature * surrogate.predict_mean(z), priors, rng=rng, **smc_options)
+    return smc(
+        lambda z: temperature * surrogate.predict_mean(z) + surrogate.log_feasibility(z),
+        priors,
+        rng=rng,
+        **smc_options,
+    )

@@ -174,7 +174,7 @@ def hpd_mass(result: GpSmcResult, point: Mapping[str, float]) -> float:
     log_prior = sum(
         float(Prior.from_spec(p["prior"]).logpdf(z[0, j])) for j, p in enumerate(result.priors)
     )
-    level = float(gp.predict_mean(z)[0]) + log_prior
+    level = float(gp.predict_mean(z)[0] + gp.log_feasibility(z)[0]) + log_prior
     return float(np.sum(post.weights[post.log_posterior > level]))
 
 
