@@ -38,6 +38,11 @@ from .protocols import Discrepancy, ForwardModel
 #: ``measure_failed``: the measure could not compare (MeasureError); ``error``: the plugin
 #: raised something it should not have (a bug, reported with its type).
 STATUSES = ("ok", "failed", "measure_failed", "error")
+#: residual vectors longer than this stay out of a record's JSON (``result.json``,
+#: ``evaluations.jsonl``; the store keeps them in binary): rkhs's default residual vector has
+#: about 30 000 entries per run on the flow cell, which made a 1000-run study's two files
+#: 600-760 MB. ``n_residuals`` and the distances D are always written.
+JSON_RESIDUALS_MAX = 2000
 
 
 @dataclass
@@ -74,7 +79,12 @@ class Evaluation:
             "message": self.message,
             # NaN/inf (an "error" record of a measure that returned them) as strings, so
             # that Result.save (allow_nan=False) never fails on a record.
-            "residuals": None if self.residuals is None else jsonable(self.residuals),
+            "residuals": (
+                None
+                if self.residuals is None or len(self.residuals) > JSON_RESIDUALS_MAX
+                else jsonable(self.residuals)
+            ),
+            "n_residuals": None if self.residuals is None else len(self.residuals),
             "distances": jsonable(self.distances),
             "time": self.time,
             "workdir": self.workdir,

@@ -6,7 +6,8 @@
       store.sqlite          every forward run of every session (fbia.core.store)
       evaluations.jsonl     this session's records, one JSON line each, as the iterator gets them
                             (runs reused from the store included, marked "reused": true;
-                            fbia.core.evaluation_log)
+                            fbia.core.evaluation_log; residual vectors longer than
+                            fbia.core.problem.JSON_RESIDUALS_MAX only as n_residuals)
       fbia.log              what was printed, one line per record and batch, per session
                             (fbia.core.progress)
       runs/                 one working folder per run (failed runs' kept; all with keep_runs)

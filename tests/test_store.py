@@ -77,6 +77,22 @@ def test_records_round_trip_exactly_and_the_likelihood_is_computed_on_read(store
     db.close()
 
 
+def test_long_residual_vectors_stay_in_the_store_not_in_the_json_records(tmp_path):
+    """rkhs's default residual vector (~30 000 entries per flow-cell run) made a 1000-run
+    study's result.json and evaluations.jsonl 600-760 MB; the JSON keeps their count only."""
+    from fbia.core.problem import JSON_RESIDUALS_MAX
+
+    short = fbia.Evaluation(index=0, x={"E": 1.0}, residuals=np.arange(3.0), distances=[1.0])
+    long = fbia.Evaluation(
+        index=1, x={"E": 1.0}, residuals=np.ones(JSON_RESIDUALS_MAX + 1), distances=[2.0]
+    )
+    assert short.to_dict()["residuals"] == [0.0, 1.0, 2.0]
+    assert short.to_dict()["n_residuals"] == 3
+    assert long.to_dict()["residuals"] is None
+    assert long.to_dict()["n_residuals"] == JSON_RESIDUALS_MAX + 1
+    assert long.to_dict()["distances"] == [2.0]
+
+
 def test_log_likelihood_sums_observations_with_their_own_sigmas():
     ev = fbia.Evaluation(0, {}, residuals=np.zeros(10), distances=[0.3, 0.4])
     # n_k = 5 residuals per observation, sigma 0.1 and 0.2
