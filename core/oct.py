@@ -1,0 +1,476 @@
+"""OCT scans as observations: read a volume, segment the biofilm, extract its surface (issue 18).
+
+>>> import fbia
+>>> from fbia.testing.oct import oct_phantom
+>>> ph = oct_phantom(shape=(24, 20, 20), seed=0)
+>>> seg = segment_oct(ph.volume, voxel_size=ph.voxel_size)
+>>> seg.substratum_row, round(seg.substratum_depth, 4), round(ph.substratum_depth, 4)
+(20, 0.195, 0.195)
+>>> obs = fbia.Observation.from_oct(ph.volume, ph.voxel_size, {"inflow_rate": 0.0})
+>>> obs.interface.dim
+3
+
+Optical coherence tomography images a biofilm as a stack of B-scans; fbia needs the
+fluid–biofilm interface as a triangle surface (:class:`~fbia.core.interface.Interface`).
+
+Axes.  The volume is an array whose *depth* axis (``depth_axis``, default 0) grows away from
+the probe, towards the substratum at the bottom; the two other axes, in their array order,
+are y and x.  A TIFF stack of B-scans, one page per y position with rows in depth, has shape
+(ny, nz, nx): ``depth_axis=1``.  ``voxel_size`` is (dz, dy, dx) in mm, and crops are index
+ranges in the same (z, y, x) order.  The surface comes out in fbia's frame (the one of the
+``analytic_mound_3d`` dome): x and y from voxel index 0 of the full volume, z the height above
+the substratum, triangles ordered so that their normals point out of the biofilm into the
+fluid.
+
+Steps of :func:`segment_oct`:
+
+1. substratum: the upper edge of the bright flat reflection of the substratum, the depth
+   row whose log mean intensity stands out most above the mean of its two neighbours' (a
+   second difference, which an exponential decay with depth leaves unchanged), or
+   ``substratum_depth`` given by the user; the rows under it are dropped;
+2. denoising: a Gaussian filter (default) or a median filter;
+3. depth-attenuation compensation: intensity times ``exp(mu d)`` at depth d below the first
+   row, the inverse of a Beer–Lambert decay ``exp(-mu d)`` with ``mu`` [1/mm] given by the
+   user (0: none);
+4. threshold: Otsu's (Otsu 1979) between biofilm and fluid, or a user value (applied to the
+   denoised, compensated intensity);
+5. cleanup: only the biofilm connected to the substratum is kept; fluid pockets closed off
+   from the top and the side walls are filled (both by connected-component labelling);
+6. surface: marching cubes (Lorensen & Cline 1987; scikit-image's Lewiner variant) on the
+   denoised intensity at the threshold level, so vertices lie between voxel centres where
+   the intensity crosses it; the faces on the substratum plane are dropped, and none is made
+   on the crop box's walls.
+
+:func:`write_segmentation_figures` draws a B-scan with the segmented contour and the
+substratum line, and a 3-D view of the surface, so that a user sees what was segmented.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pydantic import Field, field_validator
+
+from .errors import ConfigError
+from .interface import Interface
+from .options import PluginOptions
+
+__all__ = [
+    "OCT_SUFFIXES",
+    "OctOptions",
+    "OctSegmentation",
+    "read_oct_volume",
+    "segment_oct",
+    "write_segmentation_figures",
+]
+
+#: File types :func:`read_oct_volume` reads.
+OCT_SUFFIXES = (".npy", ".npz", ".tif", ".tiff", ".nrrd", ".nhdr")
+
+Crop = tuple[tuple[int, int] | None, tuple[int, int] | None, tuple[int, int] | None]
+
+
+class OctOptions(PluginOptions):
+    """How :func:`segment_oct` reads and segments a volume (see the module docstring)."""
+
+    depth_axis: int = Field(
+        0, ge=0, le=2, description="array axis along depth (index grows towards the substratum)"
+    )
+    crop: Crop | None = Field(
+        None,
+        description=(
+            "region of interest: one [start, stop) index pair (or None: all) per axis, in the "
+            "order (z, y, x) after moving depth first"
+        ),
+    )
+    attenuation: float = Field(
+        0.0, ge=0, allow_inf_nan=False, description="depth attenuation mu to compensate [1/mm]"
+    )
+    denoise: Literal["gaussian", "median", "none"] = Field(
+        "gaussian", description="denoising filter"
+    )
+    denoise_size: float = Field(
+        1.0, gt=0, le=10, description="Gaussian sigma or median half-width [voxels]"
+    )
+    threshold: float | None = Field(
+        None, description="biofilm/fluid threshold of the processed intensity; None: Otsu"
+    )
+    substratum_depth: float | None = Field(
+        None, ge=0, description="depth of the substratum below the first row [mm]; None: detect"
+    )
+
+    @field_validator("threshold")
+    @classmethod
+    def _check_threshold(cls, value: float | None) -> float | None:
+        if value is not None and not math.isfinite(value):
+            raise ValueError("must be finite")
+        return value
+
+
+@dataclass(frozen=True)
+class OctSegmentation:
+    """What :func:`segment_oct` found.
+
+    Attributes
+    ----------
+    interface
+        The fluid–biofilm surface [mm] (x, y, z = height above the substratum).
+    voxel_size
+        (dz, dy, dx) [mm].
+    origin
+        Index (z, y, x) of the crop's first voxel in the full volume.
+    substratum_row
+        First depth row (full volume) under the substratum surface.
+    threshold
+        Threshold of the processed intensity (Otsu's or the user's).
+    attenuation
+        Attenuation coefficient compensated [1/mm].
+    biofilm_voxels
+        Voxels of the biofilm kept.
+    bscan_row
+        y index (full volume) of the B-scan kept for the figures.
+    bscan
+        That B-scan of the cropped input, shape (crop depth, crop nx).
+    field
+        The same B-scan processed (denoised, compensated, cleaned), rows down to
+        ``substratum_row``.
+    """
+
+    interface: Interface
+    voxel_size: tuple[float, float, float]
+    origin: tuple[int, int, int]
+    substratum_row: int
+    threshold: float
+    attenuation: float
+    biofilm_voxels: int
+    bscan_row: int
+    bscan: NDArray[np.float32]
+    field: NDArray[np.float32]
+
+    @property
+    def substratum_depth(self) -> float:
+        """Depth of the substratum surface below the first row's centre [mm]."""
+        return (self.substratum_row - 0.5) * self.voxel_size[0]
+
+
+# -- reading -----------------------------------------------------------------------------------
+def read_oct_volume(source: str | Path | ArrayLike, depth_axis: int = 0) -> NDArray[np.float32]:
+    """A 3-D intensity volume as float32 with depth first: an array, or a ``.npy``, ``.npz``
+    (one array, or one named ``volume``), multi-page TIFF or NRRD file (read in C index order,
+    like NumPy and TIFF: the file's fastest axis is the last)."""
+    where = str(source) if isinstance(source, str | Path) else "oct volume"
+    if isinstance(source, str | Path):
+        data = _read_file(Path(source))
+    else:
+        data = np.asarray(source)
+    if data.ndim != 3:
+        raise ConfigError(f"an OCT volume must be a 3-D array, got shape {data.shape}", where)
+    if not (np.issubdtype(data.dtype, np.integer) or np.issubdtype(data.dtype, np.floating)):
+        raise ConfigError(f"OCT intensities must be real numbers, got dtype {data.dtype}", where)
+    volume = np.moveaxis(data, depth_axis, 0).astype(np.float32, copy=False)
+    bad = volume.size - int(np.count_nonzero(np.isfinite(volume)))
+    if bad:
+        raise ConfigError(f"volume has {bad} NaN or infinite voxel(s)", where)
+    return volume
+
+
+def _read_file(path: Path) -> NDArray[Any]:
+    suffix = path.suffix.lower()
+    if not path.is_file():
+        raise ConfigError("file not found", str(path))
+    if suffix not in OCT_SUFFIXES:
+        raise ConfigError(
+            f"unknown OCT file type {suffix!r}; readable: {', '.join(OCT_SUFFIXES)}", str(path)
+        )
+    try:
+        if suffix == ".npy":
+            return np.load(path, allow_pickle=False)
+        if suffix == ".npz":
+            with np.load(path, allow_pickle=False) as npz:
+                names = list(npz.files)
+                if "volume" in names:
+                    return npz["volume"]
+                if len(names) != 1:
+                    raise ConfigError(
+                        f"npz file holds {len(names)} arrays ({', '.join(names)}); name one "
+                        "'volume'",
+                        str(path),
+                    )
+                return npz[names[0]]
+        if suffix in (".tif", ".tiff"):
+            import tifffile
+
+            return np.asarray(tifffile.imread(path))
+        import nrrd
+
+        data, _ = nrrd.read(str(path), index_order="C")
+        return np.asarray(data)
+    except ConfigError:
+        raise
+    except Exception as exc:
+        raise ConfigError(f"cannot read OCT volume: {exc}", str(path)) from None
+
+
+# -- segmentation ------------------------------------------------------------------------------
+def segment_oct(
+    source: str | Path | ArrayLike,
+    voxel_size: tuple[float, float, float],
+    options: OctOptions | Mapping[str, Any] | None = None,
+    **kwargs: Any,
+) -> OctSegmentation:
+    """Segment the biofilm in an OCT volume and extract the fluid–biofilm surface.
+
+    Parameters
+    ----------
+    source
+        A 3-D array or a file (see :func:`read_oct_volume`).
+    voxel_size
+        (dz, dy, dx) [mm].
+    options, kwargs
+        :class:`OctOptions`, as an instance, a mapping or keywords.
+    """
+    where = str(source) if isinstance(source, str | Path) else "oct volume"
+    opts = _options(options, kwargs, where)
+    spacing = _voxel_size(voxel_size, where)
+    full = read_oct_volume(source, opts.depth_axis)
+    volume, origin = _crop(full, opts.crop, where)
+    if float(volume.min()) < 0.0:
+        raise ConfigError("OCT intensities must be >= 0 (linear, not log or dB)", where)
+    if float(volume.max()) <= float(volume.min()):
+        raise ConfigError("volume is constant: nothing to segment", where)
+    dz = spacing[0]
+    # 1. substratum: first row under its surface, in the cropped volume
+    ks = _substratum_row(volume, origin[0], opts.substratum_depth, dz, where)
+    # 2. denoise the rows above the substratum (its bright reflection would bleed upwards)
+    above = _denoise(np.array(volume[:ks], dtype=np.float32), opts.denoise, opts.denoise_size)
+    # 3. compensate the decay exp(-mu d), d = depth below the full volume's first row
+    depth = (np.arange(ks) + origin[0]) * dz
+    mu = opts.attenuation
+    above *= np.exp(mu * depth).astype(np.float32)[:, None, None]
+    # 4. threshold
+    t = float(opts.threshold) if opts.threshold is not None else _otsu(above)
+    mask = above > t
+    if not mask.any():
+        raise ConfigError(f"no biofilm found: no voxel above the threshold {t:.4g}", where)
+    # 5. keep what hangs on the substratum, fill closed fluid pockets
+    solid = _clean(mask)
+    if not solid.any():
+        raise ConfigError(
+            f"no biofilm found: no voxel above the threshold {t:.4g} touches the substratum "
+            f"(row {ks + origin[0]})",
+            where,
+        )
+    low, high = float(above[~mask].mean()) if (~mask).any() else t - 1.0, float(above[mask].mean())
+    above[mask & ~solid] = min(low, t)
+    above[~mask & solid] = max(high, t)
+    # the substratum row mirrors the fluid above it about t: the floor crosses t half-way
+    under = above[-1]
+    floor = np.where(under > t, under, 2.0 * t - under).astype(np.float32)
+    field = np.concatenate([above, floor[None]], axis=0)
+    surface = _surface(field, t, solid, ks, origin, spacing, where)
+    j = field.shape[1] // 2
+    return OctSegmentation(
+        interface=surface,
+        voxel_size=spacing,
+        origin=origin,
+        substratum_row=ks + origin[0],
+        threshold=t,
+        attenuation=float(mu),
+        biofilm_voxels=int(np.count_nonzero(solid)),
+        bscan_row=j + origin[1],
+        bscan=np.array(volume[:, j, :]),
+        field=np.array(field[:, j, :]),
+    )
+
+
+def _options(options: Any, kwargs: Mapping[str, Any], where: str) -> OctOptions:
+    if isinstance(options, OctOptions):
+        if kwargs:
+            raise TypeError("pass either an OctOptions instance or keyword options, not both")
+        return options
+    return OctOptions.parse({**dict(options or {}), **kwargs}, where=f"{where}: options")
+
+
+def _voxel_size(voxel_size: Any, where: str) -> tuple[float, float, float]:
+    try:
+        size = tuple(float(v) for v in voxel_size)
+    except (TypeError, ValueError):
+        size = ()
+    if len(size) != 3 or not all(math.isfinite(v) and v > 0 for v in size):
+        raise ConfigError(
+            f"voxel_size must be three positive numbers (dz, dy, dx) in mm, got {voxel_size!r}",
+            where,
+        )
+    return size[0], size[1], size[2]
+
+
+def _crop(
+    volume: NDArray[np.float32], crop: Crop | None, where: str
+) -> tuple[NDArray[np.float32], tuple[int, int, int]]:
+    ranges = list(crop) if crop is not None else [None, None, None]
+    slices, origin = [], []
+    for axis, (name, n, r) in enumerate(zip("zyx", volume.shape, ranges, strict=True)):
+        start, stop = (0, n) if r is None else r
+        if not (0 <= start < stop <= n):
+            raise ConfigError(
+                f"crop [{start}, {stop}) of axis {name} leaves the volume (0 to {n} on that axis,"
+                f" shape {volume.shape})",
+                where,
+            )
+        if stop - start < 3:
+            raise ConfigError(f"axis {name} has {stop - start} voxel(s); at least 3 needed", where)
+        slices.append(slice(start, stop))
+        origin.append(start)
+        del axis
+    return volume[tuple(slices)], (origin[0], origin[1], origin[2])
+
+
+def _substratum_row(
+    volume: NDArray[np.float32], z0: int, depth: float | None, dz: float, where: str
+) -> int:
+    """First row (of the crop) under the substratum surface."""
+    if depth is None:
+        m = np.log(np.maximum(volume.mean(axis=(1, 2), dtype=np.float64), 1e-300))
+        m = np.r_[m[1], m, m[-2]]  # the end rows compare with their one neighbour
+        ks = int(np.argmax(m[1:-1] - 0.5 * (m[:-2] + m[2:])))
+    else:
+        ks = int(math.floor(depth / dz + 1.0)) - z0  # the surface lies at the row's top edge
+    if not 2 <= ks < volume.shape[0]:
+        raise ConfigError(
+            f"substratum at row {ks + z0} leaves no biofilm rows above it in the volume (rows "
+            f"{z0} to {z0 + volume.shape[0] - 1}); check depth_axis, crop or substratum_depth",
+            where,
+        )
+    return ks
+
+
+def _denoise(g: NDArray[np.float32], kind: str, size: float) -> NDArray[np.float32]:
+    from scipy import ndimage
+
+    if kind == "gaussian":
+        return ndimage.gaussian_filter(g, sigma=size, mode="nearest", truncate=3.0)
+    if kind == "median":
+        return ndimage.median_filter(g, size=2 * max(1, round(size)) + 1, mode="nearest")
+    return g
+
+
+def _otsu(values: NDArray[np.float32]) -> float:
+    """Otsu's threshold (Otsu 1979) of a sample of at most about 4 million values."""
+    from skimage.filters import threshold_otsu
+
+    step = max(1, int(math.ceil(math.sqrt(values.size / 4e6))))
+    return float(threshold_otsu(values[:, ::step, ::step], nbins=1024))
+
+
+def _clean(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The biofilm connected to the substratum (a full row under ``mask``), with the fluid
+    pockets not connected to the top row or the side walls filled."""
+    from scipy import ndimage
+
+    ext = np.concatenate([mask, np.ones((1, *mask.shape[1:]), dtype=bool)], axis=0)
+    labels, _ = ndimage.label(ext)
+    solid = labels[:-1] == labels[-1, 0, 0]
+    del labels
+    rows = np.flatnonzero(solid.any(axis=(1, 2)))
+    if len(rows) == 0:
+        return solid
+    top = int(rows[0])  # the rows above are fluid, all connected to the top
+    labels, n = ndimage.label(~solid[top:])
+    faces = [labels[0], labels[:, 0], labels[:, -1], labels[:, :, 0], labels[:, :, -1]]
+    is_open = np.zeros(n + 1, dtype=bool)
+    for face in faces:
+        is_open[face] = True
+    solid[top:] |= ~is_open[labels]  # label 0 is the solid itself
+    return solid
+
+
+def _surface(
+    field: NDArray[np.float32],
+    t: float,
+    solid: NDArray[np.bool_],
+    ks: int,
+    origin: tuple[int, int, int],
+    spacing: tuple[float, float, float],
+    where: str,
+) -> Interface:
+    from skimage.measure import marching_cubes
+
+    rows = np.flatnonzero(solid.any(axis=(1, 2)))
+    top = max(int(rows[0]) - 1, 0)
+    verts, faces, _, _ = marching_cubes(field[top:], level=t, method="lewiner")
+    k = verts[:, 0] + top
+    dz, dy, dx = spacing
+    z = (ks - 0.5 - k) * dz
+    xyz = np.c_[(verts[:, 2] + origin[2]) * dx, (verts[:, 1] + origin[1]) * dy, z]
+    on_floor = np.abs(ks - 0.5 - k) < 1e-3
+    faces = faces[~np.all(on_floor[faces], axis=1)]
+    # scikit-image's triangles turn their right-hand normals towards the higher values (the
+    # biofilm) in index space, and (k, j, i) -> (x, y, z) = (i, j, -k) keeps the orientation
+    # (a swap and a reflection): reverse them so that the normals point into the fluid
+    faces = faces[:, ::-1]
+    p = xyz[faces]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    faces = faces[area > 1e-9 * dx * dy]
+    if len(faces) == 0:
+        raise ConfigError("no biofilm found: the biofilm left no surface above the floor", where)
+    used, inverse = np.unique(faces, return_inverse=True)
+    return Interface.surface(xyz[used], inverse.reshape(faces.shape))
+
+
+# -- figures -----------------------------------------------------------------------------------
+def write_segmentation_figures(
+    result: OctSegmentation, folder: str | Path, max_triangles: int = 20000
+) -> list[Path]:
+    """``oct_bscan.png``: the kept B-scan (input intensities) with the segmented contour and
+    the substratum line; ``oct_surface.png``: a 3-D view of the surface (at most
+    ``max_triangles`` of its triangles, evenly picked).  Returns the two paths."""
+    from .plots import _pyplot
+
+    plt = _pyplot()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    dz, _, dx = result.voxel_size
+    z0, _, x0 = result.origin
+    nz, nx = result.bscan.shape
+    extent = (x0 * dx, (x0 + nx - 1) * dx, (z0 + nz - 1) * dz, z0 * dz)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.imshow(result.bscan, cmap="gray", extent=extent, aspect="auto")
+    xs = (x0 + np.arange(result.field.shape[1])) * dx
+    ds = (z0 + np.arange(result.field.shape[0])) * dz
+    ax.contour(xs, ds, result.field, levels=[result.threshold], colors="red", linewidths=1)
+    ax.axhline(result.substratum_depth, color="cyan", ls="--", lw=1, label="substratum")
+    ax.plot([], [], color="red", lw=1, label="segmented interface")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("depth [mm]")
+    ax.set_title(
+        f"B-scan y index {result.bscan_row}; threshold {result.threshold:.3g}, "
+        f"mu {result.attenuation:.3g} 1/mm",
+        fontsize=9,
+    )
+    ax.legend(fontsize=8, loc="upper right")
+    fig.tight_layout()
+    bscan_path = folder / "oct_bscan.png"
+    fig.savefig(bscan_path, dpi=120)
+    plt.close(fig)
+
+    gamma = result.interface
+    cells = gamma.cells[:: max(1, int(math.ceil(len(gamma) / max_triangles)))]
+    v = gamma.vertices
+    fig = plt.figure(figsize=(7, 5))
+    ax3 = fig.add_subplot(projection="3d")
+    ax3.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=cells, cmap="viridis", lw=0)
+    ax3.set_xlabel("x [mm]")
+    ax3.set_ylabel("y [mm]")
+    ax3.set_zlabel("height [mm]")
+    ax3.set_title(f"segmented surface: {len(gamma)} triangles ({len(cells)} drawn)", fontsize=9)
+    fig.tight_layout()
+    surface_path = folder / "oct_surface.png"
+    fig.savefig(surface_path, dpi=120)
+    plt.close(fig)
+    return [bscan_path, surface_path]
