@@ -41,8 +41,10 @@ Steps of :func:`segment_oct`:
    the intensity crosses it; the faces on the substratum plane are dropped, and none is made
    on the crop box's walls.
 
-:func:`write_segmentation_figures` draws a B-scan with the segmented contour and the
-substratum line, and a 3-D view of the surface, so that a user sees what was segmented.
+:mod:`fbia.core.oct_reader` reads the volume;
+:func:`fbia.core.oct_figures.write_segmentation_figures` draws a B-scan with the segmented
+contour and the substratum line, and a 3-D view of the surface, so that a user sees what was
+segmented.
 """
 
 from __future__ import annotations
@@ -59,19 +61,10 @@ from pydantic import Field, field_validator
 
 from .errors import ConfigError
 from .interface import Interface
+from .oct_reader import read_oct_volume
 from .options import PluginOptions
 
-__all__ = [
-    "OCT_SUFFIXES",
-    "OctOptions",
-    "OctSegmentation",
-    "read_oct_volume",
-    "segment_oct",
-    "write_segmentation_figures",
-]
-
-#: File types :func:`read_oct_volume` reads.
-OCT_SUFFIXES = (".npy", ".npz", ".tif", ".tiff", ".nrrd", ".nhdr")
+__all__ = ["OctOptions", "OctSegmentation", "segment_oct"]
 
 Crop = tuple[tuple[int, int] | None, tuple[int, int] | None, tuple[int, int] | None]
 
@@ -100,6 +93,14 @@ class OctOptions(PluginOptions):
     )
     threshold: float | None = Field(
         None, description="biofilm/fluid threshold of the processed intensity; None: Otsu"
+    )
+    min_contrast: float = Field(
+        2.0,
+        gt=1,
+        description=(
+            "least ratio of the mean biofilm to the mean fluid intensity for Otsu's split to "
+            "count as biofilm (a lower one splits one population: no biofilm) [-]"
+        ),
     )
     substratum_depth: float | None = Field(
         None, ge=0, description="depth of the substratum below the first row [mm]; None: detect"
@@ -159,64 +160,6 @@ class OctSegmentation:
         return (self.substratum_row - 0.5) * self.voxel_size[0]
 
 
-# -- reading -----------------------------------------------------------------------------------
-def read_oct_volume(source: str | Path | ArrayLike, depth_axis: int = 0) -> NDArray[np.float32]:
-    """A 3-D intensity volume as float32 with depth first: an array, or a ``.npy``, ``.npz``
-    (one array, or one named ``volume``), multi-page TIFF or NRRD file (read in C index order,
-    like NumPy and TIFF: the file's fastest axis is the last)."""
-    where = str(source) if isinstance(source, str | Path) else "oct volume"
-    if isinstance(source, str | Path):
-        data = _read_file(Path(source))
-    else:
-        data = np.asarray(source)
-    if data.ndim != 3:
-        raise ConfigError(f"an OCT volume must be a 3-D array, got shape {data.shape}", where)
-    if not (np.issubdtype(data.dtype, np.integer) or np.issubdtype(data.dtype, np.floating)):
-        raise ConfigError(f"OCT intensities must be real numbers, got dtype {data.dtype}", where)
-    volume = np.moveaxis(data, depth_axis, 0).astype(np.float32, copy=False)
-    bad = volume.size - int(np.count_nonzero(np.isfinite(volume)))
-    if bad:
-        raise ConfigError(f"volume has {bad} NaN or infinite voxel(s)", where)
-    return volume
-
-
-def _read_file(path: Path) -> NDArray[Any]:
-    suffix = path.suffix.lower()
-    if not path.is_file():
-        raise ConfigError("file not found", str(path))
-    if suffix not in OCT_SUFFIXES:
-        raise ConfigError(
-            f"unknown OCT file type {suffix!r}; readable: {', '.join(OCT_SUFFIXES)}", str(path)
-        )
-    try:
-        if suffix == ".npy":
-            return np.load(path, allow_pickle=False)
-        if suffix == ".npz":
-            with np.load(path, allow_pickle=False) as npz:
-                names = list(npz.files)
-                if "volume" in names:
-                    return npz["volume"]
-                if len(names) != 1:
-                    raise ConfigError(
-                        f"npz file holds {len(names)} arrays ({', '.join(names)}); name one "
-                        "'volume'",
-                        str(path),
-                    )
-                return npz[names[0]]
-        if suffix in (".tif", ".tiff"):
-            import tifffile
-
-            return np.asarray(tifffile.imread(path))
-        import nrrd
-
-        data, _ = nrrd.read(str(path), index_order="C")
-        return np.asarray(data)
-    except ConfigError:
-        raise
-    except Exception as exc:
-        raise ConfigError(f"cannot read OCT volume: {exc}", str(path)) from None
-
-
 # -- segmentation ------------------------------------------------------------------------------
 def segment_oct(
     source: str | Path | ArrayLike,
@@ -229,7 +172,7 @@ def segment_oct(
     Parameters
     ----------
     source
-        A 3-D array or a file (see :func:`read_oct_volume`).
+        A 3-D array or a file (see :func:`fbia.core.oct_reader.read_oct_volume`).
     voxel_size
         (dz, dy, dx) [mm].
     options, kwargs
@@ -252,12 +195,27 @@ def segment_oct(
     # 3. compensate the decay exp(-mu d), d = depth below the full volume's first row
     depth = (np.arange(ks) + origin[0]) * dz
     mu = opts.attenuation
+    if mu * depth[-1] > 30.0:
+        raise ConfigError(
+            f"attenuation {mu:g} 1/mm would amplify the deepest rows by "
+            f"exp({mu * depth[-1]:.3g}) (more than e^30); check its unit (1/mm) and voxel_size",
+            where,
+        )
     above *= np.exp(mu * depth).astype(np.float32)[:, None, None]
     # 4. threshold
     t = float(opts.threshold) if opts.threshold is not None else _otsu(above)
     mask = above > t
     if not mask.any():
         raise ConfigError(f"no biofilm found: no voxel above the threshold {t:.4g}", where)
+    high = float(above[mask].mean())
+    low = float(above[~mask].mean()) if not mask.all() else t
+    if opts.threshold is None and high < opts.min_contrast * low:
+        raise ConfigError(
+            f"no biofilm found: Otsu's threshold {t:.4g} splits one population (class means "
+            f"{high:.4g} and {low:.4g}, ratio below min_contrast = {opts.min_contrast:g}); "
+            "give a threshold if there is biofilm",
+            where,
+        )
     # 5. keep what hangs on the substratum, fill closed fluid pockets
     solid = _clean(mask)
     if not solid.any():
@@ -266,7 +224,6 @@ def segment_oct(
             f"(row {ks + origin[0]})",
             where,
         )
-    low, high = float(above[~mask].mean()) if (~mask).any() else t - 1.0, float(above[mask].mean())
     above[mask & ~solid] = min(low, t)
     above[~mask & solid] = max(high, t)
     # the substratum row mirrors the fluid above it about t: the floor crosses t half-way
@@ -421,56 +378,3 @@ def _surface(
         raise ConfigError("no biofilm found: the biofilm left no surface above the floor", where)
     used, inverse = np.unique(faces, return_inverse=True)
     return Interface.surface(xyz[used], inverse.reshape(faces.shape))
-
-
-# -- figures -----------------------------------------------------------------------------------
-def write_segmentation_figures(
-    result: OctSegmentation, folder: str | Path, max_triangles: int = 20000
-) -> list[Path]:
-    """``oct_bscan.png``: the kept B-scan (input intensities) with the segmented contour and
-    the substratum line; ``oct_surface.png``: a 3-D view of the surface (at most
-    ``max_triangles`` of its triangles, evenly picked).  Returns the two paths."""
-    from .plots import _pyplot
-
-    plt = _pyplot()
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    dz, _, dx = result.voxel_size
-    z0, _, x0 = result.origin
-    nz, nx = result.bscan.shape
-    extent = (x0 * dx, (x0 + nx - 1) * dx, (z0 + nz - 1) * dz, z0 * dz)
-    fig, ax = plt.subplots(figsize=(7, 4))
-    ax.imshow(result.bscan, cmap="gray", extent=extent, aspect="auto")
-    xs = (x0 + np.arange(result.field.shape[1])) * dx
-    ds = (z0 + np.arange(result.field.shape[0])) * dz
-    ax.contour(xs, ds, result.field, levels=[result.threshold], colors="red", linewidths=1)
-    ax.axhline(result.substratum_depth, color="cyan", ls="--", lw=1, label="substratum")
-    ax.plot([], [], color="red", lw=1, label="segmented interface")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("depth [mm]")
-    ax.set_title(
-        f"B-scan y index {result.bscan_row}; threshold {result.threshold:.3g}, "
-        f"mu {result.attenuation:.3g} 1/mm",
-        fontsize=9,
-    )
-    ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
-    bscan_path = folder / "oct_bscan.png"
-    fig.savefig(bscan_path, dpi=120)
-    plt.close(fig)
-
-    gamma = result.interface
-    cells = gamma.cells[:: max(1, int(math.ceil(len(gamma) / max_triangles)))]
-    v = gamma.vertices
-    fig = plt.figure(figsize=(7, 5))
-    ax3 = fig.add_subplot(projection="3d")
-    ax3.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=cells, cmap="viridis", lw=0)
-    ax3.set_xlabel("x [mm]")
-    ax3.set_ylabel("y [mm]")
-    ax3.set_zlabel("height [mm]")
-    ax3.set_title(f"segmented surface: {len(gamma)} triangles ({len(cells)} drawn)", fontsize=9)
-    fig.tight_layout()
-    surface_path = folder / "oct_surface.png"
-    fig.savefig(surface_path, dpi=120)
-    plt.close(fig)
-    return [bscan_path, surface_path]
