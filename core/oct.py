@@ -364,6 +364,7 @@ def _surface(
     k = verts[:, 0] + top
     dz, dy, dx = spacing
     z = (ks - 0.5 - k) * dz
+    verts = verts.astype(np.float64)
     xyz = np.c_[(verts[:, 2] + origin[2]) * dx, (verts[:, 1] + origin[1]) * dy, z]
     on_floor = np.abs(ks - 0.5 - k) < 1e-3
     faces = faces[~np.all(on_floor[faces], axis=1)]

@@ -81,8 +81,10 @@ class OctPhantom:
         p, q = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
         r, s = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
         tri = np.vstack([np.c_[p, q, r], np.c_[p, r, s]])
-        keep = np.all(z.ravel()[tri] > min_height, axis=1)
-        return Interface.surface(np.c_[x.ravel(), y.ravel(), z.ravel()], tri[keep])
+        tri = tri[np.all(z.ravel()[tri] > min_height, axis=1)]
+        used, cells = np.unique(tri, return_inverse=True)  # only the vertices of kept triangles
+        points = np.c_[x.ravel(), y.ravel(), z.ravel()][used]
+        return Interface.surface(points, cells.reshape(tri.shape))
 
 
 def oct_phantom(
