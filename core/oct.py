@@ -34,8 +34,9 @@ Steps of :func:`segment_oct`:
    user (0: none);
 4. threshold: Otsu's (Otsu 1979) between biofilm and fluid, or a user value (applied to the
    denoised, compensated intensity);
-5. cleanup: only the biofilm connected to the substratum is kept; fluid pockets closed off
-   from the top and the side walls are filled (both by connected-component labelling);
+5. cleanup: only the biofilm connected to the substratum is kept, in parts of at least
+   ``min_voxels`` voxels (speckle specks on it go); fluid pockets closed off from the top and
+   the side walls are filled (both by connected-component labelling);
 6. surface: marching cubes (Lorensen & Cline 1987; scikit-image's Lewiner variant) on the
    denoised intensity at the threshold level, so vertices lie between voxel centres where
    the intensity crosses it; the faces on the substratum plane are dropped, and none is made
@@ -101,6 +102,11 @@ class OctOptions(PluginOptions):
             "least ratio of the mean biofilm to the mean fluid intensity for Otsu's split to "
             "count as biofilm (a lower one splits one population: no biofilm) [-]"
         ),
+    )
+    min_voxels: int = Field(
+        27,
+        ge=1,
+        description="smallest biofilm part kept (connected voxels on the substratum; 27 = 3^3)",
     )
     substratum_depth: float | None = Field(
         None, ge=0, description="depth of the substratum below the first row [mm]; None: detect"
@@ -217,11 +223,11 @@ def segment_oct(
             where,
         )
     # 5. keep what hangs on the substratum, fill closed fluid pockets
-    solid = _clean(mask)
+    solid = _clean(mask, opts.min_voxels)
     if not solid.any():
         raise ConfigError(
-            f"no biofilm found: no voxel above the threshold {t:.4g} touches the substratum "
-            f"(row {ks + origin[0]})",
+            f"no biofilm found: no part of at least {opts.min_voxels} voxels above the threshold "
+            f"{t:.4g} touches the substratum (row {ks + origin[0]})",
             where,
         )
     above[mask & ~solid] = min(low, t)
@@ -325,14 +331,19 @@ def _otsu(values: NDArray[np.float32]) -> float:
     return float(threshold_otsu(values[:, ::step, ::step], nbins=1024))
 
 
-def _clean(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """The biofilm connected to the substratum (a full row under ``mask``), with the fluid
-    pockets not connected to the top row or the side walls filled."""
+def _clean(mask: NDArray[np.bool_], min_voxels: int) -> NDArray[np.bool_]:
+    """The biofilm: the connected parts of ``mask`` that touch the substratum (under its last
+    row) with at least ``min_voxels`` voxels, with the fluid pockets not connected to the top
+    row or the side walls filled."""
     from scipy import ndimage
 
-    ext = np.concatenate([mask, np.ones((1, *mask.shape[1:]), dtype=bool)], axis=0)
-    labels, _ = ndimage.label(ext)
-    solid = labels[:-1] == labels[-1, 0, 0]
+    labels, _ = ndimage.label(mask)
+    keep = np.bincount(labels.ravel()) >= min_voxels
+    on_floor = np.zeros_like(keep)
+    on_floor[labels[-1]] = True
+    keep &= on_floor
+    keep[0] = False  # the fluid
+    solid = keep[labels]
     del labels
     rows = np.flatnonzero(solid.any(axis=(1, 2)))
     if len(rows) == 0:

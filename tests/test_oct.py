@@ -213,3 +213,17 @@ def test_the_figures_are_written(tmp_path):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 10_000
     assert seg.field.shape == (seg.substratum_row - seg.origin[0] + 1, 64)
     assert seg.bscan.shape == (48, 64)
+
+
+def test_specks_on_the_substratum_go_and_fluid_pockets_in_the_biofilm_are_filled():
+    ph = phantom(0, attenuation=0.0)
+    v = ph.volume.copy()
+    v[43, 3, 3] = 20.0  # a bright speck on the floor, in a corner (a few voxels once filtered)
+    v[36:39, 30:33, 30:33] = 0.0  # a dark pocket 5-8 voxels deep inside the 15-voxel dome
+    seg = segment_oct(v, ph.voxel_size)
+    xyz = seg.interface.vertices
+    assert np.all(ph.height(xyz[:, 0], xyz[:, 1]) > 0.0)  # not the speck
+    assert np.all(ph.height(xyz[:, 0], xyz[:, 1]) - xyz[:, 2] < 3 * VOXEL)  # not the pocket
+    assert np.percentile(vertex_errors(seg.interface, ph), 99) <= 1.0
+    kept = segment_oct(v, ph.voxel_size, min_voxels=1).interface.vertices
+    assert np.any((kept[:, 0] < 0.05) & (kept[:, 1] < 0.05))  # min_voxels=1 keeps the speck
