@@ -17,10 +17,10 @@ Axes.  The volume is an array whose *depth* axis (``depth_axis``, default 0) gro
 the probe, towards the substratum at the bottom; the two other axes, in their array order,
 are y and x.  A TIFF stack of B-scans, one page per y position with rows in depth, has shape
 (ny, nz, nx): ``depth_axis=1``.  ``voxel_size`` is (dz, dy, dx) in mm, and crops are index
-ranges in the same (z, y, x) order.  The surface comes out in fbia's frame (the one of the
-``analytic_mound_3d`` dome): x and y from voxel index 0 of the full volume, z the height above
-the substratum, triangles ordered so that their normals point out of the biofilm into the
-fluid.
+ranges (``crop``) or mm boxes (``crop_mm``) in the same (z, y, x) order.  The surface comes
+out in fbia's frame (the one of the ``analytic_mound_3d`` dome): x and y from voxel index 0
+of the full volume, z the height above the substratum, triangles ordered so that their
+normals point out of the biofilm into the fluid.
 
 Steps of :func:`segment_oct`:
 
@@ -55,11 +55,11 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Self
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from .errors import ConfigError
 from .interface import Interface
@@ -69,6 +69,7 @@ from .options import PluginOptions
 __all__ = ["OctOptions", "OctSegmentation", "segment_oct"]
 
 Crop = tuple[tuple[int, int] | None, tuple[int, int] | None, tuple[int, int] | None]
+CropMm = tuple[tuple[float, float] | None, tuple[float, float] | None, tuple[float, float] | None]
 
 
 class OctOptions(PluginOptions):
@@ -82,6 +83,14 @@ class OctOptions(PluginOptions):
         description=(
             "region of interest: one [start, stop) index pair (or None: all) per axis, in the "
             "order (z, y, x) after moving depth first"
+        ),
+    )
+    crop_mm: CropMm | None = Field(
+        None,
+        description=(
+            "region of interest in mm instead of indices: one [low, high] pair (or None) per "
+            "axis (z = depth below the first row's centre, y, x); the voxels whose centres "
+            "lie inside are kept"
         ),
     )
     attenuation: float | Literal["auto"] = Field(
@@ -112,6 +121,12 @@ class OctOptions(PluginOptions):
     substratum_depth: float | None = Field(
         None, ge=0, description="depth of the substratum below the first row [mm]; None: detect"
     )
+
+    @model_validator(mode="after")
+    def _one_crop(self) -> Self:
+        if self.crop is not None and self.crop_mm is not None:
+            raise ValueError("give crop (indices) or crop_mm (mm), not both")
+        return self
 
     @field_validator("attenuation", mode="before")
     @classmethod
@@ -202,7 +217,10 @@ def segment_oct(
     opts = _options(options, kwargs, where)
     spacing = _voxel_size(voxel_size, where)
     full = read_oct_volume(source, opts.depth_axis)
-    volume, origin = _crop(full, opts.crop, where)
+    if opts.crop_mm is not None:
+        volume, origin = _crop(full, _crop_indices(opts.crop_mm, spacing), "crop_mm", where)
+    else:
+        volume, origin = _crop(full, opts.crop, "crop", where)
     if float(volume.min()) < 0.0:
         raise ConfigError("OCT intensities must be >= 0 (linear, not log or dB)", where)
     if float(volume.max()) <= float(volume.min()):
@@ -291,8 +309,20 @@ def _voxel_size(voxel_size: Any, where: str) -> tuple[float, float, float]:
     return size[0], size[1], size[2]
 
 
+def _crop_indices(box: CropMm, spacing: tuple[float, float, float]) -> Crop:
+    """Index ranges [start, stop) of the voxels whose centres ``k * d`` lie in ``box``."""
+    out: list[tuple[int, int] | None] = []
+    for r, d in zip(box, spacing, strict=True):
+        if r is None:
+            out.append(None)
+        else:
+            lo, hi = r
+            out.append((max(0, math.ceil(lo / d - 1e-9)), math.floor(hi / d + 1e-9) + 1))
+    return out[0], out[1], out[2]
+
+
 def _crop(
-    volume: NDArray[np.float32], crop: Crop | None, where: str
+    volume: NDArray[np.float32], crop: Crop | None, option: str, where: str
 ) -> tuple[NDArray[np.float32], tuple[int, int, int]]:
     ranges = list(crop) if crop is not None else [None, None, None]
     slices, origin = [], []
@@ -300,8 +330,8 @@ def _crop(
         start, stop = (0, n) if r is None else r
         if not (0 <= start < stop <= n):
             raise ConfigError(
-                f"crop [{start}, {stop}) of axis {name} leaves the volume (0 to {n} on that axis,"
-                f" shape {volume.shape})",
+                f"{option}: voxels [{start}, {stop}) of axis {name} leave the volume (0 to {n} "
+                f"on that axis, shape {volume.shape})",
                 where,
             )
         if stop - start < 3:

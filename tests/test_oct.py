@@ -118,6 +118,11 @@ def test_a_crop_keeps_the_surface_inside_its_box_in_the_full_volume_frame():
     assert v[:, 0].min() >= 8 * VOXEL and v[:, 0].max() <= 39 * VOXEL
     assert v[:, 1].min() >= 16 * VOXEL and v[:, 1].max() <= 47 * VOXEL
     assert np.percentile(vertex_errors(seg.interface, ph), 99) <= 1.0
+    # the same box in mm: the voxels whose centres lie in it
+    box = ((0.10, 0.475), (0.155, 0.47), (0.08, 0.3949))
+    in_mm = segment_oct(ph.volume, ph.voxel_size, attenuation=MU, crop_mm=box)
+    assert in_mm.origin == seg.origin
+    np.testing.assert_array_equal(in_mm.interface.vertices, seg.interface.vertices)
 
 
 @pytest.fixture(scope="module")
@@ -162,7 +167,18 @@ def bad_cases(small, tmp_path):
         (lambda: segment_oct(nan, size), "1 NaN or infinite voxel"),
         (lambda: segment_oct(v, (0.01, 0.0, 0.02)), "voxel_size must be three positive"),
         (lambda: segment_oct(v, (0.01, 0.02)), "voxel_size must be three positive"),
-        (lambda: segment_oct(v, size, crop=((0, 30), None, None)), "crop [0, 30) of axis z"),
+        (
+            lambda: segment_oct(v, size, crop=((0, 30), None, None)),
+            "crop: voxels [0, 30) of axis z",
+        ),
+        (
+            lambda: segment_oct(v, size, crop_mm=(None, None, (0.1, 0.9))),
+            "crop_mm: voxels [5, 46) of axis x leave",
+        ),
+        (
+            lambda: segment_oct(v, size, crop=((0, 9), None, None), crop_mm=((0, 9), None, None)),
+            "crop (indices) or crop_mm (mm), not both",
+        ),
         (lambda: segment_oct(v, size, crop=(None, (5, 6), None)), "axis y has 1 voxel"),
         (lambda: segment_oct(v, size, threshold=1e6), "no biofilm found: no voxel above"),
         (lambda: segment_oct(v * 0.0 + 1.0, size), "volume is constant"),
