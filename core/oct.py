@@ -229,7 +229,10 @@ def segment_oct(
     # 1. substratum: first row under its surface, in the cropped volume
     ks = _substratum_row(volume, origin[0], opts.substratum_depth, dz, where)
     # 2. denoise the rows above the substratum (its bright reflection would bleed upwards)
-    above = _denoise(np.array(volume[:ks], dtype=np.float32), opts.denoise, opts.denoise_size)
+    #    into the field marching cubes reads, with one more row for the floor
+    field = np.empty((ks + 1, *volume.shape[1:]), dtype=np.float32)
+    above = field[:ks]
+    _denoise(volume[:ks], above, opts.denoise, opts.denoise_size)
     # 3. compensate the decay exp(-mu d), d = depth below the full volume's first row
     depth = (np.arange(ks, dtype=np.float64) + origin[0]) * dz
     mu = (
@@ -270,8 +273,7 @@ def segment_oct(
     above[~mask & solid] = max(high, t)
     # the substratum row mirrors the fluid above it about t: the floor crosses t half-way
     under = above[-1]
-    floor = np.where(under > t, under, 2.0 * t - under).astype(np.float32)
-    field = np.concatenate([above, floor[None]], axis=0)
+    field[ks] = np.where(under > t, under, 2.0 * t - under)
     surface = _surface(field, t, solid, ks, origin, spacing, where)
     j = field.shape[1] // 2
     return OctSegmentation(
@@ -361,14 +363,16 @@ def _substratum_row(
     return ks
 
 
-def _denoise(g: NDArray[np.float32], kind: str, size: float) -> NDArray[np.float32]:
+def _denoise(volume: NDArray[np.float32], out: NDArray[np.float32], kind: str, size: float) -> None:
+    """``volume`` filtered into ``out`` (of its shape)."""
     from scipy import ndimage
 
     if kind == "gaussian":
-        return ndimage.gaussian_filter(g, sigma=size, mode="nearest", truncate=3.0)
-    if kind == "median":
-        return ndimage.median_filter(g, size=2 * max(1, round(size)) + 1, mode="nearest")
-    return g
+        ndimage.gaussian_filter(volume, sigma=size, output=out, mode="nearest", truncate=3.0)
+    elif kind == "median":
+        ndimage.median_filter(volume, size=2 * max(1, round(size)) + 1, output=out, mode="nearest")
+    else:
+        out[...] = volume
 
 
 def _otsu(values: NDArray[np.float32]) -> float:
