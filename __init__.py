@@ -33,6 +33,7 @@ _LAZY = {
     "smc": "fbia.iterators.smc:smc",
     "DaskEvaluator": "fbia.core.dask_executor:DaskEvaluator",
     "StudyStore": "fbia.core.store:StudyStore",
+    "segment_oct": "fbia.core.oct:segment_oct",
 }
 
 __all__ = [*_core_all, *_LAZY, "__version__"]
