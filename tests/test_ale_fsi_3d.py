@@ -127,14 +127,17 @@ def test_3d_options_that_do_not_work_yet_are_config_errors():
 
 @pytest.mark.slow
 def test_dome_displacement_converges_under_mesh_refinement(tmp_path):
-    """Largest interface displacement on three meshes, element sizes halved overall: the
-    differences shrink (observed order ...)."""
+    """Largest interface displacement of the dome at interface element sizes 0.15, 0.1 and
+    0.075 mm (9 716, 22 947 and 42 996 unknowns; ~90 s): 0.02889, 0.02685, 0.02646 mm, the
+    change shrinks 5x from the first to the second refinement (coarser meshes, with two
+    elements across the dome's radius, are not yet in the asymptotic range)."""
     values = []
-    for h in (0.4, 0.3, 0.2):
+    for h in (0.3, 0.2, 0.15):
         model = AleFsiForwardModel(
             geometry="dome_3d", mesh_size=h, interface_mesh_size=h / 2, warm_start=False
         )
         sol = model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path / f"{h}")
         values.append(sol.diagnostics["max_displacement"][0])
     first, second = abs(values[1] - values[0]), abs(values[2] - values[1])
-    assert second < first
+    assert second < 0.5 * first
+    assert second < 0.03 * values[2]

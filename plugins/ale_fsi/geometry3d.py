@@ -105,6 +105,8 @@ def build_dome_cell(
     regions = _named(e3, ngmesh.GetRegionNames(dim=3), 4)
     boundaries = _named(e2, ngmesh.GetRegionNames(dim=2), 3)
     boundaries.pop("mirror")
+    locked = np.vstack([c for n, c in boundaries.items() if n != "outflow"])
+    pts, regions[FLUID] = _split_locked_tets(pts, regions[FLUID], locked)
     # mirror about z = width/2; the points on that plane are shared
     on = np.abs(pts[:, 2] - width / 2) <= 1e-9 * max(length, height, width)
     image = np.flatnonzero(on)
@@ -215,6 +217,33 @@ def mesh_from_arrays_3d(
         idx = ngmesh.AddRegion(name, dim=2)
         ngmesh.AddElements(dim=2, index=idx, data=np.ascontiguousarray(t), base=0)
     return ngsolve.Mesh(ngmesh)
+
+
+def _split_locked_tets(
+    points: NDArray[np.float64], tets: NDArray[np.int64], faces: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Split every tetrahedron whose four vertices lie on ``faces`` (boundaries where the
+    velocity is prescribed) at its centroid into four.
+
+    The P2/P1 Taylor-Hood pair is not inf-sup stable on a mesh with such a fluid tetrahedron:
+    its velocity has no free vertex value, and a pressure mode on its four vertices is
+    spurious (Boffi, SIAM J. Numer. Anal. 34 (1997); seen here as a singular Jacobian at the
+    foot of the dome).  The centroid is an inner vertex; the faces, hence the neighbours,
+    stay as they are.
+    """
+    on = np.zeros(len(points), dtype=bool)
+    on[faces.ravel()] = True
+    bad = on[tets].all(axis=1)
+    if not np.any(bad):
+        return points, tets
+    centre = len(points) + np.arange(int(bad.sum()))
+    points = np.vstack([points, points[tets[bad]].mean(axis=1)])
+    split = []
+    for i in range(4):
+        t = tets[bad].copy()
+        t[:, i] = centre
+        split.append(t)
+    return points, np.vstack([tets[~bad], *split])
 
 
 def _named(elements: Any, names: list[str], nodes: int) -> dict[str, NDArray[np.int64]]:
