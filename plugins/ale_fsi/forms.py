@@ -77,6 +77,7 @@ class SolverSettings:
     min_det_f: float = 0.01  # smallest admissible det F (ALE map and solid)
     min_quality: float = 0.02  # smallest admissible deformed fluid element quality
     theta: float = 1.0  # one-step-theta
+    linear_solver: str = "direct"  # "direct" (Pardiso) | "block_gmres" (fem.krylov)
     threads: int = 1
 
 
@@ -292,6 +293,18 @@ class AleFsiProblem:
             self._mu[region].Set(mu)
             self._lam[region].Set(lam)
         self.materials = dict(materials)
+
+    def preconditioner_blocks(self) -> list[Any]:
+        """Free dofs of the displacement block, then of the fluid block (velocity, pressure):
+        the blocks of the Gauss-Seidel preconditioner of ``linear_solver = "block_gmres"``."""
+        out = []
+        for fields in ((1,), (0, 2)):
+            mask = np.zeros_like(self._free_np)
+            for i in fields:
+                r = self.fes.Range(i)
+                mask[r.start : r.stop] = True
+            out.append(self.ngs.BitArray((mask & self._free_np).tolist()))
+        return out
 
     @property
     def ndof(self) -> int:

@@ -227,7 +227,7 @@ def _split_locked_tets(
 
     The P2/P1 Taylor-Hood pair is not inf-sup stable on a mesh with such a fluid tetrahedron:
     its velocity has no free vertex value, and a pressure mode on its four vertices is
-    spurious (Boffi, SIAM J. Numer. Anal. 34 (1997); seen here as a singular Jacobian at the
+    spurious (Boffi 1997; seen here as a singular Jacobian at the
     foot of the dome).  The centroid is an inner vertex; the faces, hence the neighbours,
     stay as they are.
     """

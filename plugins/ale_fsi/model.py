@@ -154,6 +154,9 @@ class AleFsiOptions(PluginOptions):
     ramp_time: float = Field(10.0, ge=0, description="duration of the inflow ramp [s]")
     ramp_steps: int = Field(1, ge=1, description="cosine stairs of the inflow ramp [-]")
     threads: int = Field(1, ge=1, description="NGSolve task-manager threads [-]")
+    linear_solver: Literal["direct", "block_gmres"] = Field(
+        "direct", description="Newton systems: Pardiso, or GMRes with block preconditioner [-]"
+    )
 
     @field_validator("outline")
     @classmethod
@@ -562,6 +565,7 @@ def solver_settings(o: AleFsiOptions) -> Any:
         min_quality=o.min_element_quality,
         theta=o.theta,
         threads=o.threads,
+        linear_solver=o.linear_solver,
     )
 
 
