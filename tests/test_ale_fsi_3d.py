@@ -142,7 +142,7 @@ def test_3d_options_that_do_not_work_yet_are_config_errors():
 @pytest.mark.slow
 def test_dome_displacement_converges_under_mesh_refinement(tmp_path):
     """Largest interface displacement of the dome at interface element sizes 0.15, 0.1 and
-    0.075 mm (9 716, 22 947 and 42 996 unknowns; ~90 s): 0.02889, 0.02685, 0.02646 mm, the
+    0.075 mm (9 716, 22 947 and 42 996 unknowns; ~60 s): 0.02889, 0.02685, 0.02646 mm, the
     change shrinks 5x from the first to the second refinement (coarser meshes, with two
     elements across the dome's radius, are not yet in the asymptotic range)."""
     values = []
