@@ -5,9 +5,10 @@
 >>> sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], "run")  # doctest: +SKIP
 
 Importing this package is cheap: NGSolve is imported only when a model first meshes or solves.
-Modules: :mod:`.geometry` (flow-cell builder, user-mesh reader/writer), :mod:`.solver` (weak
-forms, Newton, continuation, checks), :mod:`.model` (the plugin class), :mod:`.output` (VTU),
-:mod:`.turek_hron` (benchmark geometry and evaluation).
+Modules: :mod:`.geometry` (flow-cell builder, user-mesh reader/writer), :mod:`.geometry3d`
+(3-D dome and ridge cells), :mod:`.solver` (weak forms, Newton, continuation, checks),
+:mod:`.model` (the plugin class), :mod:`.output` (VTU), :mod:`.turek_hron` (benchmark
+geometry and evaluation).
 """
 
 from ...core.hookspecs import Register, hookimpl

@@ -33,15 +33,22 @@ class StateChecks:
         self._tri_cache: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
 
     def min_fluid_quality(self) -> float:
-        """Smallest shape quality 4 sqrt(3) A / sum(l^2) of the deformed fluid triangles."""
+        """Smallest shape quality of the deformed fluid elements: 4 sqrt(3) A / sum(l^2) of a
+        triangle, 12 (3 V)^(2/3) / sum(l^2) of a tetrahedron (1: equilateral, <= 0: inverted)."""
         tris, pts = self._fluid_triangles()
         u = self._vertex_displacement()
         x = pts + u
-        a, b, c = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-        ab, ac, bc = b - a, c - a, c - b
-        area = 0.5 * (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-        l2 = (ab**2).sum(1) + (ac**2).sum(1) + (bc**2).sum(1)
-        return float(np.min(4.0 * math.sqrt(3.0) * area / l2))
+        corners = [x[tris[:, i]] for i in range(tris.shape[1])]
+        edges = [
+            corners[j] - corners[i] for i in range(len(corners)) for j in range(i + 1, len(corners))
+        ]
+        l2 = sum((e**2).sum(1) for e in edges)
+        if tris.shape[1] == 3:
+            ab, ac = edges[0], edges[1]
+            area = 0.5 * (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
+            return float(np.min(4.0 * math.sqrt(3.0) * area / l2))
+        vol = np.einsum("ij,ij->i", edges[0], np.cross(edges[1], edges[2])) / 6.0
+        return float(np.min(12.0 * np.sign(vol) * np.abs(3.0 * vol) ** (2.0 / 3.0) / l2))
 
     def _fluid_triangles(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         if self._tri_cache is None:
@@ -54,10 +61,13 @@ class StateChecks:
                 ]
             )
             pts = np.array([v.point for v in self.problem.mesh.vertices])
-            # orient counter-clockwise in the reference configuration
+            # orient positively (counter-clockwise) in the reference configuration
             a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
-            cw = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0] < 0
-            tris[cw] = tris[cw][:, [0, 2, 1]]
+            if tris.shape[1] == 3:
+                cw = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0] < 0
+            else:
+                cw = np.einsum("ij,ij->i", b - a, np.cross(c - a, pts[tris[:, 3]] - a)) < 0
+            tris[cw] = tris[cw][:, [0, 2, 1] + list(range(3, tris.shape[1]))]
             self._tri_cache = (tris, pts)
         return self._tri_cache
 
@@ -65,7 +75,7 @@ class StateChecks:
         """Displacement at the mesh vertices (the first nv dofs of each P2 component)."""
         nv = self.problem.mesh.nv
         comps = self.problem.displacement.components
-        return np.c_[comps[0].vec.FV().NumPy()[:nv], comps[1].vec.FV().NumPy()[:nv]]
+        return np.column_stack([c.vec.FV().NumPy()[:nv] for c in comps])
 
     def check(self, where: str) -> dict[str, float]:
         """Raise :class:`ForwardModelError` unless the current state is admissible."""

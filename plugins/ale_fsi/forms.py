@@ -1,6 +1,7 @@
 """Monolithic ALE fluid-solid interaction on NGSolve: spaces, weak forms, state, residual.
 
-Unknowns on one mesh (reference configuration, plane strain, Taylor-Hood for the fluid):
+Unknowns on one mesh (reference configuration, Taylor-Hood for the fluid; 2-D meshes in plane
+strain, 3-D meshes as they are -- the forms below are written for any dimension):
 
 * ``v`` -- velocity, continuous over fluid *and* solid (P2): fluid velocity in the fluid, solid
   velocity in the solid, so the kinematic coupling (thesis eq. 2.28, Paper A eq. 4b) holds
@@ -46,7 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .boundaries import InflowSegment, mesh_dirichlet
+from .boundaries import inflow_of, mesh_dirichlet, symmetry_axis
 from .checks import StateChecks
 from .geometry import FLUID, solid_regions
 from .materials import lame, stress_pk2
@@ -63,7 +64,7 @@ class SolverSettings:
     fluid_viscosity: float = 1e-3  # g/(mm s)
     solid_density: float = 1e-3  # g/mm^3
     material: str = "svk"  # "svk" (eq. 2.15) | "neo_hooke" (eq. 2.18)
-    gravity: tuple[float, float] = (0.0, 0.0)  # mm/s^2, acts on the solid only
+    gravity: tuple[float, ...] = (0.0, 0.0)  # mm/s^2, on the solid only; 3-D: padded with 0
     outflow: str = "horizontal"  # "horizontal" (v_y = 0, traction-free in x) | "do_nothing"
     mesh_motion: str = "harmonic"  # "harmonic" | "elastic"
     mesh_stiffening: float = 1.0  # exponent chi of the Jacobian-based stiffening
@@ -76,6 +77,7 @@ class SolverSettings:
     min_det_f: float = 0.01  # smallest admissible det F (ALE map and solid)
     min_quality: float = 0.02  # smallest admissible deformed fluid element quality
     theta: float = 1.0  # one-step-theta
+    linear_solver: str = "direct"  # "direct" (Pardiso) | "block_gmres" (fem.krylov)
     threads: int = 1
 
 
@@ -98,22 +100,27 @@ class AleFsiProblem:
         self.settings = s = settings
         ngs.SetNumThreads(max(1, int(s.threads)))
         self.solids = solid_regions(mesh)
+        self.dim = dim = int(mesh.dim)
         bnds = set(mesh.GetBoundaries())
         self._has = {b: b in bnds for b in ("outflow", "walls", "obstacle", "inflow")}
-        self.inflow = InflowSegment.of(mesh)
+        self.inflow = inflow_of(mesh)
         self.length_scale = self.inflow.width
 
         # -- spaces: velocity and displacement continuous over the whole mesh (see module doc)
         noslip = "|".join(b for b in ("walls", "obstacle", "solid_fixed") if b in bnds)
         vx = "|".join(x for x in ("inflow", noslip) if x)
-        vy = vx
-        if s.outflow == "horizontal":
-            vy = "|".join(x for x in (vx, "outflow") if x)
+        v_fixed = [vx] * dim
+        if s.outflow == "horizontal":  # the tangential velocity vanishes on the outflow
+            v_fixed[1:] = ["|".join(x for x in (vx, "outflow") if x)] * (dim - 1)
         elif s.outflow != "do_nothing":
             raise ValueError(f"unknown outflow condition {s.outflow!r}")
-        V = ngs.VectorH1(mesh, order=s.order, dirichletx=vx, dirichlety=vy)
-        dx_fixed, dy_fixed = mesh_dirichlet(mesh, s.mesh_slip)
-        D = ngs.VectorH1(mesh, order=s.order, dirichletx=dx_fixed, dirichlety=dy_fixed)
+        if "symmetry" in bnds:  # symmetry walls: no normal velocity
+            k = symmetry_axis(mesh)
+            v_fixed[k] = "|".join(x for x in (v_fixed[k], "symmetry") if x)
+        xyz = ("dirichletx", "dirichlety", "dirichletz")
+        V = ngs.VectorH1(mesh, order=s.order, **dict(zip(xyz, v_fixed, strict=False)))
+        d_fixed = mesh_dirichlet(mesh, s.mesh_slip)
+        D = ngs.VectorH1(mesh, order=s.order, **dict(zip(xyz, d_fixed, strict=False)))
         Q = ngs.H1(mesh, order=s.order - 1, definedon=FLUID)
         self.fes = ngs.FESpace([V, D, Q])
         self.gfu = ngs.GridFunction(self.fes)
@@ -128,7 +135,7 @@ class AleFsiProblem:
         self.transient = False
         self._build_motion()
         self._build_forms(transient=False)
-        self._det_points = mesh.MapToAllElements(self._check_rule(), ngs.VOL)
+        self._det_points = mesh.MapToAllElements(self._check_rule(dim), ngs.VOL)
         self._region_of_point = mesh.MaterialCF({FLUID: 1.0}, default=0.0)(self._det_points)[
             :, 0
         ].astype(bool)
@@ -138,10 +145,16 @@ class AleFsiProblem:
 
     # -- set-up ------------------------------------------------------------------------------
     @staticmethod
-    def _check_rule() -> Any:
+    def _check_rule(dim: int = 2) -> Any:
+        """Vertices, edge midpoints and centroid of the reference triangle / tetrahedron."""
         import ngsolve as ngs
 
-        pts = [(0, 0), (1, 0), (0, 1), (0.5, 0), (0.5, 0.5), (0, 0.5), (1 / 3, 1 / 3)]
+        if dim == 2:
+            pts = [(0, 0), (1, 0), (0, 1), (0.5, 0), (0.5, 0.5), (0, 0.5), (1 / 3, 1 / 3)]
+        else:
+            corners = np.array([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)], dtype=float)
+            mids = [(corners[i] + corners[j]) / 2 for i in range(4) for j in range(i + 1, 4)]
+            pts = [tuple(p) for p in [*corners, *mids, corners.mean(axis=0)]]
         return ngs.IntegrationRule(pts, [0.0] * len(pts))
 
     def _build_forms(self, transient: bool) -> None:
@@ -155,7 +168,7 @@ class AleFsiProblem:
         ngs = self.ngs
         s = self.settings
         (v, d, p), (phi, psi, q) = self.fes.TnT()
-        I2 = ngs.Id(2)
+        I2 = ngs.Id(self.dim)
         rho_f, mu_f, rho_s = s.fluid_density, s.fluid_viscosity, s.solid_density
         v_old, d_old, _ = self.gfu_old.components
         theta = s.theta if transient else 1.0
@@ -189,7 +202,8 @@ class AleFsiProblem:
         self._fluid_form += fluid_cf * ngs.dx(FLUID)
         form = ngs.BilinearForm(self.fes, symmetric=False)
         form += fluid_cf * ngs.dx(FLUID)  # the mesh motion is added as a fixed matrix
-        g = ngs.CoefficientFunction(tuple(float(c) for c in s.gravity))
+        gravity = [float(c) for c in s.gravity][: self.dim]
+        g = ngs.CoefficientFunction(tuple(gravity + [0.0] * (self.dim - len(gravity))))
         for region in self.solids:
             mu, lam = self._mu[region], self._lam[region]
 
@@ -280,6 +294,18 @@ class AleFsiProblem:
             self._lam[region].Set(lam)
         self.materials = dict(materials)
 
+    def preconditioner_blocks(self) -> list[Any]:
+        """Free dofs of the displacement block, then of the fluid block (velocity, pressure):
+        the blocks of the Gauss-Seidel preconditioner of ``linear_solver = "block_gmres"``."""
+        out = []
+        for fields in ((1,), (0, 2)):
+            mask = np.zeros_like(self._free_np)
+            for i in fields:
+                r = self.fes.Range(i)
+                mask[r.start : r.stop] = True
+            out.append(self.ngs.BitArray((mask & self._free_np).tolist()))
+        return out
+
     @property
     def ndof(self) -> int:
         """Unknowns of the Newton system (quasi-static: without the solid's velocity)."""
@@ -313,7 +339,7 @@ class AleFsiProblem:
         quadratic polynomial det F of a P2 displacement takes its characteristic values.
         """
         ngs = self.ngs
-        detf = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
+        detf = ngs.Det(ngs.Id(self.dim) + ngs.Grad(self.displacement))
         vals = np.asarray(detf(self._det_points))[:, 0]
         fl = self._region_of_point
         return float(vals[fl].min()), float(vals[~fl].min())
@@ -334,7 +360,7 @@ class AleFsiProblem:
         """
         s = self.settings
         w = self.length_scale
-        u_ref = abs(float(self.inflow_rate.Get())) / w + 1e-9 * w  # mm/s
+        u_ref = abs(self.inflow.mean_speed(float(self.inflow_rate.Get()))) + 1e-9 * w  # mm/s
         p_ref = s.fluid_density * u_ref**2 + s.fluid_viscosity * u_ref / w + 1e-12
         x = self.gfu.vec.FV().NumPy()
         out = np.empty_like(x)
@@ -441,12 +467,15 @@ class AleFsiProblem:
     def failure_note(self) -> str:
         """Where the current state compresses the solid most (for failure messages)."""
         ngs = self.ngs
-        detf = ngs.Det(ngs.Id(2) + ngs.Grad(self.displacement))
+        detf = ngs.Det(ngs.Id(self.dim) + ngs.Grad(self.displacement))
         vals = np.asarray(detf(self._det_points))[:, 0]
         solid = np.flatnonzero(~self._region_of_point)
         k = solid[np.argmin(vals[solid])]
-        x, y = (float(np.asarray(c(self._det_points)).ravel()[k]) for c in (ngs.x, ngs.y))
-        note = f"the solid is compressed to det F = {vals[k]:.2g} at ({x:.3f}, {y:.3f}) mm"
+        at = ", ".join(
+            f"{float(np.asarray(c(self._det_points)).ravel()[k]):.3f}"
+            for c in (ngs.x, ngs.y, ngs.z)[: self.dim]
+        )
+        note = f"the solid is compressed to det F = {vals[k]:.2g} at ({at}) mm"
         if self.settings.material == "svk" and vals[k] < 1.0 / 3.0:
             # plane strain SVK under volumetric compression F = s I: P = (lam + mu)(s^2 - 1) s
             # has its extremum at s^2 = det F = 1/3; below it the material softens

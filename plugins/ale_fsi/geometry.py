@@ -5,8 +5,13 @@ Every mesh the solver sees has *named* regions and boundaries:
 =============== ===========================================================================
 region          ``fluid``; ``solid`` or ``solid_1``, ``solid_2``, ... (one per subdomain)
 boundary        ``inflow``, ``outflow``, ``walls`` (no-slip), ``interface`` (fluid-solid),
-                ``solid_fixed`` (solid clamped), optional ``obstacle`` (rigid no-slip body)
+                ``solid_fixed`` (solid clamped), optional ``obstacle`` (rigid no-slip body),
+                optional ``symmetry`` (planes normal to one axis: no normal velocity and
+                displacement -- the side walls of a 3-D ridge in plane strain)
 =============== ===========================================================================
+
+The same names serve 3-D meshes (tetrahedra, boundary triangles), built by
+:mod:`fbia.plugins.ale_fsi.geometry3d`.
 
 >>> from fbia.plugins.ale_fsi.geometry import build_flow_cell
 >>> mesh = build_flow_cell(mesh_size=0.2, interface_mesh_size=0.08)   # doctest: +SKIP
@@ -45,6 +50,7 @@ BOUNDARY_NAMES = (
     "solid_fixed",
     "obstacle",
     "internal",
+    "symmetry",
 )
 REQUIRED_BOUNDARIES = ("inflow", "interface", "solid_fixed")
 
@@ -246,8 +252,8 @@ def solid_regions(mesh: ngsolve.Mesh) -> list[str]:
 
 def check_mesh(mesh: ngsolve.Mesh, where: str = "mesh") -> None:
     """Raise :class:`ConfigError` unless the mesh follows the naming convention of this module."""
-    if mesh.dim != 2:
-        raise ConfigError(f"ale_fsi needs a 2-D mesh, got dimension {mesh.dim}", where)
+    if mesh.dim not in (2, 3):
+        raise ConfigError(f"ale_fsi needs a 2-D or 3-D mesh, got dimension {mesh.dim}", where)
     materials = set(mesh.GetMaterials())
     solids = solid_regions(mesh)
     if FLUID not in materials:
@@ -486,3 +492,28 @@ def interface_chains(mesh: Any, ngs: Any) -> list[list[tuple[int, int]]]:
                 break
         chains.append(chain)
     return chains
+
+
+def interface_triangles(mesh: Any, ngs: Any) -> NDArray[np.int64]:
+    """The 3-D interface's triangles (vertex numbers), right-hand normal out of the solid."""
+    solid_names = set(solid_regions(mesh))
+    pts = np.array([v.point for v in mesh.vertices])
+    opposite: dict[frozenset[int], int] = {}
+    for el in mesh.Elements(ngs.VOL):
+        if el.mat in solid_names:
+            vs = [v.nr for v in el.vertices]
+            for i in range(4):
+                opposite[frozenset(vs[:i] + vs[i + 1 :])] = vs[i]
+    tris = []
+    for el in mesh.Elements(ngs.BND):
+        if el.mat != "interface":
+            continue
+        a, b, c = (v.nr for v in el.vertices)
+        opp = opposite.get(frozenset((a, b, c)))
+        if opp is None:
+            raise ForwardModelError("an interface face touches no solid element", "bad_mesh")
+        normal = np.cross(pts[b] - pts[a], pts[c] - pts[a])
+        tris.append((a, b, c) if np.dot(normal, pts[opp] - pts[a]) < 0 else (a, c, b))
+    if not tris:
+        raise ForwardModelError("mesh has no interface faces", "bad_mesh")
+    return np.array(tris, dtype=np.int64)

@@ -1,5 +1,5 @@
 """The solid's material laws: Lame parameters and the second Piola-Kirchhoff stress
-(Saint Venant-Kirchhoff, thesis eq. 2.15; neo-Hooke, eq. 2.18), plane strain."""
+(Saint Venant-Kirchhoff, thesis eq. 2.15; neo-Hooke, eq. 2.18), plane strain in 2-D, and in 3-D."""
 
 from __future__ import annotations
 
@@ -16,14 +16,14 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 
 
 def stress_pk2(material: str, F: Any, mu: Any, lam: Any) -> Any:
-    """Second Piola-Kirchhoff stress of the plane-strain solid.
+    """Second Piola-Kirchhoff stress of the solid (plane strain for a 2x2 ``F``, else 3-D).
 
     SVK, eq. 2.15: ``S = lam tr(E) I + 2 mu E`` with ``E = (F^T F - I)/2``;
     neo-Hooke, eq. 2.18: ``S = mu (I - C^-1) + lam ln(J) C^-1`` with ``C = F^T F``.
     """
     import ngsolve as ngs
 
-    identity = ngs.Id(2)
+    identity = ngs.Id(F.dims[0])
     C = F.trans * F
     if material == "svk":
         E = 0.5 * (C - identity)

@@ -14,6 +14,11 @@ rate; the coordinates are inflow levels ``{"inflow_rate": r}`` (mm^2/s; ``{}`` m
 parameter/option value).  Transient mode marches with one-step-theta from rest, the inflow
 ramped by a cosine over ``ramp_time`` as in Paper A, and returns the interface at the requested
 ``{"time": t}`` (s).  Physics, weak forms and checks: :mod:`fbia.plugins.ale_fsi.solver`.
+
+``geometry = "dome_3d"`` solves the same model on a 3-D duct with a dome on its floor
+(:mod:`~fbia.plugins.ale_fsi.geometry3d`; inflow rate in mm^3/s) and returns the interface as
+a triangulated surface; ``"ridge_3d"`` extrudes the 2-D cell between symmetry walls (the
+plane-strain limit; inflow rate per unit depth, mm^2/s).  3-D runs are quasi-static only.
 """
 
 from __future__ import annotations
@@ -56,6 +61,17 @@ class AleFsiOptions(PluginOptions):
     )
     channel_length: float = Field(2.0, gt=0, description="flow-cell length L [mm]")
     channel_height: float = Field(1.0, gt=0, description="flow-cell height H [mm]")
+    geometry: Literal["flow_cell", "dome_3d", "ridge_3d"] = Field(
+        "flow_cell",
+        description="flow_cell: the 2-D cell; dome_3d: a 3-D duct with a spherical-cap "
+        "biofilm (inflow_rate in mm^3/s; use coarse sizes, e.g. mesh_size 0.3, "
+        "interface_mesh_size 0.15); ridge_3d: the 2-D cell extruded over channel_width "
+        "between symmetry walls (plane strain) [-]",
+    )
+    channel_width: float = Field(1.0, gt=0, description="3-D duct width / ridge depth W [mm]")
+    dome_radius: float = Field(0.4, gt=0, description="base radius of the dome_3d cap [mm]")
+    dome_height: float = Field(0.4, gt=0, description="height of the dome_3d cap [mm]")
+    dome_centre: float = Field(0.8, gt=0, description="x of the dome_3d centre [mm]")
     outline: list[Point] | None = Field(
         None,
         description="biofilm outline from the upstream to the downstream foot, both on "
@@ -138,6 +154,9 @@ class AleFsiOptions(PluginOptions):
     ramp_time: float = Field(10.0, ge=0, description="duration of the inflow ramp [s]")
     ramp_steps: int = Field(1, ge=1, description="cosine stairs of the inflow ramp [-]")
     threads: int = Field(1, ge=1, description="NGSolve task-manager threads [-]")
+    linear_solver: Literal["direct", "block_gmres"] = Field(
+        "direct", description="Newton systems: Pardiso, or GMRes with block preconditioner [-]"
+    )
 
     @field_validator("outline")
     @classmethod
@@ -150,6 +169,22 @@ class AleFsiOptions(PluginOptions):
     def _mesh_source(self) -> AleFsiOptions:
         if self.mesh_file is not None and (self.outline is not None or self.subdomains):
             raise ValueError("give either mesh_file or outline/subdomains, not both")
+        if self.geometry != "flow_cell":
+            # not yet supported in 3-D (say so rather than half-work)
+            clash = [
+                name
+                for name, on in (
+                    ("mesh_file", self.mesh_file is not None),
+                    ("subdomains", bool(self.subdomains)),
+                    ("outline", self.outline is not None and self.geometry == "dome_3d"),
+                    ("mode = 'transient'", self.mode == "transient"),
+                    ("probes", bool(self.probes)),
+                    ("write_vtu", self.write_vtu),
+                )
+                if on
+            ]
+            if clash:
+                raise ValueError(f"geometry {self.geometry!r} does not support yet: {clash}")
         return self
 
 
@@ -253,7 +288,7 @@ class AleFsiForwardModel(Configurable):
             """Check the current state and store its results for coordinate ``index``."""
             for key, val in solver.check_state(label).items():
                 diag[key] = min(diag.get(key, math.inf), val)
-            curves[index] = post.interface_curves()
+            curves[index] = post.interface()
             per["max_displacement"][index] = post.max_interface_displacement()
             per["fluid_force"][index] = post.forces().tolist()
             if self.options.probes:
@@ -292,7 +327,7 @@ class AleFsiForwardModel(Configurable):
             diag["jacobians"] = rep.jacobians
             diag["warm_start"] = False
         diag.update(per)
-        pairs = [(c, Interface.polylines(cs)) for c, cs in zip(coordinates, curves, strict=True)]
+        pairs: list[tuple[Coordinate, Interface]] = list(zip(coordinates, curves, strict=True))
         diag.update(
             linear_solver=solver.linear_solver,
             ndof=solver.ndof,
@@ -392,6 +427,34 @@ class AleFsiForwardModel(Configurable):
         o = self.options
         if o.mesh_file is not None:
             return geometry.read_mesh(o.mesh_file)
+        if o.geometry == "dome_3d":
+            from .geometry3d import build_dome_cell
+
+            return build_dome_cell(
+                o.channel_length,
+                o.channel_height,
+                o.channel_width,
+                dome_centre=o.dome_centre,
+                dome_radius=o.dome_radius,
+                dome_height=o.dome_height,
+                mesh_size=o.mesh_size,
+                interface_mesh_size=o.interface_mesh_size,
+            )
+        if o.geometry == "ridge_3d":
+            from .geometry3d import build_ridge_cell
+
+            return build_ridge_cell(
+                depth=o.channel_width,
+                length=o.channel_length,
+                height=o.channel_height,
+                outline=DEFAULT_OUTLINE if o.outline is None else o.outline,
+                smooth=o.smooth_outline,
+                mesh_size=o.mesh_size,
+                interface_mesh_size=o.interface_mesh_size,
+                solid_mesh_size=(
+                    2.0 * o.interface_mesh_size if o.solid_mesh_size is None else o.solid_mesh_size
+                ),
+            )
         return geometry.build_flow_cell(
             length=o.channel_length,
             height=o.channel_height,
@@ -502,6 +565,7 @@ def solver_settings(o: AleFsiOptions) -> Any:
         min_quality=o.min_element_quality,
         theta=o.theta,
         threads=o.threads,
+        linear_solver=o.linear_solver,
     )
 
 

@@ -1,8 +1,10 @@
-"""Post-processing of an ALE FSI state: interface curves, fluxes, forces, probes.
+"""Post-processing of an ALE FSI state: interface curves or surfaces, fluxes, forces, probes.
 
 :class:`AleFsiPostprocess` reads the state of an
 :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver` (no solving): the deformed interface as
-ordered polylines (what the measures compare), volume fluxes through boundaries of the
+ordered polylines (2-D) or a triangulated surface (3-D: the P1 vertices of the interface faces,
+each triangle's right-hand normal into the fluid, as :meth:`fbia.Interface.surface` wants) --
+what the measures compare --, volume fluxes through boundaries of the
 deformed domain, the force of the fluid on a body from the residual of the fluid equations,
 nodal interface forces and point displacements.
 """
@@ -14,8 +16,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core.interface import Interface
 from .forms import AleFsiProblem
-from .geometry import interface_chains
+from .geometry import interface_chains, interface_triangles
 
 
 class AleFsiPostprocess:
@@ -24,6 +27,31 @@ class AleFsiPostprocess:
     def __init__(self, solver: AleFsiProblem) -> None:
         self.solver = solver
         self._iface_cache: tuple[Any, Any, Any] | None = None
+        self._surface_cache: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
+
+    def interface(self, deformed: bool = True) -> Interface:
+        """The interface as a :class:`fbia.Interface`: polylines (2-D) or a surface (3-D)."""
+        if self.solver.dim == 2:
+            return Interface.polylines(self.interface_curves(deformed))
+        return Interface.surface(*self.interface_surface(deformed))
+
+    def interface_surface(
+        self, deformed: bool = True
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Vertices (n, 3) and triangles (m, 3) of the 3-D interface, moved by the displacement
+        at the vertices; each triangle's right-hand normal points into the fluid."""
+        if self._surface_cache is None:
+            tris = interface_triangles(self.solver.mesh, self.solver.ngs)
+            verts, local = np.unique(tris, return_inverse=True)
+            self._surface_cache = (verts, local.reshape(tris.shape))
+        verts, tris = self._surface_cache
+        mesh = self.solver.mesh
+        x = np.array([mesh.vertices[int(i)].point for i in verts])
+        if deformed:
+            # the vertex dofs of an H1 field are its values at the vertices
+            comps = self.solver.displacement.components
+            x = x + np.column_stack([c.vec.FV().NumPy()[verts] for c in comps])
+        return x, tris
 
     def interface_curves(self, deformed: bool = True) -> list[NDArray[np.float64]]:
         """Ordered interface polylines (solid on the right), with the edge midpoints.
@@ -72,8 +100,9 @@ class AleFsiPostprocess:
     def flux(self, boundary: str) -> float:
         """Volume flux (mm^2/s) out of the fluid through a boundary of the deformed domain."""
         ngs = self.solver.ngs
-        n = ngs.specialcf.normal(2)
-        F = ngs.Id(2) + ngs.Grad(self.solver.displacement)
+        dim = self.solver.dim
+        n = ngs.specialcf.normal(dim)
+        F = ngs.Id(dim) + ngs.Grad(self.solver.displacement)
         # Nanson: n da = J F^-T N dA; for the boundary integrals use the reference normal.
         Jn = ngs.Det(F) * ngs.Inv(F).trans * n
         val = ngs.Integrate(
@@ -105,7 +134,8 @@ class AleFsiPostprocess:
     def forces(
         self, boundaries: tuple[str, ...] = ("obstacle", "interface")
     ) -> NDArray[np.float64]:
-        """Force of the fluid on the body bounded by ``boundaries`` (g/s^2 per unit depth).
+        """Force of the fluid on the body bounded by ``boundaries`` (g/s^2 per unit depth in
+        2-D; g mm/s^2 in 3-D).
 
         Computed from the residual of the fluid equations (Babuska-Miller): the test function
         that is 1 (in x or y) on the body and 0 elsewhere on the boundary is the sum of the
@@ -114,26 +144,31 @@ class AleFsiPostprocess:
         """
         res = self._fluid_residual()
         verts = self._vertex_dofs(boundaries, boundary=True)
-        n = len(res) // 2  # VectorH1: all x dofs, then all y dofs; vertex dofs first
-        return -np.array([res[verts].sum(), res[n + verts].sum()])
+        dim = self.solver.dim
+        n = len(res) // dim  # VectorH1: all x dofs, then all y dofs, ...; vertex dofs first
+        return -np.array([res[k * n + verts].sum() for k in range(dim)])
 
     def interface_nodal_forces(self) -> NDArray[np.float64]:
         """Consistent nodal force (g/s^2) of the fluid on every interface vertex; 0 elsewhere."""
         res = self._fluid_residual()
-        n = len(res) // 2
+        dim = self.solver.dim
+        n = len(res) // dim
         nv = self.solver.mesh.nv
-        out = np.zeros((nv, 2))
+        out = np.zeros((nv, dim))
         verts = self._vertex_dofs(("interface",), boundary=True)
-        out[verts, 0] = -res[verts]
-        out[verts, 1] = -res[n + verts]
+        for k in range(dim):
+            out[verts, k] = -res[k * n + verts]
         return out
 
-    def point_displacement(self, point: tuple[float, float]) -> NDArray[np.float64]:
-        mp = self.solver.mesh(float(point[0]), float(point[1]))
+    def point_displacement(self, point: tuple[float, ...]) -> NDArray[np.float64]:
+        mp = self.solver.mesh(*(float(c) for c in point))
         return np.asarray(self.solver.displacement(mp), dtype=float).ravel()
 
     def max_interface_displacement(self) -> float:
         """Largest displacement magnitude (mm) on the interface."""
+        if self.solver.dim == 3:
+            (ref3, _), (cur3, _) = self.interface_surface(False), self.interface_surface(True)
+            return float(np.linalg.norm(cur3 - ref3, axis=1).max())
         ref = self.interface_curves(deformed=False)
         cur = self.interface_curves(deformed=True)
         return float(

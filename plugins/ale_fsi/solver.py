@@ -47,9 +47,15 @@ class AleFsiSolver(AleFsiProblem):
         # machine its spinning threads cost more than they give, so follow ``threads``
         # unless the user has set MKL_NUM_THREADS.
         os.environ.setdefault("MKL_NUM_THREADS", str(max(1, int(settings.threads))))
-        self.linear_solver = sparse_direct_solver()
+        self.linear_solver = direct = sparse_direct_solver()
+        blocks = None
+        if settings.linear_solver == "block_gmres":
+            blocks = self.preconditioner_blocks
+            self.linear_solver = f"block_gmres({direct})"
+        elif settings.linear_solver != "direct":
+            raise ValueError(f"unknown linear solver {settings.linear_solver!r}")
         self._newton = NewtonSolver(
-            self, settings.newton_tol, settings.newton_max_iter, self.linear_solver
+            self, settings.newton_tol, settings.newton_max_iter, direct, blocks=blocks
         )
         self._continuation = ArclengthContinuation(
             self, self._newton, self.newton, settings.continuation_min_fraction, unit="mm^2/s"

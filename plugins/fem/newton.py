@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -120,6 +121,10 @@ class NewtonSolver:
         fails.
     inadmissible
         The reason tag of that failure (what an inadmissible state means for the system).
+    blocks
+        If given, a callable returning the free dofs of each block (NGSolve BitArrays): the
+        Jacobian is then solved by GMRes with a block Gauss-Seidel preconditioner whose blocks
+        ``linear_solver`` factorises (:class:`~fbia.plugins.fem.krylov.BlockGMResInverse`).
     """
 
     def __init__(
@@ -131,6 +136,7 @@ class NewtonSolver:
         *,
         max_halvings: int = 5,
         inadmissible: str = "ale_jacobian",
+        blocks: Callable[[], list[Any]] | None = None,
     ) -> None:
         self.system = system
         self.tol = tol
@@ -138,6 +144,7 @@ class NewtonSolver:
         self.linear_solver = linear_solver
         self.max_halvings = max_halvings
         self.inadmissible = inadmissible
+        self.blocks = blocks
         #: seconds spent assembling and solving, summed over every solve
         self.timings = {"assembly": 0.0, "solve": 0.0}
         #: the factorised Jacobian (None until the first factorisation)
@@ -252,7 +259,13 @@ class NewtonSolver:
         from pyngcore import Flags
 
         try:
-            if self.inverse is None:
+            if self.inverse is None and self.blocks is not None:
+                from .krylov import BlockGMResInverse
+
+                self.inverse = BlockGMResInverse(
+                    self.system.matrix, self.blocks(), self.system.free, self.linear_solver
+                )
+            elif self.inverse is None:
                 flags = {"refinement": 0} if self.linear_solver == "pardiso" else {}
                 self.inverse = self.system.matrix.Inverse(
                     self.system.free, inverse=self.linear_solver, flags=Flags(flags)

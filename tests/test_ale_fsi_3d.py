@@ -1,0 +1,157 @@
+"""The ale_fsi forward model in 3-D (coarse meshes, one NGSolve thread).
+
+* the plane-strain limit: a ridge (the 2-D cell extruded between symmetry walls) gives the
+  2-D model's interface displacement to within the 2-D model's own discretisation error;
+* a dome under flow deflects downstream, mirror-symmetrically about the duct's mid-plane (the
+  mesh is mirrored, so to the solver's tolerance), and its displacement converges under mesh
+  refinement (slow);
+* the 3-D interface is a triangulated surface that the measures take as it is.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ngsolve")
+
+import fbia  # noqa: E402
+from fbia.plugins.ale_fsi import AleFsiForwardModel  # noqa: E402
+
+COARSE_2D = {"mesh_size": 0.2, "interface_mesh_size": 0.06, "curved": False}
+DOME = {"geometry": "dome_3d", "mesh_size": 0.3, "interface_mesh_size": 0.15}
+MATERIAL = {"E": 400.0, "nu": 0.3}
+
+
+def _vertex_displacement(model: AleFsiForwardModel) -> np.ndarray:
+    """Displacement at the mesh vertices of the model's current state, (nv, dim)."""
+    solver = model.solver
+    nv = solver.mesh.nv
+    return np.column_stack([c.vec.FV().NumPy()[:nv] for c in solver.displacement.components])
+
+
+def _interface_vertices(model: AleFsiForwardModel) -> np.ndarray:
+    import ngsolve as ngs
+
+    mesh = model.solver.mesh
+    return np.array(
+        sorted(
+            {v.nr for el in mesh.Elements(ngs.BND) if el.mat == "interface" for v in el.vertices}
+        )
+    )
+
+
+@pytest.fixture(scope="module")
+def dome(tmp_path_factory) -> tuple[AleFsiForwardModel, fbia.Solution]:
+    model = AleFsiForwardModel(**DOME, warm_start=False)
+    coords = [{"inflow_rate": 0.0}, {"inflow_rate": 100.0}]
+    return model, model.solve(MATERIAL, coords, tmp_path_factory.mktemp("dome"))
+
+
+def test_ridge_recovers_the_2d_model_in_the_plane_strain_limit(tmp_path):
+    """The extruded 2-D mesh (one layer of prisms, three tetrahedra each) contains the 2-D P2
+    solution, constant in z, but the 3-D Galerkin solution is not exactly it (the 3-D test
+    functions are not constant in z); the two must agree to within the discretisation error
+    of the 2-D mesh, measured here as the change of the largest interface displacement from
+    this mesh to one with half the element size (1.1 %).  Observed: 0.7 % pointwise, 0.3 %
+    in the largest displacement, and v_z = d_z = 0 on the symmetry walls exactly."""
+    rate = {"inflow_rate": 100.0}
+    flat = AleFsiForwardModel(**COARSE_2D)
+    sol2 = flat.solve(MATERIAL, [rate], tmp_path / "2d")
+    d2 = _vertex_displacement(flat)
+    iface = _interface_vertices(flat)
+    finer = AleFsiForwardModel(mesh_size=0.1, interface_mesh_size=0.03, curved=False)
+    sol_fine = finer.solve(MATERIAL, [rate], tmp_path / "fine")
+    max2 = sol2.diagnostics["max_displacement"][0]
+    tol = abs(sol_fine.diagnostics["max_displacement"][0] - max2) / max2
+    assert 0.002 < tol < 0.03  # the coarse mesh's error is what it was measured to be
+
+    ridge = AleFsiForwardModel(geometry="ridge_3d", channel_width=0.2, **COARSE_2D)
+    sol3 = ridge.solve(MATERIAL, [rate], tmp_path / "3d")
+    d3 = _vertex_displacement(ridge)
+    nv = len(d2)
+    assert d3.shape == (2 * nv, 3)  # the 2-D vertices at z = 0, then at z = depth
+    scale = np.abs(d2[iface]).max()
+    for layer in (0, 1):
+        dd = d3[iface + layer * nv]
+        assert np.abs(dd[:, :2] - d2[iface]).max() / scale < tol
+        assert np.abs(dd[:, 2]).max() == 0.0  # d_z = 0 on the symmetry walls
+    assert abs(sol3.diagnostics["max_displacement"][0] - max2) / max2 < tol
+    force2 = np.array(sol2.diagnostics["fluid_force"][0])
+    force3 = np.array(sol3.diagnostics["fluid_force"][0]) / 0.2  # per unit depth
+    assert np.abs(force3[:2] - force2).max() / np.abs(force2).max() < tol
+
+
+def test_dome_deflects_downstream_symmetric_about_the_mid_plane(dome):
+    model, sol = dome
+    assert sol.diagnostics["max_displacement"][0] == 0.0
+    d = _vertex_displacement(model)
+    iface = _interface_vertices(model)
+    pts = np.array([v.point for v in model.solver.mesh.vertices])
+    di = d[iface]
+    assert di[:, 0].mean() > 0.3 * np.abs(di).max()  # pushed downstream (+x)
+    fx, _, fz = sol.diagnostics["fluid_force"][1]
+    assert fx > 0 and abs(fz) < 1e-12 * fx
+    # mirror image of every vertex about z = W/2 (the mesh is mirrored, so it is a vertex)
+    width = 1.0
+    image = pts[iface] * [1.0, 1.0, -1.0] + [0.0, 0.0, width]
+    order = {tuple(np.round(p, 9)): k for k, p in zip(iface, pts[iface], strict=True)}
+    partner = np.array([order[tuple(np.round(p, 9))] for p in image])
+    flip = np.array([1.0, 1.0, -1.0])
+    scale = np.abs(di).max()
+    assert np.abs(d[partner] * flip - di).max() < 1e-9 * scale
+    assert np.abs(di[:, 2]).max() > 1e-3 * scale  # not trivially symmetric: it bulges sideways
+
+
+def test_dome_interface_is_a_surface_that_the_measures_take(dome):
+    _, sol = dome
+    moved = sol.interface({"inflow_rate": 100.0})
+    rest = sol.interface({"inflow_rate": 0.0})
+    assert moved.dim == 3 and len(moved) > 50
+    # the normals point from the solid into the fluid: outward from the dome, so the area-
+    # weighted normals of the cap sum to (0, base area, 0) (the closed surface with the base)
+    total = (rest.normals * rest.sizes[:, None]).sum(axis=0)
+    base = np.pi * 0.4**2
+    assert total[1] == pytest.approx(base, rel=0.05) and abs(total[0]) < 1e-12
+    for name in ("rkhs", "cpp"):
+        measure = fbia.measure(name)
+        assert measure.distance(moved, fbia.Observation(moved)) == pytest.approx(0.0, abs=1e-12)
+        assert measure.distance(moved, fbia.Observation(rest)) > 1e-3
+
+
+def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_path):
+    """GMRes to 1e-12 with the block Gauss-Seidel preconditioner: the same Newton iterates as
+    with Pardiso, so the same state to far below the Newton tolerance."""
+    model = AleFsiForwardModel(**DOME, warm_start=False, linear_solver="block_gmres")
+    sol = model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path)
+    direct = dome[1].diagnostics
+    assert sol.diagnostics["linear_solver"].startswith("block_gmres")
+    assert sol.diagnostics["newton_iterations"] == direct["newton_iterations_per_coordinate"][1]
+    d_direct = _vertex_displacement(dome[0])
+    d_gmres = _vertex_displacement(model)
+    assert np.abs(d_gmres - d_direct).max() < 1e-8 * np.abs(d_direct).max()
+    assert 0 < max(model.solver._newton.inverse.iterations) < 30
+
+
+def test_3d_options_that_do_not_work_yet_are_config_errors():
+    for extra in ({"mode": "transient"}, {"write_vtu": True}, {"subdomains": [[(0, 0)] * 3]}):
+        with pytest.raises(fbia.ConfigError, match="does not support yet"):
+            AleFsiForwardModel(**DOME, **extra)
+
+
+@pytest.mark.slow
+def test_dome_displacement_converges_under_mesh_refinement(tmp_path):
+    """Largest interface displacement of the dome at interface element sizes 0.15, 0.1 and
+    0.075 mm (9 716, 22 947 and 42 996 unknowns; ~60 s): 0.02889, 0.02685, 0.02646 mm, the
+    change shrinks 5x from the first to the second refinement (coarser meshes, with two
+    elements across the dome's radius, are not yet in the asymptotic range)."""
+    values = []
+    for h in (0.3, 0.2, 0.15):
+        model = AleFsiForwardModel(
+            geometry="dome_3d", mesh_size=h, interface_mesh_size=h / 2, warm_start=False
+        )
+        sol = model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path / f"{h}")
+        values.append(sol.diagnostics["max_displacement"][0])
+    first, second = abs(values[1] - values[0]), abs(values[2] - values[1])
+    assert second < 0.5 * first
+    assert second < 0.03 * values[2]
