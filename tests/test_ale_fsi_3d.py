@@ -5,7 +5,8 @@
 * a dome under flow deflects downstream, mirror-symmetrically about the duct's mid-plane (the
   mesh is mirrored, so to the solver's tolerance), and its displacement converges under mesh
   refinement (slow);
-* the 3-D interface is a triangulated surface that the measures take as it is.
+* the 3-D interface is a triangulated surface that the measures take as it is, and the dome
+  passes the forward-model conformance checks.
 """
 
 from __future__ import annotations
@@ -131,6 +132,21 @@ def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_pa
     d_gmres = _vertex_displacement(model)
     assert np.abs(d_gmres - d_direct).max() < 1e-8 * np.abs(d_direct).max()
     assert 0 < max(model.solver._newton.inverse.iterations) < 30
+
+
+def test_dome_passes_the_forward_model_conformance_checks(tmp_path):
+    """The protocol every forward model honours (fbia.testing): deterministic, independent of
+    the order of the coordinates, inputs untouched, a failing run a ForwardModelError."""
+    from fbia.testing import check_forward_model
+
+    model = AleFsiForwardModel(**DOME)
+    check_forward_model(
+        model,
+        MATERIAL,
+        [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}],
+        tmp_path,
+        failing_parameters={"E": 1.0, "nu": 0.3},
+    )
 
 
 def test_3d_options_that_do_not_work_yet_are_config_errors():
