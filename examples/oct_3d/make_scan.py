@@ -12,7 +12,7 @@
    ``data/scan_loaded.json`` (voxel size, attenuation).
 3. :func:`fbia.core.oct.segment_oct` segments it (Otsu threshold, marching cubes, the known
    attenuation compensated); the surface, mapped back to the model's axes, is the observed
-   interface ``data/observed_100.stl`` of ``study_lm.toml`` and ``study_bayes.toml``.
+   interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``.
    The segmentation figures (a B-scan with the contour, a 3-D view) go to ``output/scan``.
 
 Seeded: the files are the same every time (up to the solver's rounding).
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import fbia
-from fbia.core.oct import segment_oct
+from fbia.core.oct import OctSegmentation, segment_oct
 from fbia.core.oct_figures import write_segmentation_figures
 from fbia.testing.oct import oct_volume_from_surface
 
@@ -59,23 +59,32 @@ def simulate(E: float, nu: float = TRUTH["nu"]) -> fbia.Interface:
     return obs.interface
 
 
-def main() -> None:
-    data = HERE / "data"
-    data.mkdir(exist_ok=True)
+def make_scan(
+    folder: Path,
+    voxel_size: tuple[float, float, float] = VOXEL_SIZE,
+    shape: tuple[int, int, int] = SHAPE,
+    seed: int = SEED,
+) -> OctSegmentation:
+    """Steps 1-3 of the module docstring, the files written into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
     loaded = simulate(TRUTH["E"])
     volume, _ = oct_volume_from_surface(
-        model_to_scan(loaded), SHAPE, VOXEL_SIZE, attenuation=ATTENUATION, seed=SEED
+        model_to_scan(loaded), shape, voxel_size, attenuation=ATTENUATION, seed=seed
     )
-    np.save(data / "scan_loaded.npy", volume)
-    meta = {"voxel_size_mm": list(VOXEL_SIZE), "attenuation_per_mm": ATTENUATION}
-    (data / "scan_loaded.json").write_text(json.dumps(meta, indent=2) + "\n")
-    seg = segment_oct(volume, voxel_size=VOXEL_SIZE, attenuation=ATTENUATION)
-    observed = scan_to_model(seg.interface)
-    observed.write(data / "observed_100.stl")
-    loaded.write(data / "simulated_truth_100.stl")
+    np.save(folder / "scan_loaded.npy", volume)
+    meta = {"voxel_size_mm": list(voxel_size), "attenuation_per_mm": ATTENUATION}
+    (folder / "scan_loaded.json").write_text(json.dumps(meta, indent=2) + "\n")
+    seg = segment_oct(volume, voxel_size=voxel_size, attenuation=ATTENUATION)
+    scan_to_model(seg.interface).write(folder / "observed_100.ply")
+    loaded.write(folder / "simulated_truth_100.ply")
+    return seg
+
+
+def main() -> None:
+    seg = make_scan(HERE / "data")
     write_segmentation_figures(seg, HERE / "output" / "scan")
     print(
-        f"wrote data/scan_loaded.npy {volume.shape}, data/observed_100.stl ({observed}); "
+        f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}); "
         f"substratum row {seg.substratum_row}, threshold {seg.threshold:.3g}"
     )
 
