@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.errors import ConfigError
 from ..core.interface import Interface
 
 FloatArray = NDArray[np.float64]
@@ -138,9 +139,76 @@ def oct_phantom(
     ph = OctPhantom(
         np.empty(0, np.float32), (dz, dy, dx), d_s, crest, centre, (semi_axes[0], semi_axes[1])
     )
-    rng = np.random.default_rng(seed)
     y, x = np.meshgrid(np.arange(ny) * dy, np.arange(nx) * dx, indexing="ij")
-    h = ph.height(x, y).astype(np.float32)
+    levels = (biofilm, fluid, reflection)
+    volume = _image(
+        ph.height(x, y), shape, voxel_size, d_s, levels, looks, attenuation, noise_floor, seed
+    )
+    return OctPhantom(volume, (dz, dy, dx), d_s, crest, centre, (semi_axes[0], semi_axes[1]))
+
+
+def oct_volume_from_surface(
+    surface: Interface,
+    shape: tuple[int, int, int],
+    voxel_size: tuple[float, float, float],
+    rows_below: int = 4,
+    biofilm: float = 1.0,
+    fluid: float = 0.15,
+    reflection: float = 4.0,
+    looks: float = 2.0,
+    attenuation: float = 0.0,
+    noise_floor: float = 0.02,
+    seed: int = 0,
+) -> tuple[NDArray[np.float32], float]:
+    """An OCT-like volume of the biofilm under a triangulated surface, and its ``d_s`` [mm].
+
+    ``surface`` is a height field in the frame of the module docstring: x and y from voxel
+    index 0, z the height above the substratum (e.g. a forward model's deformed interface
+    with its axes permuted to that frame).  Each voxel column's biofilm height h(x, y) is the
+    surface linearly interpolated over its (x, y) projection (Delaunay triangulation of the
+    vertices; 0 outside their convex hull, so the surface must not overhang), and the volume
+    is imaged with the partial-volume, speckle, attenuation and noise-floor model of
+    :func:`oct_phantom` (same parameters).
+    """
+    from scipy.interpolate import LinearNDInterpolator
+
+    nz, ny, nx = shape
+    dz, dy, dx = voxel_size
+    v = surface.vertices
+    if surface.dim != 3:
+        raise ConfigError("needs a 3-D surface", "oct_volume_from_surface")
+    d_s = (nz - rows_below - 0.5) * dz
+    if v[:, 2].max() >= d_s:
+        raise ConfigError(
+            f"the surface ({v[:, 2].max():.3g} mm high) does not fit under the first row "
+            f"(substratum {d_s:.3g} mm deep)",
+            "oct_volume_from_surface",
+        )
+    y, x = np.meshgrid(np.arange(ny) * dy, np.arange(nx) * dx, indexing="ij")
+    h = LinearNDInterpolator(v[:, :2], v[:, 2], fill_value=0.0)(x, y)
+    h = np.clip(np.nan_to_num(h), 0.0, None)
+    levels = (biofilm, fluid, reflection)
+    volume = _image(h, shape, voxel_size, d_s, levels, looks, attenuation, noise_floor, seed)
+    return volume, d_s
+
+
+def _image(
+    h: FloatArray,
+    shape: tuple[int, int, int],
+    voxel_size: tuple[float, float, float],
+    d_s: float,
+    levels: tuple[float, float, float],
+    looks: float,
+    attenuation: float,
+    noise_floor: float,
+    seed: int,
+) -> NDArray[np.float32]:
+    """The imaging model of the module docstring over the height field ``h`` (ny, nx) [mm]."""
+    nz, ny, nx = shape
+    dz = voxel_size[0]
+    biofilm, fluid, reflection = levels
+    rng = np.random.default_rng(seed)
+    h32 = np.asarray(h, dtype=np.float32)
     depth = np.arange(nz, dtype=np.float32) * np.float32(dz)
     volume = np.empty(shape, dtype=np.float32)
     for k in range(nz):  # row by row: a 512 x 512 x 256 volume needs no float64 copy
@@ -151,10 +219,10 @@ def oct_phantom(
             level = np.full((ny, nx), reflection, dtype=np.float32)
         else:
             # fraction of [z - dz/2, z + dz/2] below h (and above the substratum)
-            inside = np.clip((h - (z - 0.5 * dz)) / dz, 0.0, 1.0)
+            inside = np.clip((h32 - (z - 0.5 * dz)) / dz, 0.0, 1.0)
             level = (fluid + (biofilm - fluid) * inside).astype(np.float32)
         speckle = rng.standard_gamma(looks, size=(ny, nx), dtype=np.float32) / np.float32(looks)
         floor = rng.standard_exponential(size=(ny, nx), dtype=np.float32)
         volume[k] = level * speckle * np.float32(np.exp(-attenuation * depth[k]))
         volume[k] += np.float32(noise_floor) * floor
-    return OctPhantom(volume, (dz, dy, dx), d_s, crest, centre, (semi_axes[0], semi_axes[1]))
+    return volume

@@ -17,7 +17,7 @@ from fbia.core.errors import ConfigError
 from fbia.core.oct import OctOptions, segment_oct
 from fbia.core.oct_figures import write_segmentation_figures
 from fbia.measures import CppMeasure, RkhsMeasure
-from fbia.testing.oct import OctPhantom, oct_phantom
+from fbia.testing.oct import OctPhantom, oct_phantom, oct_volume_from_surface
 
 VOXEL = 0.01  # mm
 MU = 5.0  # 1/mm: the signal at the substratum is exp(-2.2) = 0.11 of that at the top
@@ -259,3 +259,18 @@ def test_specks_on_the_substratum_go_and_fluid_pockets_in_the_biofilm_are_filled
     assert np.percentile(vertex_errors(seg.interface, ph), 99) <= 1.0
     kept = segment_oct(v, ph.voxel_size, min_voxels=1).interface.vertices
     assert np.any((kept[:, 0] < 0.05) & (kept[:, 1] < 0.05))  # min_voxels=1 keeps the speck
+
+
+def test_a_volume_from_a_surface_images_the_same_biofilm_as_the_phantom():
+    # the phantom's own dome as a fine triangle surface: with the same seed the two volumes
+    # share speckle and noise, and differ only where the interpolated height moves a voxel's
+    # partial-volume fraction (piecewise-linear interpolation of a smooth dome on a 64^2 grid:
+    # height errors ~ H / 64^2, far below dz)
+    ph = oct_phantom(shape=(24, 32, 32), seed=1)
+    volume, d_s = oct_volume_from_surface(ph.surface(n=64), (24, 32, 32), ph.voxel_size, seed=1)
+    assert d_s == pytest.approx(ph.substratum_depth)
+    assert np.abs(volume - ph.volume).max() < 0.05 * np.abs(ph.volume).max()
+    seg = segment_oct(volume, voxel_size=ph.voxel_size)
+    assert seg.substratum_depth == pytest.approx(ph.substratum_depth)
+    with pytest.raises(ConfigError, match="does not fit"):
+        oct_volume_from_surface(ph.surface(n=8), (4, 32, 32), ph.voxel_size)

@@ -1,0 +1,93 @@
+"""Make the synthetic OCT scan of this example and segment it (``python make_scan.py``).
+
+1. ``ale_fsi`` in 3-D (``geometry = "dome_3d"``, the coarse mesh of :data:`MODEL_OPTIONS`)
+   runs at the ground truth E = 400 Pa, nu = 0.3 with an inflow of 100 mm^3/s: a spherical-cap
+   colony (radius 0.4 mm, height 0.4 mm) on the floor of a 2 x 1 x 1 mm duct, bent downstream.
+2. Its deformed interface is imaged as an OCT-like volume by
+   :func:`fbia.testing.oct.oct_volume_from_surface`: voxels of (dz, dy, dx) =
+   :data:`VOXEL_SIZE`, partial volume, speckle (2 looks), Beer–Lambert attenuation
+   (:data:`ATTENUATION`) and a noise floor, seeded.  Axes: the model's flow direction x is
+   the scan's x, the model's span z is the scan's y, the model's height y is the scan's
+   height above the substratum.  Written as ``data/scan_loaded.npy`` (depth, y, x) with
+   ``data/scan_loaded.json`` (voxel size, attenuation).
+3. :func:`fbia.core.oct.segment_oct` segments it (Otsu threshold, marching cubes, the known
+   attenuation compensated); the surface, mapped back to the model's axes, is the observed
+   interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``.
+   The segmentation figures (a B-scan with the contour, a 3-D view) go to ``output/scan``.
+
+Seeded: the files are the same every time (up to the solver's rounding).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+import fbia
+from fbia.core.oct import OctSegmentation, segment_oct
+from fbia.core.oct_figures import write_segmentation_figures
+from fbia.testing.oct import oct_volume_from_surface
+
+HERE = Path(__file__).parent
+TRUTH = {"E": 400.0, "nu": 0.3}
+INFLOW = {"inflow_rate": 100.0}  # mm^3/s
+MODEL_OPTIONS = {"geometry": "dome_3d", "mesh_size": 0.3, "interface_mesh_size": 0.15}
+VOXEL_SIZE = (0.005, 0.01, 0.01)  # (dz, dy, dx) [mm]: 5 um axial, 10 um lateral
+SHAPE = (100, 100, 160)  # (depth, y, x): 0.5 x 1.0 x 1.6 mm, the duct's x from 0 to 1.6 mm
+ATTENUATION = 1.0  # 1/mm
+SEED = 18
+
+
+def model_to_scan(interface: fbia.Interface) -> fbia.Interface:
+    """The model's (x, height y, span z) as the scan's (x, y = span, z = height)."""
+    v = interface.vertices
+    # swapping two axes mirrors the surface: reverse the triangles to keep normals outward
+    return fbia.Interface.surface(v[:, [0, 2, 1]], interface.cells[:, ::-1])
+
+
+def scan_to_model(interface: fbia.Interface) -> fbia.Interface:
+    """The inverse of :func:`model_to_scan` (the same swap)."""
+    return model_to_scan(interface)
+
+
+def simulate(E: float, nu: float = TRUTH["nu"]) -> fbia.Interface:
+    """The deformed interface of the 3-D dome at (E, nu) and :data:`INFLOW` (model axes)."""
+    model = fbia.forward_model("ale_fsi", **MODEL_OPTIONS)
+    (obs,) = fbia.synthetic_observations(model, {"E": E, "nu": nu}, [INFLOW], 0.0, seed=0)
+    return obs.interface
+
+
+def make_scan(
+    folder: Path,
+    voxel_size: tuple[float, float, float] = VOXEL_SIZE,
+    shape: tuple[int, int, int] = SHAPE,
+    seed: int = SEED,
+) -> OctSegmentation:
+    """Steps 1-3 of the module docstring, the files written into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    loaded = simulate(TRUTH["E"])
+    volume, _ = oct_volume_from_surface(
+        model_to_scan(loaded), shape, voxel_size, attenuation=ATTENUATION, seed=seed
+    )
+    np.save(folder / "scan_loaded.npy", volume)
+    meta = {"voxel_size_mm": list(voxel_size), "attenuation_per_mm": ATTENUATION}
+    (folder / "scan_loaded.json").write_text(json.dumps(meta, indent=2) + "\n")
+    seg = segment_oct(volume, voxel_size=voxel_size, attenuation=ATTENUATION)
+    scan_to_model(seg.interface).write(folder / "observed_100.ply")
+    loaded.write(folder / "simulated_truth_100.ply")
+    return seg
+
+
+def main() -> None:
+    seg = make_scan(HERE / "data")
+    write_segmentation_figures(seg, HERE / "output" / "scan")
+    print(
+        f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}); "
+        f"substratum row {seg.substratum_row}, threshold {seg.threshold:.3g}"
+    )
+
+
+if __name__ == "__main__":
+    main()
