@@ -4,9 +4,13 @@ published drag and lift coefficients.
 Reference values: tests/data/fsi/schaefer_turek_1996_3d.json (Schäfer & Turek 1996 interval
 c_D in [6.05, 6.25]; refined c_D = 6.18533, c_L = 0.009401 of Braack & Richter 2006).
 
-Tolerance of the coarse test: TOL_COARSE (see below) on c_D, from the measured mesh convergence
-in benchmarks/bench_schaefer_turek_3d.py; c_D converges from above.  The slow test asserts the
-published interval on a finer mesh.
+Tolerance of the coarse test: 3 % on c_D.  Measured (benchmarks/bench_schaefer_turek_3d.py,
+P2/P1, curved cylinder): channel h = 0.1 m, cylinder h = 0.03 m, 28 044 unknowns: c_D = 6.3186
+(+2.15 %); cylinder h = 0.02 m, 36 959 unknowns: 6.2624 (+1.25 %); c_D falls towards the
+reference as the cylinder mesh is refined, so the coarse value sits above it and 3 % leaves
+0.85 % for meshing/BLAS differences between machines.  c_L (0.0094) is below the
+discretisation error of the force on these meshes (measured 0.0145 and -0.0003) and is not
+asserted.  The slow test asserts the published interval on a finer mesh.
 """
 
 from __future__ import annotations
