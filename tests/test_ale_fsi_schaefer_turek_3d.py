@@ -10,7 +10,8 @@ P2/P1, curved cylinder): channel h = 0.1 m, cylinder h = 0.03 m, 28 044 unknowns
 reference as the cylinder mesh is refined, so the coarse value sits above it and 3 % leaves
 0.85 % for meshing/BLAS differences between machines.  c_L (0.0094) is below the
 discretisation error of the force on these meshes (measured 0.0145 and -0.0003) and is not
-asserted.  The slow test asserts the published interval on a finer mesh.
+asserted.  The slow test asserts the published interval on a finer mesh (channel h = 0.07 m,
+cylinder h = 0.015 m, 81 248 unknowns: c_D = 6.2326, +0.76 %; about 150 s and 1.5 GB).
 """
 
 from __future__ import annotations
