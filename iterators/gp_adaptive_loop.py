@@ -215,10 +215,8 @@ def _gp_unsure(
 
 
 def _tempered(gp: Surrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
-    def log_likelihood(z: FloatArray) -> FloatArray:
-        return beta * gp.predict_mean_guarded(z) + gp.log_feasibility(z)
-
-    return log_likelihood
+    """beta times the guarded mean, where the forward model runs (the factor untempered)."""
+    return gp.feasible(lambda z: beta * gp.predict_mean_guarded(z))
 
 
 def _design(points: FloatArray, loglik: FloatArray, run: SmcRun, train: Any) -> DesignRuns:

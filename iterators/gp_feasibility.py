@@ -27,8 +27,8 @@ back out before it reweights by the GP's sample paths.
 Cost: expectation propagation is O(n^3); the classifier is fitted on at most
 :data:`MAX_POINTS` runs, every failed run (a random subset when there are more than half of
 that) and the successful runs nearest to a failure (which place the boundary; far from it the
-factor is 1 anyway). 600 of 2100 runs in 7-D: about 8 s. Predictions use the fitted
-posterior (GPy's Woodbury vector) in numpy, so a restored result needs no GPy.
+factor is 1 anyway). 600 of 2100 runs in 7-D: about 7 s (2 cores, shared). Predictions use
+the fitted posterior (GPy's Woodbury vector) in numpy, so a restored result needs no GPy.
 
 >>> import numpy as np
 >>> rng = np.random.default_rng(0)
@@ -52,7 +52,7 @@ from scipy.special import log_ndtr
 
 FloatArray = NDArray[np.float64]
 
-#: Largest number of runs the classifier is fitted on (EP is O(n^3): 600 runs, about 4 s).
+#: Largest number of runs the classifier is fitted on (EP is O(n^3): 600 runs in 7-D, about 7 s).
 MAX_POINTS = 600
 #: log P_ok is not taken below this (P_ok = 1e-300 is as good as zero for SMC).
 LOG_FLOOR = -690.0
