@@ -41,7 +41,7 @@ from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Coordinate, Solution
 from ...core.options import Configurable, PluginOptions
-from ..ale_fsi.model import AleFsiOptions, solver_settings
+from ..ale_fsi.options import AleFsiOptions, solver_settings
 from .geometry import finger_outline, interface_state, vertex_coordinates
 from .growth_law import NODE_AREA, GrowthCoefficients, growth_displacement
 from .mesh_update import grow_mesh, solid_area

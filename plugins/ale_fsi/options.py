@@ -1,0 +1,188 @@
+"""Options of the ``ale_fsi`` forward model, and their mapping onto the solver's settings.
+
+:class:`AleFsiOptions` is the typed contract of the plugin (units in every description);
+:func:`solver_settings` is the one place the options become the solver's
+:class:`~fbia.plugins.ale_fsi.forms.SolverSettings` (``growth`` inherits both).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from ...core.options import PluginOptions
+
+Point = tuple[float, float]
+
+
+class AleFsiOptions(PluginOptions):
+    """Options of :class:`AleFsiForwardModel` (units in every description)."""
+
+    mode: Literal["quasi_static", "transient"] = Field(
+        "quasi_static",
+        description="quasi_static: steady FSI with continuation in the inflow rate "
+        "(coordinates {'inflow_rate': mm^2/s}); transient: one-step-theta from rest "
+        "(coordinates {'time': s}) [-]",
+    )
+    material: Literal["svk", "neo_hooke"] = Field(
+        "svk", description="solid material: Saint Venant-Kirchhoff or neo-Hooke [-]"
+    )
+    E: float = Field(400.0, gt=0, description="Young's modulus of the biofilm [Pa]")
+    nu: float = Field(0.3, gt=-1.0, lt=0.5, description="Poisson's ratio of the biofilm [-]")
+    inflow_rate: float = Field(
+        100.0, description="volume inflow rate of the parabolic inflow profile [mm^2/s]"
+    )
+    channel_length: float = Field(2.0, gt=0, description="flow-cell length L [mm]")
+    channel_height: float = Field(1.0, gt=0, description="flow-cell height H [mm]")
+    geometry: Literal["flow_cell", "dome_3d", "ridge_3d"] = Field(
+        "flow_cell",
+        description="flow_cell: the 2-D cell; dome_3d: a 3-D duct with a spherical-cap "
+        "biofilm (inflow_rate in mm^3/s; use coarse sizes, e.g. mesh_size 0.3, "
+        "interface_mesh_size 0.15); ridge_3d: the 2-D cell extruded over channel_width "
+        "between symmetry walls (plane strain) [-]",
+    )
+    channel_width: float = Field(1.0, gt=0, description="3-D duct width / ridge depth W [mm]")
+    dome_radius: float = Field(0.4, gt=0, description="base radius of the dome_3d cap [mm]")
+    dome_height: float = Field(0.4, gt=0, description="height of the dome_3d cap [mm]")
+    dome_centre: float = Field(0.8, gt=0, description="x of the dome_3d centre [mm]")
+    outline: list[Point] | None = Field(
+        None,
+        description="biofilm outline from the upstream to the downstream foot, both on "
+        "the floor y = 0; default: a mound shaped like Paper A Fig. 2 [mm]",
+    )
+    smooth_outline: bool = Field(
+        True, description="interpolate the outline by a cubic spline (else polygon) [-]"
+    )
+    subdomains: list[list[Point]] = Field(
+        default_factory=list,
+        description="closed polygons cutting the biofilm into regions solid_1..solid_n; "
+        "the rest of the biofilm is region n+1 (Paper A Fig. 9) [mm]",
+    )
+    mesh_file: Path | None = Field(
+        None,
+        description="user mesh (gmsh .msh or any meshio format) with regions fluid, "
+        "solid[_k] and boundaries inflow, outflow, walls, interface, solid_fixed "
+        "[, obstacle]; replaces the flow-cell builder [path]",
+    )
+    curved: bool = Field(
+        True,
+        description="second-order element geometry along the biofilm outline of the "
+        "flow-cell builder (user meshes are read with straight sides) [-]",
+    )
+    mesh_size: float = Field(0.12, gt=0, description="maximum element size [mm]")
+    interface_mesh_size: float = Field(
+        0.03, gt=0, description="element size at the fluid-biofilm interface [mm]"
+    )
+    solid_mesh_size: float | None = Field(
+        None,
+        gt=0,
+        description="element size inside the biofilm and on its base, graded from the "
+        "interface size; default 2 x interface_mesh_size [mm]",
+    )
+    fluid_density: float = Field(1e-3, gt=0, description="fluid density [g/mm^3]")
+    fluid_viscosity: float = Field(1e-3, gt=0, description="dynamic viscosity [g/(mm s)]")
+    solid_density: float = Field(1e-3, gt=0, description="biofilm density [g/mm^3]")
+    gravity: tuple[float, float] = Field(
+        (0.0, 0.0), description="body force per unit mass on the solid only [mm/s^2]"
+    )
+    outflow: Literal["horizontal", "do_nothing"] = Field(
+        "horizontal",
+        description="outflow condition: horizontal flow (v_y = 0, traction-free in x, "
+        "Paper A) or do-nothing (traction-free) [-]",
+    )
+    mesh_motion: Literal["elastic", "harmonic"] = Field(
+        "elastic", description="pseudo-solid extension of the displacement into the fluid [-]"
+    )
+    mesh_stiffening: float = Field(
+        1.0, ge=0, description="exponent of the Jacobian-based mesh stiffening [-]"
+    )
+    order: int = Field(2, ge=2, le=4, description="polynomial order of v and d; p: order-1 [-]")
+    newton_tol: float = Field(
+        1e-10, gt=0, lt=1e-2, description="tolerance on the scaled Newton update [-]"
+    )
+    newton_max_iter: int = Field(
+        12, ge=1, description="Jacobian assemblies per Newton solve (chord steps extra) [-]"
+    )
+    min_det_f: float = Field(
+        0.01, ge=0, description="smallest admissible det F of the ALE map and solid [-]"
+    )
+    min_element_quality: float = Field(
+        0.02, ge=0, lt=1, description="smallest admissible deformed fluid element quality [-]"
+    )
+    warm_start: bool = Field(
+        True,
+        description="start from the nearest converged state of an earlier run of this "
+        "model object (same mesh) [-]",
+    )
+    probes: list[Point] = Field(
+        default_factory=list,
+        description="reference points whose displacement is reported in the diagnostics "
+        "('probe_displacements', one list per coordinate) [mm]",
+    )
+    write_vtu: bool = Field(
+        False, description="write a VTU file per coordinate into the run's workdir [-]"
+    )
+    time_step: float = Field(0.25, gt=0, description="transient time step [s]")
+    theta: float = Field(1.0, ge=0.5, le=1.0, description="one-step-theta parameter [-]")
+    ramp_time: float = Field(10.0, ge=0, description="duration of the inflow ramp [s]")
+    ramp_steps: int = Field(1, ge=1, description="cosine stairs of the inflow ramp [-]")
+    threads: int = Field(1, ge=1, description="NGSolve task-manager threads [-]")
+    linear_solver: Literal["direct", "block_gmres"] = Field(
+        "direct", description="Newton systems: Pardiso, or GMRes with block preconditioner [-]"
+    )
+
+    @field_validator("outline")
+    @classmethod
+    def _outline_len(cls, v: list[Point] | None) -> list[Point] | None:
+        if v is not None and len(v) < 3:
+            raise ValueError("an outline needs at least 3 points")
+        return v
+
+    @model_validator(mode="after")
+    def _mesh_source(self) -> AleFsiOptions:
+        if self.mesh_file is not None and (self.outline is not None or self.subdomains):
+            raise ValueError("give either mesh_file or outline/subdomains, not both")
+        if self.geometry != "flow_cell":
+            # not yet supported in 3-D (say so rather than half-work)
+            clash = [
+                name
+                for name, on in (
+                    ("mesh_file", self.mesh_file is not None),
+                    ("subdomains", bool(self.subdomains)),
+                    ("outline", self.outline is not None and self.geometry == "dome_3d"),
+                    ("mode = 'transient'", self.mode == "transient"),
+                    ("probes", bool(self.probes)),
+                    ("write_vtu", self.write_vtu),
+                )
+                if on
+            ]
+            if clash:
+                raise ValueError(f"geometry {self.geometry!r} does not support yet: {clash}")
+        return self
+
+
+def solver_settings(o: AleFsiOptions) -> Any:
+    """The solver's :class:`~fbia.plugins.ale_fsi.forms.SolverSettings` from the plugin's
+    options (the one place they are mapped; ``growth`` uses it too)."""
+    from .forms import SolverSettings
+
+    return SolverSettings(
+        fluid_density=o.fluid_density,
+        fluid_viscosity=o.fluid_viscosity,
+        solid_density=o.solid_density,
+        material=o.material,
+        gravity=o.gravity,
+        outflow=o.outflow,
+        mesh_motion=o.mesh_motion,
+        mesh_stiffening=o.mesh_stiffening,
+        order=o.order,
+        newton_tol=o.newton_tol,
+        newton_max_iter=o.newton_max_iter,
+        min_det_f=o.min_det_f,
+        min_quality=o.min_element_quality,
+        theta=o.theta,
+        threads=o.threads,
+        linear_solver=o.linear_solver,
+    )
