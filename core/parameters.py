@@ -27,12 +27,15 @@ class Prior:
 
     Use the constructors in this module (:func:`uniform`, :func:`normal`,
     :func:`truncated_normal`, :func:`lognormal`, :func:`beta`) or :meth:`from_spec`.
+    A :class:`Parameter` whose bounds cut the prior's support holds the prior truncated to
+    them (:meth:`truncated`, ``scipy.stats.truncate``): ``truncation`` is then those bounds.
     """
 
     kind: str
     params: Mapping[str, float]
     dist: Any = field(repr=False, compare=False)
     mode: float = field(compare=False, default=math.nan)
+    truncation: tuple[float, float] | None = None
 
     def logpdf(self, x: ArrayLike) -> NDArray[np.float64]:
         return np.asarray(self.dist.logpdf(x), dtype=float)
@@ -42,9 +45,13 @@ class Prior:
 
     def ppf(self, u: ArrayLike) -> NDArray[np.float64]:
         """Inverse CDF: maps points of the unit interval (e.g. a Sobol design) to the prior."""
+        if self.truncation is not None:
+            return np.asarray(self.dist.icdf(np.asarray(u, dtype=float)), dtype=float)
         return np.asarray(self.dist.ppf(u), dtype=float)
 
     def rvs(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        if self.truncation is not None:
+            return np.asarray(self.dist.sample(size, rng=rng), dtype=float)
         return np.asarray(self.dist.rvs(size=size, random_state=rng), dtype=float)
 
     @property
@@ -58,7 +65,38 @@ class Prior:
 
     @property
     def std(self) -> float:
+        if self.truncation is not None:
+            return float(self.dist.standard_deviation())
         return float(self.dist.std())
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        # scipy's truncated random variables do not pickle: rebuild from the specification
+        return _rebuild, (self.kind, dict(self.params), self.truncation)
+
+    def truncated(self, lower: float, upper: float) -> Prior:
+        """This prior conditioned on ``[lower, upper]`` (itself if its support lies inside)."""
+        lo, hi = self.support
+        if lower <= lo and hi <= upper:
+            return self
+        lo, hi = max(lo, lower), min(hi, upper)
+        _check(
+            lo < hi and float(self.dist.cdf(hi) - self.dist.cdf(lo)) > 0.0,
+            f"the {self.kind} prior has no mass inside the bounds [{lower}, {upper}]",
+        )
+        stats = _stats()
+        frozen = self.dist
+        names = [n.strip() for n in (frozen.dist.shapes or "").split(",") if n.strip()]
+        kwds = dict(zip(names, frozen.args, strict=False)) | dict(frozen.kwds)
+        loc, scale = kwds.pop("loc", 0.0), kwds.pop("scale", 1.0)
+        variable = stats.make_distribution(frozen.dist)(**kwds) * scale + loc
+        mode = min(max(self.mode, lo), hi) if math.isfinite(self.mode) else self.mode
+        return Prior(
+            self.kind,
+            self.params,
+            stats.truncate(variable, lb=lo, ub=hi),
+            mode=mode,
+            truncation=(lo, hi),
+        )
 
     def spec(self) -> dict[str, Any]:
         """The specification as written in a study file: ``{"distribution": kind, ...}``."""
@@ -177,6 +215,14 @@ _BUILDERS: dict[str, tuple[Any, tuple[str, ...]]] = {
 _OPTIONAL = {"beta": {"lower", "upper"}}
 
 
+def _rebuild(
+    kind: str, params: Mapping[str, float], truncation: tuple[float, float] | None
+) -> Prior:
+    """The prior of a specification (and truncation), for pickling."""
+    prior: Prior = _BUILDERS[kind][0](**params)
+    return prior if truncation is None else prior.truncated(*truncation)
+
+
 @dataclass(frozen=True)
 class Parameter:
     """A model input to calibrate (or, in ``InverseProblem.uncertain``, to marginalise).
@@ -188,7 +234,8 @@ class Parameter:
     bounds
         Lower and upper bound; default: the prior's support when it is finite.
     prior
-        A :class:`Prior`; default: uniform on ``bounds``.
+        A :class:`Prior`; default: uniform on ``bounds``.  Bounds are hard: a prior whose
+        support reaches beyond them is truncated to them (renormalised, :meth:`Prior.truncated`).
     unit
         Unit, for reports and plots (e.g. ``"Pa"``, ``"mm^2/s"``).
     initial
@@ -221,6 +268,11 @@ class Parameter:
         prior = self.prior
         if prior is None and self.bounds is not None:
             object.__setattr__(self, "prior", uniform(*self.bounds))
+        elif prior is not None and self.bounds is not None:
+            try:  # the bounds are hard: a prior reaching beyond them is cut at them
+                object.__setattr__(self, "prior", prior.truncated(*self.bounds))
+            except ConfigError as err:
+                raise ConfigError(err.reason, self.name) from None
         if self.initial is not None:
             x0 = float(self.initial)
             if not math.isfinite(x0):

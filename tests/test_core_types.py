@@ -4,12 +4,13 @@ InverseProblem (validation and the outcomes of ``evaluate`` with the analytic mo
 from __future__ import annotations
 
 import math
+import pickle
 from pathlib import Path
 
 import meshio
 import numpy as np
 import pytest
-from scipy import special, stats
+from scipy import integrate, special, stats
 
 import fbia
 from fbia.core.interface import Interface
@@ -322,6 +323,40 @@ def test_lognormal_prior_is_parametrised_by_the_moments_of_log_x():
     assert p.mode == pytest.approx(math.exp(5.86 - 0.16))
     assert p.mode == pytest.approx(300.0, abs=2.0)
     assert p.support == (0.0, math.inf)
+
+
+def test_bounds_truncate_a_prior_that_reaches_beyond_them():
+    # Paper B's informed E prior LN(5.86, 0.4) on the design box [100, 800] Pa: the bounds are
+    # hard, so the prior is the lognormal conditioned on them (about 2 % of its mass is cut)
+    full = fbia.priors.lognormal(5.86, 0.4)
+    E = fbia.Parameter("E", bounds=(100.0, 800.0), prior=full)
+    p = E.prior
+    assert p.truncation == (100.0, 800.0) and p.support == (100.0, 800.0)
+    mass = float(full.dist.cdf(800.0) - full.dist.cdf(100.0))
+    assert 0.975 < mass < 0.985
+    x = np.array([150.0, 300.0, 799.0])
+    np.testing.assert_allclose(p.logpdf(x), full.logpdf(x) - math.log(mass), rtol=1e-12)
+    assert p.logpdf(900.0) == -np.inf and p.logpdf(90.0) == -np.inf
+    assert integrate.quad(p.pdf, 100.0, 800.0)[0] == pytest.approx(1.0, rel=1e-9)
+    mean = integrate.quad(lambda t: t * full.pdf(t), 100.0, 800.0)[0] / mass
+    assert p.mean == pytest.approx(mean, rel=1e-9)
+    np.testing.assert_allclose(p.ppf([0.0, 1.0]), [100.0, 800.0], rtol=1e-9)
+    u = np.array([0.1, 0.5, 0.9])  # ppf inverts the truncated CDF
+    lo = float(full.dist.cdf(100.0))
+    np.testing.assert_allclose(p.ppf(u), full.ppf(lo + u * mass), rtol=1e-8)
+    draws = p.rvs(4000, np.random.default_rng(1))
+    assert draws.min() >= 100.0 and draws.max() <= 800.0
+    np.testing.assert_array_equal(draws, p.rvs(4000, np.random.default_rng(1)))
+    assert p.mode == full.mode and p.spec() == full.spec()
+    again = pickle.loads(pickle.dumps(E))  # process pools ship parameters
+    assert again == E and again.prior.ppf(0.5) == p.ppf(0.5)
+    # a prior inside its bounds is kept as it is; one without mass inside them is an error
+    beta = fbia.priors.beta(2.0, 2.0, lower=-0.8, upper=0.5)
+    assert fbia.Parameter("nu", bounds=(-0.8, 0.5), prior=beta).prior is beta
+    cut = fbia.Parameter("nu", bounds=(-0.5, 0.45), prior=beta).prior
+    assert cut.truncation == (-0.5, 0.45) and cut.std < beta.std
+    with pytest.raises(fbia.ConfigError, match=r"^E: the normal prior has no mass inside"):
+        fbia.Parameter("E", bounds=(100.0, 800.0), prior=fbia.priors.normal(-1e6, 1.0))
 
 
 def test_paper_b_beta_prior_on_poisson_ratio():
