@@ -369,7 +369,8 @@ class Interface:
             if self.dim == 3
             else np.c_[self._vertices, np.zeros(len(self._vertices))]
         )
-        meshio.Mesh(pts, [(kind, self._cells)]).write(path)
+        # int32 cells: PLY has no 64-bit integers (meshio would warn and cast)
+        meshio.Mesh(pts, [(kind, self._cells.astype(np.int32))]).write(path)
         return path
 
 
