@@ -152,9 +152,6 @@ class AleFsiOptions(PluginOptions):
                     ("mesh_file", self.mesh_file is not None),
                     ("subdomains", bool(self.subdomains)),
                     ("outline", self.outline is not None and self.geometry == "dome_3d"),
-                    ("mode = 'transient'", self.mode == "transient"),
-                    ("probes", bool(self.probes)),
-                    ("write_vtu", self.write_vtu),
                 )
                 if on
             ]
