@@ -44,9 +44,18 @@ def _interface_vertices(model: AleFsiForwardModel) -> np.ndarray:
     )
 
 
+def _interface_points(mesh) -> np.ndarray:
+    import ngsolve as ngs
+
+    verts = {v.nr for el in mesh.Elements(ngs.BND) if el.mat == "interface" for v in el.vertices}
+    return np.array([mesh.vertices[i].point for i in sorted(verts)])
+
+
 @pytest.fixture(scope="module")
 def dome(tmp_path_factory) -> tuple[AleFsiForwardModel, fbia.Solution]:
-    model = AleFsiForwardModel(**DOME, warm_start=False)
+    """The dome at rest and under flow, probed at every interface vertex."""
+    probes = [tuple(p) for p in _interface_points(AleFsiForwardModel(**DOME).build_mesh())]
+    model = AleFsiForwardModel(**DOME, warm_start=False, probes=probes)
     coords = [{"inflow_rate": 0.0}, {"inflow_rate": 100.0}]
     return model, model.solve(MATERIAL, coords, tmp_path_factory.mktemp("dome"))
 
@@ -128,6 +137,33 @@ def test_dome_interface_is_a_surface_that_the_measures_take(dome):
         measure = fbia.measure(name)
         assert measure.distance(moved, fbia.Observation(moved)) == pytest.approx(0.0, abs=1e-12)
         assert measure.distance(moved, fbia.Observation(rest)) > 1e-3
+
+
+def test_probes_at_the_interface_vertices_give_the_largest_displacement(dome):
+    """A probe at a vertex reads the vertex value of the P2 displacement (its vertex dof), so
+    probes at all interface vertices give the reported largest interface displacement."""
+    model, sol = dome
+    probes = np.array(model.options.probes)
+    rest, moved = (np.array(p) for p in sol.diagnostics["probe_displacements"])
+    assert rest.shape == moved.shape == (len(probes), 3)
+    assert np.abs(rest).max() == 0.0
+    largest = sol.diagnostics["max_displacement"][1]
+    assert np.linalg.norm(moved, axis=1).max() == pytest.approx(largest, rel=1e-12)
+    pts = np.array([v.point for v in model.solver.mesh.vertices])
+    index = {tuple(np.round(p, 12)): k for k, p in enumerate(pts)}
+    at = np.array([index[tuple(np.round(p, 12))] for p in probes])
+    d = _vertex_displacement(model)
+    assert np.abs(moved - d[at]).max() < 1e-12 * largest
+
+
+def test_probes_of_the_wrong_dimension_or_outside_the_mesh_are_config_errors():
+    with pytest.raises(fbia.ConfigError, match="probes need 3 coordinates"):
+        AleFsiForwardModel(**DOME, probes=[(0.8, 0.4)])
+    with pytest.raises(fbia.ConfigError, match="probes need 2 coordinates"):
+        AleFsiForwardModel(probes=[(0.8, 0.4, 0.5)])
+    ridge = AleFsiForwardModel(geometry="ridge_3d", mesh_size=0.3, probes=[(0.5, 0.5, 1.5)])
+    with pytest.raises(fbia.ConfigError, match=r"probe \(0.5, 0.5, 1.5\) lies outside"):
+        ridge.solve(MATERIAL, [{"inflow_rate": 10.0}], "unused")
 
 
 def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_path):

@@ -264,6 +264,7 @@ class AleFsiForwardModel(Configurable):
             from .solver import AleFsiSolver
 
             mesh = self.build_mesh()
+            _check_probes(mesh, self.options.probes)
             settings = solver_settings(self.options)
             try:
                 self._solver = AleFsiSolver(mesh, settings)
@@ -352,6 +353,16 @@ class AleFsiForwardModel(Configurable):
     def _remember(self, key: dict[str, float], rate: float, state: NDArray[np.float64]) -> None:
         self._store.append((dict(key), rate, state))
         del self._store[:-16]
+
+
+def _check_probes(mesh: Any, probes: Sequence[tuple[float, ...]]) -> None:
+    """Every probe has one coordinate per mesh dimension and lies in the (reference) mesh."""
+    where = "ale_fsi options: probes"
+    for p in probes:
+        if len(p) != mesh.dim:
+            raise ConfigError(f"probe {tuple(p)} needs {mesh.dim} coordinates on this mesh", where)
+        if mesh(*(float(c) for c in p)).nr < 0:
+            raise ConfigError(f"probe {tuple(p)} lies outside the mesh", where)
 
 
 def _nearest(
