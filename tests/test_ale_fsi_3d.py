@@ -229,7 +229,8 @@ def test_ridge_follows_the_2d_transient_model_in_the_plane_strain_limit(tmp_path
 
 @pytest.fixture(scope="module")
 def dome_transient(tmp_path_factory) -> tuple[AleFsiForwardModel, fbia.Solution]:
-    model = AleFsiForwardModel(**DOME, **dict(TRANSIENT, time_step=0.25, inflow_rate=100.0))
+    transient = dict(TRANSIENT, time_step=0.25, inflow_rate=100.0)
+    model = AleFsiForwardModel(**DOME, **transient, write_vtu=True)
     times = [{"time": 0.0}, {"time": 0.25}, {"time": 1.5}]
     return model, model.solve(MATERIAL, times, tmp_path_factory.mktemp("dome_transient"))
 
@@ -258,6 +259,36 @@ def test_dome_transient_reaches_the_quasi_static_state(dome, dome_transient):
 def test_dome_transient_state_is_mirror_symmetric(dome_transient):
     model, _ = dome_transient
     _assert_mirror_symmetric(model)
+
+
+def test_vtu_output_on_the_tetrahedral_mesh(dome_transient):
+    """One file per coordinate; the last holds the model's current state (t = 1.5 s)."""
+    import meshio
+
+    model, sol = dome_transient
+    mesh = model.solver.mesh
+    assert sorted(sol.fields) == ["vtu_0", "vtu_1", "vtu_2"]
+    data = meshio.read(sol.fields["vtu_2"])
+    assert data.points.shape == (mesh.nv, 3)
+    assert [c.type for c in data.cells] == ["tetra"] and len(data.cells[0].data) == mesh.ne
+    np.testing.assert_array_equal(data.points, [v.point for v in mesh.vertices])
+    assert set(np.unique(data.cell_data["subdomain"][0])) == {0, 1}
+    for name in ("velocity", "displacement", "interface_force"):
+        assert data.point_data[name].shape == (mesh.nv, 3)
+    # values at the fastest vertex (in the fluid) are the solver's fields evaluated there
+    k = int(np.argmax(np.linalg.norm(data.point_data["velocity"], axis=1)))
+    at = mesh(*data.points[k])
+    for name, field in (("velocity", model.solver.velocity), ("pressure", model.solver.pressure)):
+        want = np.asarray(field(at), dtype=float).ravel()
+        assert np.abs(data.point_data[name][k] - want).max() <= 1e-12 * np.abs(want).max()
+    assert np.abs(data.point_data["displacement"]).max() == pytest.approx(
+        np.abs(_vertex_displacement(model)).max(), rel=1e-15
+    )
+    # the nodal interface forces add up to the fluid force on the dome
+    total = data.point_data["interface_force"].sum(axis=0)
+    np.testing.assert_allclose(total, sol.diagnostics["fluid_force"][2], rtol=1e-10, atol=1e-14)
+    rest = meshio.read(sol.fields["vtu_0"])
+    assert np.abs(rest.point_data["displacement"]).max() == 0.0
 
 
 @pytest.mark.slow

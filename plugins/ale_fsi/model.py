@@ -18,7 +18,8 @@ ramped by a cosine over ``ramp_time`` as in Paper A, and returns the interface a
 ``geometry = "dome_3d"`` solves the same model on a 3-D duct with a dome on its floor
 (:mod:`~fbia.plugins.ale_fsi.geometry3d`; inflow rate in mm^3/s) and returns the interface as
 a triangulated surface; ``"ridge_3d"`` extrudes the 2-D cell between symmetry walls (the
-plane-strain limit; inflow rate per unit depth, mm^2/s); both modes work in 3-D as in 2-D.
+plane-strain limit; inflow rate per unit depth, mm^2/s).  Both modes, probes (x, y, z) and
+VTU output (tetrahedra) work in 3-D as in 2-D.
 """
 
 from __future__ import annotations
