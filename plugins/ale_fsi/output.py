@@ -81,8 +81,8 @@ def _xyz(a: NDArray[np.float64]) -> NDArray[np.float64]:
 def _cells(mesh: Any) -> tuple[NDArray[np.float64], dict[str, NDArray[np.int64]], str]:
     """Vertex coordinates, 0-based cells by region name and the meshio cell type."""
     if mesh.dim == 2:
-        pts, regions, _ = mesh_arrays(mesh)
-        return pts, regions, "triangle"
+        pts, triangles, _ = mesh_arrays(mesh)
+        return pts, triangles, "triangle"
     ngmesh = mesh.ngmesh
     elements = ngmesh.Elements3D().NumPy()
     regions: dict[str, NDArray[np.int64]] = {}
