@@ -156,7 +156,9 @@ def test_probes_at_the_interface_vertices_give_the_largest_displacement(dome):
     assert np.abs(moved - d[at]).max() < 1e-12 * largest
 
 
-def test_probes_of_the_wrong_dimension_or_outside_the_mesh_are_config_errors():
+def test_probes_of_the_wrong_dimension_or_outside_the_mesh_are_config_errors(tmp_path):
+    from fbia.plugins.ale_fsi.geometry import write_mesh
+
     with pytest.raises(fbia.ConfigError, match="probes need 3 coordinates"):
         AleFsiForwardModel(**DOME, probes=[(0.8, 0.4)])
     with pytest.raises(fbia.ConfigError, match="probes need 2 coordinates"):
@@ -164,6 +166,13 @@ def test_probes_of_the_wrong_dimension_or_outside_the_mesh_are_config_errors():
     ridge = AleFsiForwardModel(geometry="ridge_3d", mesh_size=0.3, probes=[(0.5, 0.5, 1.5)])
     with pytest.raises(fbia.ConfigError, match=r"probe \(0.5, 0.5, 1.5\) lies outside"):
         ridge.solve(MATERIAL, [{"inflow_rate": 10.0}], "unused")
+    # a mesh file's dimension is known once it is read
+    path = write_mesh(
+        AleFsiForwardModel(mesh_size=0.3, curved=False).build_mesh(), tmp_path / "c.msh"
+    )
+    user = AleFsiForwardModel(mesh_file=path, probes=[(0.5, 0.5, 0.5)])
+    with pytest.raises(fbia.ConfigError, match=r"probe \(0.5, 0.5, 0.5\) needs 2 coordinates"):
+        user.solve(MATERIAL, [{"inflow_rate": 10.0}], "unused")
 
 
 def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_path):
