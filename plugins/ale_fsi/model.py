@@ -18,7 +18,8 @@ ramped by a cosine over ``ramp_time`` as in Paper A, and returns the interface a
 ``geometry = "dome_3d"`` solves the same model on a 3-D duct with a dome on its floor
 (:mod:`~fbia.plugins.ale_fsi.geometry3d`; inflow rate in mm^3/s) and returns the interface as
 a triangulated surface; ``"ridge_3d"`` extrudes the 2-D cell between symmetry walls (the
-plane-strain limit; inflow rate per unit depth, mm^2/s).  3-D runs are quasi-static only.
+plane-strain limit; inflow rate per unit depth, mm^2/s).  Both modes, probes (x, y, z) and
+VTU output (tetrahedra) work in 3-D as in 2-D.
 """
 
 from __future__ import annotations
@@ -264,6 +265,7 @@ class AleFsiForwardModel(Configurable):
             from .solver import AleFsiSolver
 
             mesh = self.build_mesh()
+            _check_probes(mesh, self.options.probes)
             settings = solver_settings(self.options)
             try:
                 self._solver = AleFsiSolver(mesh, settings)
@@ -352,6 +354,16 @@ class AleFsiForwardModel(Configurable):
     def _remember(self, key: dict[str, float], rate: float, state: NDArray[np.float64]) -> None:
         self._store.append((dict(key), rate, state))
         del self._store[:-16]
+
+
+def _check_probes(mesh: Any, probes: Sequence[tuple[float, ...]]) -> None:
+    """Every probe has one coordinate per mesh dimension and lies in the (reference) mesh."""
+    where = "ale_fsi options: probes"
+    for p in probes:
+        if len(p) != mesh.dim:
+            raise ConfigError(f"probe {tuple(p)} needs {mesh.dim} coordinates on this mesh", where)
+        if mesh(*(float(c) for c in p)).nr < 0:
+            raise ConfigError(f"probe {tuple(p)} lies outside the mesh", where)
 
 
 def _nearest(

@@ -15,6 +15,7 @@ from pydantic import Field, field_validator, model_validator
 from ...core.options import PluginOptions
 
 Point = tuple[float, float]
+Probe = tuple[float, float] | tuple[float, float, float]  # one coordinate per mesh dimension
 
 
 class AleFsiOptions(PluginOptions):
@@ -116,10 +117,10 @@ class AleFsiOptions(PluginOptions):
         description="start from the nearest converged state of an earlier run of this "
         "model object (same mesh) [-]",
     )
-    probes: list[Point] = Field(
+    probes: list[Probe] = Field(
         default_factory=list,
-        description="reference points whose displacement is reported in the diagnostics "
-        "('probe_displacements', one list per coordinate) [mm]",
+        description="reference points (x, y) in 2-D, (x, y, z) in 3-D, whose displacement "
+        "is reported in the diagnostics ('probe_displacements', one list per coordinate) [mm]",
     )
     write_vtu: bool = Field(
         False, description="write a VTU file per coordinate into the run's workdir [-]"
@@ -152,14 +153,23 @@ class AleFsiOptions(PluginOptions):
                     ("mesh_file", self.mesh_file is not None),
                     ("subdomains", bool(self.subdomains)),
                     ("outline", self.outline is not None and self.geometry == "dome_3d"),
-                    ("mode = 'transient'", self.mode == "transient"),
-                    ("probes", bool(self.probes)),
-                    ("write_vtu", self.write_vtu),
                 )
                 if on
             ]
             if clash:
                 raise ValueError(f"geometry {self.geometry!r} does not support yet: {clash}")
+        return self
+
+    @model_validator(mode="after")
+    def _probe_dimension(self) -> AleFsiOptions:
+        # a mesh file's dimension is known only once it is read (AleFsiForwardModel checks)
+        if self.mesh_file is None:
+            dim = 2 if self.geometry == "flow_cell" else 3
+            wrong = [p for p in self.probes if len(p) != dim]
+            if wrong:
+                raise ValueError(
+                    f"probes need {dim} coordinates in geometry {self.geometry!r}, got {wrong}"
+                )
         return self
 
 

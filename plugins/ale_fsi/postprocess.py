@@ -161,6 +161,7 @@ class AleFsiPostprocess:
         return out
 
     def point_displacement(self, point: tuple[float, ...]) -> NDArray[np.float64]:
+        """Displacement (mm, one component per dimension) at a point of the reference mesh."""
         mp = self.solver.mesh(*(float(c) for c in point))
         return np.asarray(self.solver.displacement(mp), dtype=float).ravel()
 
