@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from .interface import Interface
 from .observation import coordinate_key
 from .options import plugin_options
 from .problem import InverseProblem, jsonable
@@ -41,6 +42,7 @@ __all__ = [
     "comparison_part",
     "coordinates_of",
     "describe_change",
+    "interface_digest",
     "model_part",
     "problem_fingerprint",
     "run_key",
@@ -103,6 +105,11 @@ def _digest(*arrays: Any) -> str | None:
     return h.hexdigest()
 
 
+def interface_digest(gamma: Interface) -> str:
+    """SHA-256 of an interface's vertices and cells (an observation's part of a fingerprint)."""
+    return str(_digest(gamma.vertices, gamma.cells))
+
+
 # -- fingerprints --------------------------------------------------------------------------------
 def problem_fingerprint(problem: InverseProblem) -> dict[str, Any]:
     """Everything that determines a run, its comparison and its likelihood, as one dict.
@@ -120,7 +127,7 @@ def problem_fingerprint(problem: InverseProblem) -> dict[str, Any]:
         observations.append(
             {
                 "coordinate": dict(obs.coordinate),
-                "interface": None if gamma is None else _digest(gamma.vertices, gamma.cells),
+                "interface": None if gamma is None else interface_digest(gamma),
                 "points": None if mp is None else _digest(mp.points, mp.directions),
                 "noise_std": obs.noise_std,
             }

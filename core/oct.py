@@ -66,10 +66,12 @@ from .interface import Interface
 from .oct_reader import read_oct_volume
 from .options import PluginOptions
 
-__all__ = ["OctOptions", "OctSegmentation", "segment_oct"]
+__all__ = ["HeightAxis", "OctOptions", "OctSegmentation", "in_model_axes", "segment_oct"]
 
 Crop = tuple[tuple[int, int] | None, tuple[int, int] | None, tuple[int, int] | None]
 CropMm = tuple[tuple[float, float] | None, tuple[float, float] | None, tuple[float, float] | None]
+#: the forward model's axis along the height above the substratum (:func:`in_model_axes`)
+HeightAxis = Literal["z", "y"]
 
 
 class OctOptions(PluginOptions):
@@ -193,6 +195,22 @@ class OctSegmentation:
     def substratum_depth(self) -> float:
         """Depth of the substratum surface below the first row's centre [mm]."""
         return (self.substratum_row - 0.5) * self.voxel_size[0]
+
+
+def in_model_axes(surface: Interface, height_axis: HeightAxis = "z") -> Interface:
+    """A segmented surface (x, y, z = height) in the axes of a forward model.
+
+    ``"z"``: unchanged, fbia's frame (``analytic_mound_3d``).  ``"y"``: (x, height, y), the
+    axes of ``ale_fsi``'s 3-D geometries (x along the flow, y up, z across the duct), so the
+    scan's y is the model's z.  Swapping two axes mirrors the surface: the triangles are
+    reversed to keep their normals pointing into the fluid.  The map is its own inverse, so
+    ``in_model_axes(deformed, "y")`` also puts an ``ale_fsi`` surface in the scan's frame.
+    """
+    if height_axis == "z":
+        return surface
+    if height_axis != "y":
+        raise ConfigError(f"height_axis must be 'z' or 'y', got {height_axis!r}", "in_model_axes")
+    return Interface.surface(surface.vertices[:, [0, 2, 1]], surface.cells[:, ::-1])
 
 
 # -- segmentation ------------------------------------------------------------------------------

@@ -38,6 +38,9 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     [[observations]]            # observed states from files, relative to the study file ...
     coordinate = { inflow_rate = 100.0 }     # which state (model-defined names)
     interface = "data/observed_100.csv"      # CSV x, y[, curve] (2-D); STL/PLY/VTU/... (3-D)
+    # oct = { file = "data/scan.npy", voxel_size = [0.005, 0.01, 0.01], threshold = 0.6 }
+    #   or an OCT scan (fbia.core.study_oct), segmented on reading: voxel_size (dz, dy, dx) mm,
+    #   height_axis = "y" for ale_fsi 3-D, options of fbia.core.oct; figures <output>/oct/
     points = "data/points_100.csv"           # optional: x, y[, z][, dx, dy[, dz]]
     noise_std = 0.01                         # optional, mm
     name = "Q100"                            # optional label
@@ -353,7 +356,7 @@ class _Reader:
         meta = parse_section(StudySection, raw.get("study", {}), self.where("[study]"))
         name = meta.name or self.path.stem
         self.seed = meta.seed
-        output = self.folder / meta.output
+        output = self.output = self.folder / meta.output
         store = store_file(self.folder, meta.store, self.where("[study]", "store"))
 
         self.model_name, model = self.plugin("forward_model", "model")
@@ -499,9 +502,9 @@ class _Reader:
             where = self.where("[[observations]]", f"#{k + 1}")
             spec = parse_section(ObservationSection, raw, where)
             coordinate = check_coordinate(spec.coordinate, f"{where} coordinate")
-            if spec.interface is None and spec.points is None:
-                raise ConfigError("needs 'interface' (a file), 'points' (a file) or both", where)
-            gamma = None
+            if spec.interface is None and spec.points is None and spec.oct is None:
+                raise ConfigError("needs 'interface' or 'oct', 'points' (a file) or both", where)
+            gamma = None if spec.oct is None else self.oct_scan(spec.oct, k, f"{where} oct")
             if spec.interface is not None:
                 try:
                     gamma = Interface.read(self.folder / spec.interface)
@@ -527,6 +530,14 @@ class _Reader:
                 f"observations mix dimensions {sorted(dims)}", self.where("[[observations]]")
             )
         return out
+
+    def oct_scan(self, value: Any, k: int, where: str) -> Interface:
+        from .study_oct import read_oct_scan, write_oct_record
+
+        self.dimension(3, where)
+        scan = read_oct_scan(value, self.folder, where)
+        write_oct_record(scan, self.output / "oct" / f"observation_{k + 1}")
+        return scan.interface
 
     def dimension(self, dim: int, where: str) -> None:
         if isinstance(self.model_dim, int) and dim != self.model_dim:

@@ -173,9 +173,16 @@ class ObservationSection(Section):
 
     coordinate: Table = Field(default_factory=dict)
     interface: Text | None = None
+    oct: Any = None  # an OCT scan: a file or a table, checked by fbia.core.study_oct
     points: Text | None = None
     noise_std: Annotated[Number, Field(gt=0)] | None = None
     name: Label = ""
+
+    @model_validator(mode="after")
+    def _one_surface(self) -> ObservationSection:
+        if self.interface is not None and self.oct is not None:
+            raise _KeyError("oct", "give 'interface' (a surface file) or 'oct' (a scan), not both")
+        return self
 
 
 class StudySection(Section):

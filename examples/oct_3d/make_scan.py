@@ -8,11 +8,13 @@
    :data:`VOXEL_SIZE`, partial volume, speckle (2 looks), Beer–Lambert attenuation
    (:data:`ATTENUATION`) and a noise floor, seeded.  Axes: the model's flow direction x is
    the scan's x, the model's span z is the scan's y, the model's height y is the scan's
-   height above the substratum.  Written as ``data/scan_loaded.npy`` (depth, y, x) with
+   height above the substratum (:func:`fbia.core.oct.in_model_axes` with
+   ``height_axis = "y"``, its own inverse).  Written as ``data/scan_loaded.npy`` (depth, y, x) with
    ``data/scan_loaded.json`` (voxel size, attenuation).
 3. :func:`fbia.core.oct.segment_oct` segments it (Otsu threshold, marching cubes, the known
    attenuation compensated); the surface, mapped back to the model's axes, is the observed
-   interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``.
+   interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``
+   (``study_lm_scan.toml`` reads the scan itself: ``[[observations]] oct = {...}``).
    The segmentation figures (a B-scan with the contour, a 3-D view) go to ``output/scan``.
 
 Seeded: the files are the same every time (up to the solver's rounding).
@@ -26,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import fbia
-from fbia.core.oct import OctSegmentation, segment_oct
+from fbia.core.oct import OctSegmentation, in_model_axes, segment_oct
 from fbia.core.oct_figures import write_segmentation_figures
 from fbia.testing.oct import oct_volume_from_surface
 
@@ -38,18 +40,6 @@ VOXEL_SIZE = (0.005, 0.01, 0.01)  # (dz, dy, dx) [mm]: 5 um axial, 10 um lateral
 SHAPE = (100, 100, 160)  # (depth, y, x): 0.5 x 1.0 x 1.6 mm, the duct's x from 0 to 1.6 mm
 ATTENUATION = 1.0  # 1/mm
 SEED = 18
-
-
-def model_to_scan(interface: fbia.Interface) -> fbia.Interface:
-    """The model's (x, height y, span z) as the scan's (x, y = span, z = height)."""
-    v = interface.vertices
-    # swapping two axes mirrors the surface: reverse the triangles to keep normals outward
-    return fbia.Interface.surface(v[:, [0, 2, 1]], interface.cells[:, ::-1])
-
-
-def scan_to_model(interface: fbia.Interface) -> fbia.Interface:
-    """The inverse of :func:`model_to_scan` (the same swap)."""
-    return model_to_scan(interface)
 
 
 def simulate(E: float, nu: float = TRUTH["nu"]) -> fbia.Interface:
@@ -69,13 +59,13 @@ def make_scan(
     folder.mkdir(parents=True, exist_ok=True)
     loaded = simulate(TRUTH["E"])
     volume, _ = oct_volume_from_surface(
-        model_to_scan(loaded), shape, voxel_size, attenuation=ATTENUATION, seed=seed
+        in_model_axes(loaded, "y"), shape, voxel_size, attenuation=ATTENUATION, seed=seed
     )
     np.save(folder / "scan_loaded.npy", volume)
     meta = {"voxel_size_mm": list(voxel_size), "attenuation_per_mm": ATTENUATION}
     (folder / "scan_loaded.json").write_text(json.dumps(meta, indent=2) + "\n")
     seg = segment_oct(volume, voxel_size=voxel_size, attenuation=ATTENUATION)
-    scan_to_model(seg.interface).write(folder / "observed_100.ply")
+    in_model_axes(seg.interface, "y").write(folder / "observed_100.ply")
     loaded.write(folder / "simulated_truth_100.ply")
     return seg
 
