@@ -14,6 +14,11 @@
    attenuation compensated); the surface, mapped back to the model's axes, is the observed
    interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``.
    The segmentation figures (a B-scan with the contour, a 3-D view) go to ``output/scan``.
+4. The *unloaded* dome (no flow) is imaged the same way (another speckle seed),
+   ``data/scan_unloaded.npy``, and :func:`fbia.plugins.ale_fsi.colony3d.colony_from_oct`
+   segments it into ``data/unloaded.ply`` (model axes): the reference geometry
+   (``geometry = "colony_3d"``, ``colony_surface``) of ``study_*_scan_geometry.toml``, so
+   that the reference and the loaded surfaces carry the same segmentation bias.
 
 Seeded: the files are the same every time (up to the solver's rounding).
 """
@@ -28,6 +33,7 @@ import numpy as np
 import fbia
 from fbia.core.oct import OctSegmentation, segment_oct
 from fbia.core.oct_figures import write_segmentation_figures
+from fbia.plugins.ale_fsi.colony3d import colony_from_oct, oct_to_model_axes
 from fbia.testing.oct import oct_volume_from_surface
 
 HERE = Path(__file__).parent
@@ -40,22 +46,17 @@ ATTENUATION = 1.0  # 1/mm
 SEED = 18
 
 
-def model_to_scan(interface: fbia.Interface) -> fbia.Interface:
-    """The model's (x, height y, span z) as the scan's (x, y = span, z = height)."""
-    v = interface.vertices
-    # swapping two axes mirrors the surface: reverse the triangles to keep normals outward
-    return fbia.Interface.surface(v[:, [0, 2, 1]], interface.cells[:, ::-1])
+#: The model's (x, height y, span z) as the scan's (x, y = span, z = height), and back: one
+#: swap of two axes (the triangles reversed to keep the normals outward).
+model_to_scan = scan_to_model = oct_to_model_axes
 
 
-def scan_to_model(interface: fbia.Interface) -> fbia.Interface:
-    """The inverse of :func:`model_to_scan` (the same swap)."""
-    return model_to_scan(interface)
-
-
-def simulate(E: float, nu: float = TRUTH["nu"]) -> fbia.Interface:
-    """The deformed interface of the 3-D dome at (E, nu) and :data:`INFLOW` (model axes)."""
+def simulate(
+    E: float, nu: float = TRUTH["nu"], coordinate: dict[str, float] = INFLOW
+) -> fbia.Interface:
+    """The interface of the 3-D dome at (E, nu) and ``coordinate`` (model axes)."""
     model = fbia.forward_model("ale_fsi", **MODEL_OPTIONS)
-    (obs,) = fbia.synthetic_observations(model, {"E": E, "nu": nu}, [INFLOW], 0.0, seed=0)
+    (obs,) = fbia.synthetic_observations(model, {"E": E, "nu": nu}, [coordinate], 0.0, seed=0)
     return obs.interface
 
 
@@ -77,6 +78,14 @@ def make_scan(
     seg = segment_oct(volume, voxel_size=voxel_size, attenuation=ATTENUATION)
     scan_to_model(seg.interface).write(folder / "observed_100.ply")
     loaded.write(folder / "simulated_truth_100.ply")
+    # 4. the unloaded scan -> the reference geometry of the *_scan_geometry studies
+    rest = simulate(TRUTH["E"], coordinate={"inflow_rate": 0.0})
+    volume, _ = oct_volume_from_surface(
+        model_to_scan(rest), shape, voxel_size, attenuation=ATTENUATION, seed=seed + 1
+    )
+    np.save(folder / "scan_unloaded.npy", volume)
+    colony_from_oct(volume, voxel_size, folder / "unloaded.ply", attenuation=ATTENUATION)
+    rest.write(folder / "simulated_truth_0.ply")
     return seg
 
 
@@ -84,7 +93,8 @@ def main() -> None:
     seg = make_scan(HERE / "data")
     write_segmentation_figures(seg, HERE / "output" / "scan")
     print(
-        f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}); "
+        f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}), "
+        "data/scan_unloaded.npy, data/unloaded.ply; "
         f"substratum row {seg.substratum_row}, threshold {seg.threshold:.3g}"
     )
 
