@@ -23,7 +23,8 @@ Construction (:func:`build_colony_cell`):
    extruded downwards into a solid and cut by the duct: the colony is the part above the
    floor; the fluid is the duct minus the colony; netgen meshes both (faces named as in
    :mod:`~fbia.plugins.ale_fsi.geometry3d`) and, as there, the fluid tetrahedra with all four
-   vertices on no-slip faces are split (``_split_locked_tets``).  Elements are straight-sided.
+   vertices on no-slip faces are split (``_split_locked_tets``; Boffi 1997).  Elements are
+   straight-sided.
 
 :func:`oct_to_model_axes` maps a surface from the OCT frame of :mod:`fbia.core.oct`
 (x, y = span, z = height) to the model's (x, y = height, z = span), and
@@ -80,10 +81,11 @@ class ColonyHeightField:
     x, z
         Grid node coordinates along the flow and across it [mm].
     height
-        ``h(x_i, z_j)`` [mm]: the colony's height on its footprint, ``-distance`` to the
-        footprint outside it (smoothed if asked), shape (len(x), len(z)).
+        ``h(x_i, z_j)`` [mm]: the colony's height on its footprint, continued below the
+        floor outside it (step 2 of the module docstring; smoothed if asked), shape
+        (len(x), len(z)).
     footprint
-        Nodes under the colony (a ray met it above the floor), shape (len(x), len(z)).
+        Nodes under the colony (``height > 0``), shape (len(x), len(z)).
     """
 
     x: NDArray[np.float64]
@@ -189,13 +191,6 @@ def colony_height_field(
             where,
         )
     footprint = footprint.reshape(gx.shape)
-    if within is not None and (footprint[[0, -1], :].any() or footprint[:, [0, -1]].any()):
-        raise ConfigError(
-            f"the colony (x in [{lo[0]:.4g}, {hi[0]:.4g}], z in [{lo[2]:.4g}, {hi[2]:.4g}] mm) "
-            f"reaches the walls of the duct {within} mm (closer than the grid spacing "
-            f"{resolution} mm); move it with colony_offset",
-            where,
-        )
     h = height.reshape(gx.shape)
     # outside: the height of the nearest footprint node h_b mirrored about a foot half a
     # grid step beyond it, -h_b (2 d / resolution - 1) at distance d: the slope at the foot
@@ -207,8 +202,15 @@ def colony_height_field(
     h = np.where(footprint, h, -h[i, j] * (2.0 * d / resolution - 1.0))
     if smoothing > 0:
         h = ndimage.gaussian_filter(h, smoothing / resolution, mode="nearest")
-        footprint = h > 0
-    return ColonyHeightField(x, z, h, footprint)
+    reach = footprint | (h > 0)
+    if within is not None and (reach[[0, -1], :].any() or reach[:, [0, -1]].any()):
+        raise ConfigError(
+            f"the colony (x in [{lo[0]:.4g}, {hi[0]:.4g}], z in [{lo[2]:.4g}, {hi[2]:.4g}] mm) "
+            f"reaches the walls of the duct {within} mm (closer than the grid spacing "
+            f"{resolution} mm); move it with colony_offset",
+            where,
+        )
+    return ColonyHeightField(x, z, h, h > 0)
 
 
 def _gaps_under_overhangs(

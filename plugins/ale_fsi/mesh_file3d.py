@@ -10,8 +10,8 @@ in regions ``fluid`` and ``solid`` or ``solid_1..n`` (subdomains with parameters
 * netgen ``.vol`` -- netgen's material and boundary-condition names.
 
 As in :mod:`~fbia.plugins.ale_fsi.geometry3d`, fluid tetrahedra whose four vertices lie on
-faces with a prescribed velocity are split at their centroid (Taylor-Hood stability), and
-elements have straight sides (quadratic cells are read by their corners).
+faces with a prescribed velocity are split at their centroid (Taylor-Hood stability:
+Boffi 1997), and elements have straight sides (quadratic cells are read by their corners).
 :func:`write_mesh_3d` writes a mesh in this convention (gmsh 2.2), so a built mesh reads back
 as a user's would.
 
