@@ -16,6 +16,11 @@
    interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``
    (``study_lm_scan.toml`` reads the scan itself: ``[[observations]] oct = {...}``).
    The segmentation figures (a B-scan with the contour, a 3-D view) go to ``output/scan``.
+4. The *unloaded* dome (no flow) is imaged the same way (another speckle seed),
+   ``data/scan_unloaded.npy``, and :func:`fbia.plugins.ale_fsi.colony3d.colony_from_oct`
+   segments it into ``data/unloaded.ply`` (model axes): the reference geometry
+   (``geometry = "colony_3d"``, ``colony_surface``) of ``study_*_scan_geometry.toml``, so
+   that the reference and the loaded surfaces carry the same segmentation bias.
 
 Seeded: the files are the same every time (up to the solver's rounding).
 """
@@ -30,6 +35,7 @@ import numpy as np
 import fbia
 from fbia.core.oct import OctSegmentation, in_model_axes, segment_oct
 from fbia.core.oct_figures import write_segmentation_figures
+from fbia.plugins.ale_fsi.colony3d import colony_from_oct
 from fbia.testing.oct import oct_volume_from_surface
 
 HERE = Path(__file__).parent
@@ -42,10 +48,12 @@ ATTENUATION = 1.0  # 1/mm
 SEED = 18
 
 
-def simulate(E: float, nu: float = TRUTH["nu"]) -> fbia.Interface:
-    """The deformed interface of the 3-D dome at (E, nu) and :data:`INFLOW` (model axes)."""
+def simulate(
+    E: float, nu: float = TRUTH["nu"], coordinate: dict[str, float] = INFLOW
+) -> fbia.Interface:
+    """The interface of the 3-D dome at (E, nu) and ``coordinate`` (model axes)."""
     model = fbia.forward_model("ale_fsi", **MODEL_OPTIONS)
-    (obs,) = fbia.synthetic_observations(model, {"E": E, "nu": nu}, [INFLOW], 0.0, seed=0)
+    (obs,) = fbia.synthetic_observations(model, {"E": E, "nu": nu}, [coordinate], 0.0, seed=0)
     return obs.interface
 
 
@@ -67,6 +75,14 @@ def make_scan(
     seg = segment_oct(volume, voxel_size=voxel_size, attenuation=ATTENUATION)
     in_model_axes(seg.interface, "y").write(folder / "observed_100.ply")
     loaded.write(folder / "simulated_truth_100.ply")
+    # 4. the unloaded scan -> the reference geometry of the *_scan_geometry studies
+    rest = simulate(TRUTH["E"], coordinate={"inflow_rate": 0.0})
+    volume, _ = oct_volume_from_surface(
+        in_model_axes(rest, "y"), shape, voxel_size, attenuation=ATTENUATION, seed=seed + 1
+    )
+    np.save(folder / "scan_unloaded.npy", volume)
+    colony_from_oct(volume, voxel_size, folder / "unloaded.ply", attenuation=ATTENUATION)
+    rest.write(folder / "simulated_truth_0.ply")
     return seg
 
 
@@ -74,7 +90,8 @@ def main() -> None:
     seg = make_scan(HERE / "data")
     write_segmentation_figures(seg, HERE / "output" / "scan")
     print(
-        f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}); "
+        f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}), "
+        "data/scan_unloaded.npy, data/unloaded.ply; "
         f"substratum row {seg.substratum_row}, threshold {seg.threshold:.3g}"
     )
 

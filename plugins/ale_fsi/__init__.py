@@ -6,7 +6,8 @@
 
 Importing this package is cheap: NGSolve is imported only when a model first meshes or solves.
 Modules: :mod:`.geometry` (flow-cell builder, user-mesh reader/writer), :mod:`.geometry3d`
-(3-D dome and ridge cells), :mod:`.solver` (weak forms, Newton, continuation, checks),
+(3-D dome and ridge cells), :mod:`.colony3d` (a user's 3-D colony surface, an OCT scan's),
+:mod:`.mesh_file3d` (3-D user meshes), :mod:`.solver` (weak forms, Newton, continuation, checks),
 :mod:`.model` (the plugin class), :mod:`.output` (VTU), :mod:`.turek_hron` (benchmark
 geometry and evaluation).
 """

@@ -1,10 +1,12 @@
 """Where the ``ale_fsi`` mesh comes from: a user's mesh file or one of the built-in cells.
 
 :func:`build_mesh` dispatches on the options (``mesh_file``, ``geometry``) to
-:mod:`~fbia.plugins.ale_fsi.geometry` (2-D flow cell, mesh files) and
-:mod:`~fbia.plugins.ale_fsi.geometry3d` (3-D dome and ridge); :func:`regions_in_file` names the
-solid regions of a mesh file without NGSolve, so that a model knows its parameters before it
-meshes.
+:mod:`~fbia.plugins.ale_fsi.geometry` (2-D flow cell, 2-D mesh files),
+:mod:`~fbia.plugins.ale_fsi.mesh_file3d` (3-D mesh files),
+:mod:`~fbia.plugins.ale_fsi.geometry3d` (3-D dome and ridge) and
+:mod:`~fbia.plugins.ale_fsi.colony3d` (a user's 3-D colony surface); :func:`regions_in_file`
+names the solid regions of a mesh file without NGSolve, so that a model knows its parameters
+before it meshes.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ...core.errors import ConfigError
-from .geometry import DEFAULT_OUTLINE, FLUID, SOLID
+from .geometry import BOUNDARY_NAMES, DEFAULT_OUTLINE, FLUID, SOLID
 from .options import AleFsiOptions
 
 
@@ -22,6 +24,10 @@ def build_mesh(o: AleFsiOptions) -> Any:
     from . import geometry
 
     if o.mesh_file is not None:
+        from .mesh_file3d import is_3d_mesh_file, read_mesh_3d
+
+        if is_3d_mesh_file(o.mesh_file):
+            return read_mesh_3d(o.mesh_file)
         return geometry.read_mesh(o.mesh_file)
     if o.geometry == "dome_3d":
         from .geometry3d import build_dome_cell
@@ -33,6 +39,20 @@ def build_mesh(o: AleFsiOptions) -> Any:
             dome_centre=o.dome_centre,
             dome_radius=o.dome_radius,
             dome_height=o.dome_height,
+            mesh_size=o.mesh_size,
+            interface_mesh_size=o.interface_mesh_size,
+        )
+    if o.geometry == "colony_3d" and o.colony_surface is not None:
+        from .colony3d import build_colony_cell
+
+        return build_colony_cell(
+            o.colony_surface,
+            o.channel_length,
+            o.channel_height,
+            o.channel_width,
+            offset=o.colony_offset,
+            resolution=o.colony_resolution,
+            smoothing=o.colony_smoothing,
             mesh_size=o.mesh_size,
             interface_mesh_size=o.interface_mesh_size,
         )
@@ -69,9 +89,12 @@ def build_mesh(o: AleFsiOptions) -> Any:
 def regions_in_file(path: Path) -> list[str]:
     """Solid region names in a mesh file, read with meshio (no NGSolve needed)."""
     from .geometry import read_mesh_names
+    from .mesh_file3d import is_3d_mesh_file, read_mesh_names_3d
 
-    names = read_mesh_names(path)
-    solids = sorted((n for n in names if n == SOLID or n.startswith(SOLID + "_")), key=len)
+    names = read_mesh_names_3d(path) if is_3d_mesh_file(path) else read_mesh_names(path)
+    # boundaries are not regions: 'solid_fixed' is no subdomain 'solid_<k>'
+    names = [n for n in names if n not in BOUNDARY_NAMES]
+    solids = sorted(n for n in names if n == SOLID or n.startswith(SOLID + "_"))
     solids.sort(key=lambda s: (len(s), s))
     if not solids or FLUID not in names:
         raise ConfigError("mesh needs regions 'fluid' and 'solid[_k]'", str(path))

@@ -37,17 +37,36 @@ class AleFsiOptions(PluginOptions):
     )
     channel_length: float = Field(2.0, gt=0, description="flow-cell length L [mm]")
     channel_height: float = Field(1.0, gt=0, description="flow-cell height H [mm]")
-    geometry: Literal["flow_cell", "dome_3d", "ridge_3d"] = Field(
+    geometry: Literal["flow_cell", "dome_3d", "ridge_3d", "colony_3d"] = Field(
         "flow_cell",
         description="flow_cell: the 2-D cell; dome_3d: a 3-D duct with a spherical-cap "
         "biofilm (inflow_rate in mm^3/s; use coarse sizes, e.g. mesh_size 0.3, "
         "interface_mesh_size 0.15); ridge_3d: the 2-D cell extruded over channel_width "
-        "between symmetry walls (plane strain) [-]",
+        "between symmetry walls (plane strain); colony_3d: the dome_3d duct with the "
+        "colony of colony_surface [-]",
     )
     channel_width: float = Field(1.0, gt=0, description="3-D duct width / ridge depth W [mm]")
     dome_radius: float = Field(0.4, gt=0, description="base radius of the dome_3d cap [mm]")
     dome_height: float = Field(0.4, gt=0, description="height of the dome_3d cap [mm]")
     dome_centre: float = Field(0.8, gt=0, description="x of the dome_3d centre [mm]")
+    colony_surface: Path | None = Field(
+        None,
+        description="colony_3d: the colony's surface (STL, PLY, OBJ, VTU, ...; closed or its "
+        "upper part), model axes: x along the flow, y height above the floor, z across; "
+        "a height field y = h(x, z) (fbia.plugins.ale_fsi.colony3d) [path, mm]",
+    )
+    colony_offset: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="colony_3d: translation of colony_surface [mm]"
+    )
+    colony_resolution: float = Field(
+        0.02, gt=0, description="colony_3d: grid spacing of the colony's height field [mm]"
+    )
+    colony_smoothing: float = Field(
+        0.02,
+        ge=0,
+        description="colony_3d: Gaussian smoothing width of the height field (voxel steps "
+        "of a segmented surface, spline ringing at a steep foot); 0: none [mm]",
+    )
     outline: list[Point] | None = Field(
         None,
         description="biofilm outline from the upstream to the downstream foot, both on "
@@ -63,9 +82,9 @@ class AleFsiOptions(PluginOptions):
     )
     mesh_file: Path | None = Field(
         None,
-        description="user mesh (gmsh .msh or any meshio format) with regions fluid, "
-        "solid[_k] and boundaries inflow, outflow, walls, interface, solid_fixed "
-        "[, obstacle]; replaces the flow-cell builder [path]",
+        description="user mesh (gmsh .msh or any meshio format; 3-D: tetrahedra, also "
+        "netgen .vol) with regions fluid, solid[_k] and boundaries inflow, outflow, walls, "
+        "interface, solid_fixed [, obstacle, symmetry]; replaces the builders [path]",
     )
     curved: bool = Field(
         True,
@@ -145,14 +164,17 @@ class AleFsiOptions(PluginOptions):
     def _mesh_source(self) -> AleFsiOptions:
         if self.mesh_file is not None and (self.outline is not None or self.subdomains):
             raise ValueError("give either mesh_file or outline/subdomains, not both")
+        if (self.geometry == "colony_3d") != (self.colony_surface is not None):
+            raise ValueError("geometry 'colony_3d' and colony_surface go together")
+        if self.mesh_file is not None and self.geometry != "flow_cell":
+            raise ValueError(f"give either mesh_file or geometry {self.geometry!r}, not both")
         if self.geometry != "flow_cell":
             # not yet supported in 3-D (say so rather than half-work)
             clash = [
                 name
                 for name, on in (
-                    ("mesh_file", self.mesh_file is not None),
                     ("subdomains", bool(self.subdomains)),
-                    ("outline", self.outline is not None and self.geometry == "dome_3d"),
+                    ("outline", self.outline is not None and self.geometry != "ridge_3d"),
                 )
                 if on
             ]

@@ -1,0 +1,191 @@
+"""A user's 3-D tetrahedral mesh for the ALE FSI model: read (gmsh, VTU, netgen .vol) and write.
+
+The names are those of the 2-D convention (:mod:`fbia.plugins.ale_fsi.geometry`): tetrahedra
+in regions ``fluid`` and ``solid`` or ``solid_1..n`` (subdomains with parameters ``E_k``,
+``nu_k``), boundary triangles in ``inflow``, ``outflow``, ``walls``, ``interface``,
+``solid_fixed`` (and optionally ``symmetry``, ``obstacle``, ``internal``):
+
+* gmsh ``.msh`` -- physical groups (volumes for regions, surfaces for boundaries);
+* any other meshio format (VTU, XDMF, ...) -- meshio ``cell_sets``;
+* netgen ``.vol`` -- netgen's material and boundary-condition names.
+
+As in :mod:`~fbia.plugins.ale_fsi.geometry3d`, fluid tetrahedra whose four vertices lie on
+faces with a prescribed velocity are split at their centroid (Taylor-Hood stability:
+Boffi 1997), and elements have straight sides (quadratic cells are read by their corners).
+:func:`write_mesh_3d` writes a mesh in this convention (gmsh 2.2), so a built mesh reads back
+as a user's would.
+
+>>> from fbia.plugins.ale_fsi.mesh_file3d import is_3d_mesh_file, read_mesh_3d
+>>> mesh = read_mesh_3d("colony.msh")                          # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...core.errors import ConfigError
+from .geometry import FLUID, REQUIRED_BOUNDARIES, SOLID, check_mesh
+from .geometry3d import _named, _split_locked_tets, mesh_from_arrays_3d
+
+if TYPE_CHECKING:
+    import ngsolve
+
+__all__ = ["is_3d_mesh_file", "read_mesh_3d", "read_mesh_names_3d", "write_mesh_3d"]
+
+_TETS = ("tetra", "tetra10")
+_TRIS = ("triangle", "triangle6", "triangle7")
+Cells = dict[str, NDArray[np.int64]]
+
+
+def is_3d_mesh_file(path: str | Path) -> bool:
+    """Whether a mesh file holds a 3-D mesh (netgen ``.vol`` of dimension 3, or tetrahedra)."""
+    path = Path(path)
+    if path.suffix.lower() == ".vol":
+        return _read_vol(path)[0].shape[1] == 3
+    return any(b.type in _TETS for b in _meshio_read(path).cells)
+
+
+def read_mesh_3d(path: str | Path) -> ngsolve.Mesh:
+    """Read a named 3-D mesh (module docstring); a :class:`ConfigError` names the file and
+    the names it lacks."""
+    path = Path(path)
+    where = str(path)
+    points, regions, boundaries = _read(path)
+    _check_names(regions, boundaries, where)
+    locked = np.vstack([c for n, c in boundaries.items() if n not in ("outflow", "internal")])
+    points, regions[FLUID] = _split_locked_tets(points, regions[FLUID], locked)
+    mesh = mesh_from_arrays_3d(points, regions, boundaries)
+    check_mesh(mesh, where)
+    return mesh
+
+
+def read_mesh_names_3d(path: str | Path) -> list[str]:
+    """Names of the regions and boundaries of a 3-D mesh file."""
+    _, regions, boundaries = _read(Path(path))
+    return [*regions, *boundaries]
+
+
+def write_mesh_3d(mesh: ngsolve.Mesh, path: str | Path) -> Path:
+    """Write a named 3-D mesh as gmsh 2.2 (physical groups = region/boundary names)."""
+    import meshio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ngmesh = mesh.ngmesh
+    pts = np.asarray(ngmesh.Coordinates(), dtype=float)
+    regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
+    boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
+    cells, phys, field_data = [], [], {}
+    tag = 1
+    for kind, groups, dim in (("triangle", boundaries, 2), ("tetra", regions, 3)):
+        for name, conn in groups.items():
+            cells.append((kind, conn))
+            phys.append(np.full(len(conn), tag, dtype=np.int32))
+            field_data[name] = np.array([tag, dim])
+            tag += 1
+    out = meshio.Mesh(
+        pts,
+        cells,
+        cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
+        field_data=field_data,
+    )
+    meshio.write(path, out, file_format="gmsh22", binary=False)
+    return path
+
+
+def _check_names(regions: Cells, boundaries: Cells, where: str) -> None:
+    solids = [n for n in regions if n == SOLID or n.startswith(SOLID + "_")]
+    missing = [FLUID] if FLUID not in regions else []
+    missing += [] if solids else ["solid[_k]"]
+    missing += [b for b in (*REQUIRED_BOUNDARIES, "outflow") if b not in boundaries]
+    if missing:
+        raise ConfigError(
+            f"the 3-D mesh lacks the named region(s)/boundary(ies) {missing} (it has regions "
+            f"{sorted(regions)} and boundaries {sorted(boundaries)})",
+            where,
+        )
+
+
+def _read(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
+    if path.suffix.lower() == ".vol":
+        return _read_vol(path)
+    return _read_meshio(path)
+
+
+def _read_vol(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
+    import netgen.meshing as nm
+
+    where = str(path)
+    if not path.is_file():
+        raise ConfigError("mesh file not found", where)
+    ngmesh = nm.Mesh()
+    try:
+        ngmesh.Load(str(path))
+    except Exception as exc:  # netgen raises bare Exception subclasses
+        raise ConfigError(f"netgen cannot read the mesh: {exc}", where) from None
+    if ngmesh.dim != 3:
+        return np.zeros((0, ngmesh.dim)), {}, {}
+    pts = np.asarray(ngmesh.Coordinates(), dtype=float)
+    regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
+    boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
+    return pts, regions, boundaries
+
+
+def _meshio_read(path: Path) -> Any:
+    import meshio
+
+    where = str(path)
+    if not path.is_file():
+        raise ConfigError("mesh file not found", where)
+    said = io.StringIO()
+    try:
+        # meshio prints "Couldn't read file ..." and calls sys.exit(1) for some formats
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            return meshio.read(path)
+    except (Exception, SystemExit) as exc:  # meshio raises many types for unreadable files
+        reason = " ".join(said.getvalue().split()) or str(exc)
+        raise ConfigError(f"meshio cannot read the mesh: {reason}", where) from None
+
+
+def _read_meshio(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
+    where = str(path)
+    data = _meshio_read(path)
+    points = np.asarray(data.points, dtype=float)
+    if points.shape[1] != 3:
+        raise ConfigError("a 3-D mesh needs 3 coordinates per point", where)
+    sets = {name: s for name, s in data.cell_sets.items() if not name.startswith("gmsh:")}
+    if not sets and "gmsh:physical" in data.cell_data and data.field_data:
+        # gmsh files: physical names in field_data {name: [tag, dim]}, tags per cell
+        dims = {**dict.fromkeys(_TETS, 3), **dict.fromkeys(_TRIS, 2)}
+        for name, value in data.field_data.items():
+            tag, dim = int(value[0]), int(value[1])
+            sets[name] = [
+                np.flatnonzero(np.asarray(tags) == tag) if dims.get(block.type) == dim else None
+                for block, tags in zip(data.cells, data.cell_data["gmsh:physical"], strict=True)
+            ]
+    if not sets:
+        raise ConfigError("the mesh has no named cell sets (gmsh physical groups)", where)
+    regions: Cells = {}
+    boundaries: Cells = {}
+    for name, per_block in sets.items():
+        for block, idx in zip(data.cells, per_block, strict=True):
+            if idx is None or len(idx) == 0:
+                continue
+            conn = np.asarray(block.data, dtype=np.int64)[np.asarray(idx, dtype=np.int64)]
+            if block.type in _TETS:
+                regions[name] = np.vstack(
+                    [regions.get(name, np.empty((0, 4), np.int64)), conn[:, :4]]
+                )
+            elif block.type in _TRIS:
+                boundaries[name] = np.vstack(
+                    [boundaries.get(name, np.empty((0, 3), np.int64)), conn[:, :3]]
+                )
+            elif block.type not in ("vertex", "line", "line3"):
+                raise ConfigError(f"unsupported cell type {block.type!r} in set {name!r}", where)
+    return points, regions, boundaries
