@@ -28,7 +28,9 @@ The error of order 2 comes from the duct (the flow), not from the dome: order 2 
 0.075 mm dome in a 0.15 mm duct (43 k unknowns, ~40 s CPU) for the same, and curving the
 dome (``curved``) moves the displacement by < 0.5 %.  P2/P3 tetrahedra have no interior
 unknowns to condense statically; Pardiso on the whole Jacobian stays faster than the block
-GMRes (``linear_solver``) at these sizes.
+GMRes (``linear_solver``) at these sizes (order 3, 57 k unknowns: 49 s against 78 s CPU,
+2.4 against 2.1 GB).  ``threads = 2`` pays only when both cores are free (on a machine
+loaded with other jobs one thread was faster).
 """
 
 from __future__ import annotations
