@@ -141,19 +141,22 @@ def test_dome_interface_is_a_surface_that_the_measures_take(dome):
 
 def test_probes_at_the_interface_vertices_give_the_largest_displacement(dome):
     """A probe at a vertex reads the vertex value of the P2 displacement (its vertex dof), so
-    probes at all interface vertices give the reported largest interface displacement."""
+    probes at all interface vertices give the vertex values.  The reported largest interface
+    displacement samples the field inside the triangles too: it is at least the largest vertex
+    value and exceeds it by less than the field varies along an edge (observed 0.1 %)."""
     model, sol = dome
     probes = np.array(model.options.probes)
     rest, moved = (np.array(p) for p in sol.diagnostics["probe_displacements"])
     assert rest.shape == moved.shape == (len(probes), 3)
     assert np.abs(rest).max() == 0.0
-    largest = sol.diagnostics["max_displacement"][1]
-    assert np.linalg.norm(moved, axis=1).max() == pytest.approx(largest, rel=1e-12)
     pts = np.array([v.point for v in model.solver.mesh.vertices])
     index = {tuple(np.round(p, 12)): k for k, p in enumerate(pts)}
     at = np.array([index[tuple(np.round(p, 12))] for p in probes])
     d = _vertex_displacement(model)
-    assert np.abs(moved - d[at]).max() < 1e-12 * largest
+    largest_vertex = np.linalg.norm(d[at], axis=1).max()
+    assert np.abs(moved - d[at]).max() < 1e-12 * largest_vertex
+    largest = sol.diagnostics["max_displacement"][1]
+    assert largest_vertex * (1 - 1e-12) <= largest < 1.01 * largest_vertex
 
 
 def test_probes_of_the_wrong_dimension_or_outside_the_mesh_are_config_errors(tmp_path):
@@ -202,6 +205,42 @@ def test_dome_passes_the_forward_model_conformance_checks(tmp_path):
         tmp_path,
         failing_parameters={"E": 1.0, "nu": 0.3},
     )
+
+
+def test_curved_dome_has_the_volume_and_area_of_its_spherical_cap():
+    """The straight-sided dome is a polyhedron inscribed in the sphere, its volume too small by
+    O(h^2): 6.7 % and 2.4 % at interface sizes 0.15 and 0.1 mm.  Curved (order 2, the default
+    ``curved``) it is within 0.5 % and 0.06 % -- better than the O(h^3) of a quadratic surface
+    (3.4x from 0.15 to 0.1 mm; observed 8x); the floor stays flat (the foot's edges follow
+    the base circle) and no element is inverted."""
+    import ngsolve as ngs
+
+    from fbia.plugins.ale_fsi.geometry3d import build_dome_cell, curve_dome
+
+    volume, area = 2.0 / 3.0 * np.pi * 0.4**3, 2.0 * np.pi * 0.4**2  # the default hemisphere
+    errors = {}
+    for h in (0.15, 0.1):
+        mesh = build_dome_cell(mesh_size=2 * h, interface_mesh_size=h, curve_order=1)
+        for order in (1, 2):
+            if order == 2:  # what build_dome_cell(..., curve_order=2) does
+                curve_dome(mesh, (0.8, 0.0, 0.5), 0.4, 0.4, order)
+            v = ngs.Integrate(1.0, mesh, definedon=mesh.Materials("solid"), order=6)
+            a = ngs.Integrate(1.0, mesh, definedon=mesh.Boundaries("interface"), order=6)
+            errors[h, order] = (abs(v / volume - 1.0), abs(a / area - 1.0))
+        floor = mesh.MapToAllElements(ngs.IntegrationRule(ngs.TRIG, 4), ngs.BND)
+        on = np.array([el.mat in ("solid_fixed", "walls") for el in mesh.Elements(ngs.BND)])
+        y = np.asarray(ngs.y(floor)).reshape(len(on), -1)
+        assert np.abs(y[on & (y.max(axis=1) < 1e-9)]).max() < 1e-12  # the floor is flat
+        det = ngs.Det(ngs.specialcf.JacobianMatrix(3))(
+            mesh.MapToAllElements(ngs.IntegrationRule(ngs.TET, 5), ngs.VOL)
+        )
+        det = np.asarray(det).reshape(mesh.ne, -1)
+        assert np.all(det.min(axis=1) * det.max(axis=1) > 0)  # no element turned inside out
+    for h in (0.15, 0.1):
+        assert errors[h, 1][0] > 0.02  # the straight dome's volume is visibly wrong
+        assert errors[h, 2][0] < 0.1 * errors[h, 1][0] and errors[h, 2][1] < 0.1 * errors[h, 1][1]
+    assert errors[0.15, 2][0] < 0.006
+    assert errors[0.1, 2][0] < errors[0.15, 2][0] / 1.5**3  # at least third order
 
 
 def test_3d_options_that_do_not_work_yet_are_config_errors():
@@ -303,10 +342,12 @@ def test_vtu_output_on_the_tetrahedral_mesh(dome_transient):
 
 @pytest.mark.slow
 def test_dome_displacement_converges_under_mesh_refinement(tmp_path):
-    """Largest interface displacement of the dome at interface element sizes 0.15, 0.1 and
-    0.075 mm (9 716, 22 947 and 42 996 unknowns; ~60 s): 0.02889, 0.02685, 0.02646 mm, the
-    change shrinks 5x from the first to the second refinement (coarser meshes, with two
-    elements across the dome's radius, are not yet in the asymptotic range)."""
+    """Largest interface displacement of the (curved) dome at interface element sizes 0.15, 0.1
+    and 0.075 mm (9 716, 22 947 and 42 996 unknowns; ~60 s): 0.02888, 0.02694, 0.02661 mm, the
+    change shrinks 6x from the first to the second refinement (coarser meshes, with two
+    elements across the dome's radius, are not yet in the asymptotic range).  Order 2 with
+    the duct twice as coarse as the dome converges slowly: the duct's element size dominates
+    the error (see benchmarks/bench_ale_fsi_3d.py)."""
     values = []
     for h in (0.3, 0.2, 0.15):
         model = AleFsiForwardModel(
@@ -317,3 +358,17 @@ def test_dome_displacement_converges_under_mesh_refinement(tmp_path):
     first, second = abs(values[1] - values[0]), abs(values[2] - values[1])
     assert second < 0.5 * first
     assert second < 0.03 * values[2]
+
+
+@pytest.mark.slow
+def test_recommended_3d_settings_are_within_one_percent_of_the_finest_run(tmp_path):
+    """The recommended 3-D settings (order 3, dome 0.15 mm, duct 0.3 mm, curved; 33 k
+    unknowns, ~22 s CPU) against the finest run of benchmarks/bench_ale_fsi_3d.py (order 3,
+    dome and duct 0.15 mm: 0.026478 mm).  Measured: 0.026661 mm, +0.7 %."""
+    reference = 0.026478
+    model = AleFsiForwardModel(
+        geometry="dome_3d", order=3, mesh_size=0.3, interface_mesh_size=0.15, warm_start=False
+    )
+    sol = model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path)
+    value = sol.diagnostics["max_displacement"][0]
+    assert abs(value - reference) < 0.01 * reference

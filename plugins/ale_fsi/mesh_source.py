@@ -41,6 +41,7 @@ def build_mesh(o: AleFsiOptions) -> Any:
             dome_height=o.dome_height,
             mesh_size=o.mesh_size,
             interface_mesh_size=o.interface_mesh_size,
+            curve_order=o.order if o.curved else 1,
         )
     if o.geometry == "colony_3d" and o.colony_surface is not None:
         from .colony3d import build_colony_cell

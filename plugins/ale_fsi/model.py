@@ -19,7 +19,20 @@ ramped by a cosine over ``ramp_time`` as in Paper A, and returns the interface a
 (:mod:`~fbia.plugins.ale_fsi.geometry3d`; inflow rate in mm^3/s) and returns the interface as
 a triangulated surface; ``"ridge_3d"`` extrudes the 2-D cell between symmetry walls (the
 plane-strain limit; inflow rate per unit depth, mm^2/s).  Both modes, probes (x, y, z) and
-VTU output (tetrahedra) work in 3-D as in 2-D.
+VTU output (tetrahedra) work in 3-D as in 2-D; ``"colony_3d"`` takes a user's colony surface
+(:mod:`~fbia.plugins.ale_fsi.colony3d`) and ``mesh_file`` a 3-D tetrahedral mesh.
+
+Recommended 3-D settings (``dome_3d``; ``benchmarks/bench_ale_fsi_3d.py`` prints the table):
+``order = 3, interface_mesh_size = 0.15, mesh_size = 0.3, curved = True, threads = 2`` --
+33 k unknowns, 1.3 GB, ~22 s CPU; the largest displacement within 0.7 % of the finest run
+(order 3, duct 0.15 mm), which order-3 runs on finer ducts scatter around by +-0.8 %.
+The error of order 2 comes from the duct (the flow), not from the dome: order 2 needs a
+0.075 mm dome in a 0.15 mm duct (43 k unknowns, ~40 s CPU) for the same, and curving the
+dome (``curved``) moves the displacement by < 0.5 %.  P2/P3 tetrahedra have no interior
+unknowns to condense statically; Pardiso on the whole Jacobian stays faster than the block
+GMRes (``linear_solver``) at these sizes (order 3, 57 k unknowns: 49 s against 78 s CPU,
+2.4 against 2.1 GB).  ``threads = 2`` pays only when both cores are free (on a machine
+loaded with other jobs one thread was faster).
 """
 
 from __future__ import annotations

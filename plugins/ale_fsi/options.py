@@ -40,10 +40,11 @@ class AleFsiOptions(PluginOptions):
     geometry: Literal["flow_cell", "dome_3d", "ridge_3d", "colony_3d"] = Field(
         "flow_cell",
         description="flow_cell: the 2-D cell; dome_3d: a 3-D duct with a spherical-cap "
-        "biofilm (inflow_rate in mm^3/s; use coarse sizes, e.g. mesh_size 0.3, "
-        "interface_mesh_size 0.15); ridge_3d: the 2-D cell extruded over channel_width "
-        "between symmetry walls (plane strain); colony_3d: the dome_3d duct with the "
-        "colony of colony_surface [-]",
+        "biofilm (inflow_rate in mm^3/s; for its displacement to 1 %: order 3, mesh_size "
+        "0.3, interface_mesh_size 0.15, curved, threads 2 -- see "
+        "benchmarks/bench_ale_fsi_3d.py); ridge_3d: the 2-D cell extruded over "
+        "channel_width between symmetry walls (plane strain); colony_3d: the dome_3d duct "
+        "with the colony of colony_surface [-]",
     )
     channel_width: float = Field(1.0, gt=0, description="3-D duct width / ridge depth W [mm]")
     dome_radius: float = Field(0.4, gt=0, description="base radius of the dome_3d cap [mm]")
@@ -88,8 +89,9 @@ class AleFsiOptions(PluginOptions):
     )
     curved: bool = Field(
         True,
-        description="second-order element geometry along the biofilm outline of the "
-        "flow-cell builder (user meshes are read with straight sides) [-]",
+        description="curved element geometry: order 2 along the biofilm outline of the "
+        "flow-cell builder, order `order` on the dome_3d's dome (user meshes and ridge_3d "
+        "have straight sides) [-]",
     )
     mesh_size: float = Field(0.12, gt=0, description="maximum element size [mm]")
     interface_mesh_size: float = Field(

@@ -28,6 +28,7 @@ class AleFsiPostprocess:
         self.solver = solver
         self._iface_cache: tuple[Any, Any, Any] | None = None
         self._surface_cache: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
+        self._lattice_cache: tuple[Any, NDArray[np.bool_]] | None = None
 
     def interface(self, deformed: bool = True) -> Interface:
         """The interface as a :class:`fbia.Interface`: polylines (2-D) or a surface (3-D)."""
@@ -52,6 +53,19 @@ class AleFsiPostprocess:
             comps = self.solver.displacement.components
             x = x + np.column_stack([c.vec.FV().NumPy()[verts] for c in comps])
         return x, tris
+
+    def _interface_lattice(self) -> tuple[Any, NDArray[np.bool_]]:
+        """Lattice points on every boundary triangle, and which lie on the interface."""
+        if self._lattice_cache is None:
+            ngs = self.solver.ngs
+            k = 4 * self.solver.settings.order
+            lattice = [(i / k, j / k) for i in range(k + 1) for j in range(k + 1 - i)]
+            rule = ngs.IntegrationRule(lattice, [0.0] * len(lattice))
+            points = self.solver.mesh.MapToAllElements(rule, ngs.BND)
+            names = [el.mat for el in self.solver.mesh.Elements(ngs.BND)]
+            on = np.repeat(np.array(names) == "interface", len(lattice))
+            self._lattice_cache = (points, on)
+        return self._lattice_cache
 
     def interface_curves(self, deformed: bool = True) -> list[NDArray[np.float64]]:
         """Ordered interface polylines (solid on the right), with the edge midpoints.
@@ -166,10 +180,17 @@ class AleFsiPostprocess:
         return np.asarray(self.solver.displacement(mp), dtype=float).ravel()
 
     def max_interface_displacement(self) -> float:
-        """Largest displacement magnitude (mm) on the interface."""
+        """Largest displacement magnitude (mm) on the interface.
+
+        2-D: at the ends and midpoints of the interface edges.  3-D: on a lattice of
+        ``4 order`` intervals per edge on every interface triangle: the vertices alone miss a
+        maximum inside a triangle by O(h^2) -- 1 to 2 % of the dome's at interface size
+        0.15 mm, more than the finite-element error of order 3 there.
+        """
         if self.solver.dim == 3:
-            (ref3, _), (cur3, _) = self.interface_surface(False), self.interface_surface(True)
-            return float(np.linalg.norm(cur3 - ref3, axis=1).max())
+            points, on = self._interface_lattice()
+            values = np.asarray(self.solver.displacement(points))[on]
+            return float(np.linalg.norm(values, axis=1).max())
         ref = self.interface_curves(deformed=False)
         cur = self.interface_curves(deformed=True)
         return float(
