@@ -16,6 +16,7 @@ that their right-hand normal points into the fluid.
 from __future__ import annotations
 
 import csv
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -326,7 +327,11 @@ class Interface:
         try:
             import meshio
 
-            mesh = meshio.read(path)
+            with warnings.catch_warnings():
+                # meshio tells binary from ASCII STL by the file size in int32 arithmetic, which
+                # overflows for an ASCII file's triangle count; the reader is right either way
+                warnings.filterwarnings("ignore", "overflow encountered", RuntimeWarning)
+                mesh = meshio.read(path)
             tris = [b.data for b in mesh.cells if b.type == "triangle"]
             if not tris:
                 raise ConfigError("mesh file has no triangle cells", str(path))
