@@ -21,6 +21,11 @@
    segments it into ``data/unloaded.ply`` (model axes): the reference geometry
    (``geometry = "colony_3d"``, ``colony_surface``) of ``study_*_scan_geometry.toml``, so
    that the reference and the loaded surfaces carry the same segmentation bias.
+5. The *matched truth* (:func:`make_matched_scan`, into ``data/matched/``): steps 1-4 with the
+   truth computed by the calibration's own model family, ``geometry = "colony_3d"`` on the
+   rest surface of step 1 (:data:`COLONY_OPTIONS`), so that no discretisation mismatch
+   between truth and model remains (the coarse ``dome_3d`` mesh bends 13 % more than the
+   colony mesh); the files of ``study_lm_matched.toml`` (README, "nu free").
 
 Seeded: the files are the same every time (up to the solver's rounding).
 """
@@ -45,14 +50,25 @@ MODEL_OPTIONS = {"geometry": "dome_3d", "mesh_size": 0.3, "interface_mesh_size":
 VOXEL_SIZE = (0.005, 0.01, 0.01)  # (dz, dy, dx) [mm]: 5 um axial, 10 um lateral
 SHAPE = (100, 100, 160)  # (depth, y, x): 0.5 x 1.0 x 1.6 mm, the duct's x from 0 to 1.6 mm
 ATTENUATION = 1.0  # 1/mm
+#: The colony_3d options of the *_scan_geometry studies (colony_surface is set per call).
+COLONY_OPTIONS = {
+    "geometry": "colony_3d",
+    "colony_resolution": 0.01,
+    "colony_smoothing": 0.01,
+    "mesh_size": 0.3,
+    "interface_mesh_size": 0.15,
+}
 SEED = 18
 
 
 def simulate(
-    E: float, nu: float = TRUTH["nu"], coordinate: dict[str, float] = INFLOW
+    E: float,
+    nu: float = TRUTH["nu"],
+    coordinate: dict[str, float] = INFLOW,
+    options: dict[str, object] | None = None,
 ) -> fbia.Interface:
-    """The interface of the 3-D dome at (E, nu) and ``coordinate`` (model axes)."""
-    model = fbia.forward_model("ale_fsi", **MODEL_OPTIONS)
+    """The interface of the 3-D dome (or of ``options``' model) at (E, nu) and ``coordinate``."""
+    model = fbia.forward_model("ale_fsi", **(MODEL_OPTIONS if options is None else options))
     (obs,) = fbia.synthetic_observations(model, {"E": E, "nu": nu}, [coordinate], 0.0, seed=0)
     return obs.interface
 
@@ -86,12 +102,35 @@ def make_scan(
     return seg
 
 
+def make_matched_scan(folder: Path, seed: int = SEED) -> OctSegmentation:
+    """Step 5: the truth on the colony_3d mesh of ``folder/simulated_truth_0.ply``, imaged as
+    in steps 2-4, into ``folder/matched``."""
+    out = folder / "matched"
+    out.mkdir(parents=True, exist_ok=True)
+    options = {**COLONY_OPTIONS, "colony_surface": str(folder / "simulated_truth_0.ply")}
+    truth = {}
+    for rate, name in ((100.0, "simulated_truth_100.ply"), (0.0, "simulated_truth_0.ply")):
+        truth[rate] = simulate(TRUTH["E"], coordinate={"inflow_rate": rate}, options=options)
+        truth[rate].write(out / name)
+    volume, _ = oct_volume_from_surface(
+        in_model_axes(truth[100.0], "y"), SHAPE, VOXEL_SIZE, attenuation=ATTENUATION, seed=seed
+    )
+    seg = segment_oct(volume, voxel_size=VOXEL_SIZE, attenuation=ATTENUATION)
+    in_model_axes(seg.interface, "y").write(out / "observed_100.ply")
+    volume, _ = oct_volume_from_surface(
+        in_model_axes(truth[0.0], "y"), SHAPE, VOXEL_SIZE, attenuation=ATTENUATION, seed=seed + 1
+    )
+    colony_from_oct(volume, VOXEL_SIZE, out / "unloaded.ply", attenuation=ATTENUATION)
+    return seg
+
+
 def main() -> None:
     seg = make_scan(HERE / "data")
+    make_matched_scan(HERE / "data")
     write_segmentation_figures(seg, HERE / "output" / "scan")
     print(
         f"wrote data/scan_loaded.npy, data/observed_100.ply ({seg.interface}), "
-        "data/scan_unloaded.npy, data/unloaded.ply; "
+        "data/scan_unloaded.npy, data/unloaded.ply, data/matched/; "
         f"substratum row {seg.substratum_row}, threshold {seg.threshold:.3g}"
     )
 
