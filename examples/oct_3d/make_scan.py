@@ -73,6 +73,14 @@ def simulate(
     return obs.interface
 
 
+def save_scan(path: Path, volume: np.ndarray, voxel_size: tuple[float, float, float]) -> None:
+    """The scan as .npy with a JSON of the same stem beside it (voxel size, attenuation), which
+    ``[[observations]] oct = "..."`` reads."""
+    np.save(path, volume)
+    meta = {"voxel_size_mm": list(voxel_size), "attenuation_per_mm": ATTENUATION}
+    path.with_suffix(".json").write_text(json.dumps(meta, indent=2) + "\n")
+
+
 def make_scan(
     folder: Path,
     voxel_size: tuple[float, float, float] = VOXEL_SIZE,
@@ -85,9 +93,7 @@ def make_scan(
     volume, _ = oct_volume_from_surface(
         in_model_axes(loaded, "y"), shape, voxel_size, attenuation=ATTENUATION, seed=seed
     )
-    np.save(folder / "scan_loaded.npy", volume)
-    meta = {"voxel_size_mm": list(voxel_size), "attenuation_per_mm": ATTENUATION}
-    (folder / "scan_loaded.json").write_text(json.dumps(meta, indent=2) + "\n")
+    save_scan(folder / "scan_loaded.npy", volume, voxel_size)
     seg = segment_oct(volume, voxel_size=voxel_size, attenuation=ATTENUATION)
     in_model_axes(seg.interface, "y").write(folder / "observed_100.ply")
     loaded.write(folder / "simulated_truth_100.ply")
@@ -115,6 +121,7 @@ def make_matched_scan(folder: Path, seed: int = SEED) -> OctSegmentation:
     volume, _ = oct_volume_from_surface(
         in_model_axes(truth[100.0], "y"), SHAPE, VOXEL_SIZE, attenuation=ATTENUATION, seed=seed
     )
+    save_scan(out / "scan_loaded.npy", volume, VOXEL_SIZE)  # study_lm_matched.toml reads it
     seg = segment_oct(volume, voxel_size=VOXEL_SIZE, attenuation=ATTENUATION)
     in_model_axes(seg.interface, "y").write(out / "observed_100.ply")
     volume, _ = oct_volume_from_surface(
