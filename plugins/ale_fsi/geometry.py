@@ -420,21 +420,35 @@ def mesh_arrays(
 
 def write_mesh(mesh: ngsolve.Mesh, path: str | Path) -> Path:
     """Write a named 2-D mesh as gmsh 2.2 (physical groups = region/boundary names)."""
+    pts, regions, boundaries = mesh_arrays(mesh)
+    groups = [("line", boundaries, 1), ("triangle", regions, 2)]
+    return write_named_gmsh(path, np.c_[pts, np.zeros(len(pts))], groups)
+
+
+def write_named_gmsh(
+    path: str | Path,
+    points: NDArray[np.float64],
+    groups: Sequence[tuple[str, dict[str, NDArray[np.int64]], int]],
+) -> Path:
+    """Write cells grouped by name as gmsh 2.2, one physical group per name.
+
+    ``groups``: (meshio cell type, {name: connectivity}, dimension of the cells), boundaries
+    first; ``points`` with three coordinates.  Used for 2-D and 3-D meshes alike.
+    """
     import meshio
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    pts, regions, boundaries = mesh_arrays(mesh)
     cells, phys, field_data = [], [], {}
     tag = 1
-    for kind, groups, dim in (("line", boundaries, 1), ("triangle", regions, 2)):
-        for name, conn in groups.items():
+    for kind, named, dim in groups:
+        for name, conn in named.items():
             cells.append((kind, conn))
             phys.append(np.full(len(conn), tag, dtype=np.int32))
             field_data[name] = np.array([tag, dim])
             tag += 1
     out = meshio.Mesh(
-        np.c_[pts, np.zeros(len(pts))],
+        points,
         cells,
         cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
         field_data=field_data,

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
-from .geometry import FLUID, REQUIRED_BOUNDARIES, SOLID, check_mesh
+from .geometry import FLUID, REQUIRED_BOUNDARIES, SOLID, check_mesh, write_named_gmsh
 from .geometry3d import _named, _split_locked_tets, mesh_from_arrays_3d
 
 if TYPE_CHECKING:
@@ -73,30 +73,11 @@ def read_mesh_names_3d(path: str | Path) -> list[str]:
 
 def write_mesh_3d(mesh: ngsolve.Mesh, path: str | Path) -> Path:
     """Write a named 3-D mesh as gmsh 2.2 (physical groups = region/boundary names)."""
-    import meshio
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     ngmesh = mesh.ngmesh
     pts = np.asarray(ngmesh.Coordinates(), dtype=float)
     regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
     boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
-    cells, phys, field_data = [], [], {}
-    tag = 1
-    for kind, groups, dim in (("triangle", boundaries, 2), ("tetra", regions, 3)):
-        for name, conn in groups.items():
-            cells.append((kind, conn))
-            phys.append(np.full(len(conn), tag, dtype=np.int32))
-            field_data[name] = np.array([tag, dim])
-            tag += 1
-    out = meshio.Mesh(
-        pts,
-        cells,
-        cell_data={"gmsh:physical": phys, "gmsh:geometrical": phys},
-        field_data=field_data,
-    )
-    meshio.write(path, out, file_format="gmsh22", binary=False)
-    return path
+    return write_named_gmsh(path, pts, [("triangle", boundaries, 2), ("tetra", regions, 3)])
 
 
 def _check_names(regions: Cells, boundaries: Cells, where: str) -> None:
