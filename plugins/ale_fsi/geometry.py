@@ -306,9 +306,9 @@ def read_mesh_names(path: str | Path) -> list[str]:
     return [*regions, *boundaries]
 
 
-def _read_named_cells(
-    path: Path,
-) -> tuple[NDArray[np.float64], dict[str, NDArray[np.int64]], dict[str, NDArray[np.int64]]]:
+def read_with_meshio(path: Path) -> Any:
+    """``meshio.read(path)``, every failure a one-line ConfigError naming the file (2-D and 3-D
+    mesh files alike)."""
     import meshio
 
     where = str(path)
@@ -319,10 +319,17 @@ def _read_named_cells(
         # For an extension shared by several formats (.msh: ansys, gmsh) meshio prints
         # "Couldn't read file ..." and calls sys.exit(1) when none of them reads it.
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-            data = meshio.read(path)
+            return meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio raises many types for unreadable files
         reason = " ".join(said.getvalue().split()) or str(exc)
         raise ConfigError(f"meshio cannot read the mesh: {reason}", where) from None
+
+
+def _read_named_cells(
+    path: Path,
+) -> tuple[NDArray[np.float64], dict[str, NDArray[np.int64]], dict[str, NDArray[np.int64]]]:
+    where = str(path)
+    data = read_with_meshio(path)
     points = np.asarray(data.points, dtype=float)
     if points.shape[1] == 3:
         if np.any(np.abs(points[:, 2]) > 1e-12 * max(1.0, float(np.abs(points).max()))):

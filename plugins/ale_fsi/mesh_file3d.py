@@ -21,16 +21,21 @@ as a user's would.
 
 from __future__ import annotations
 
-import contextlib
-import io
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
-from .geometry import FLUID, REQUIRED_BOUNDARIES, SOLID, check_mesh, write_named_gmsh
+from .geometry import (
+    FLUID,
+    REQUIRED_BOUNDARIES,
+    SOLID,
+    check_mesh,
+    read_with_meshio,
+    write_named_gmsh,
+)
 from .geometry3d import _named, _split_locked_tets, mesh_from_arrays_3d
 
 if TYPE_CHECKING:
@@ -48,7 +53,7 @@ def is_3d_mesh_file(path: str | Path) -> bool:
     path = Path(path)
     if path.suffix.lower() == ".vol":
         return _read_vol(path)[0].shape[1] == 3
-    return any(b.type in _TETS for b in _meshio_read(path).cells)
+    return any(b.type in _TETS for b in read_with_meshio(path).cells)
 
 
 def read_mesh_3d(path: str | Path) -> ngsolve.Mesh:
@@ -118,25 +123,9 @@ def _read_vol(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
     return pts, regions, boundaries
 
 
-def _meshio_read(path: Path) -> Any:
-    import meshio
-
-    where = str(path)
-    if not path.is_file():
-        raise ConfigError("mesh file not found", where)
-    said = io.StringIO()
-    try:
-        # meshio prints "Couldn't read file ..." and calls sys.exit(1) for some formats
-        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-            return meshio.read(path)
-    except (Exception, SystemExit) as exc:  # meshio raises many types for unreadable files
-        reason = " ".join(said.getvalue().split()) or str(exc)
-        raise ConfigError(f"meshio cannot read the mesh: {reason}", where) from None
-
-
 def _read_meshio(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
     where = str(path)
-    data = _meshio_read(path)
+    data = read_with_meshio(path)
     points = np.asarray(data.points, dtype=float)
     if points.shape[1] != 3:
         raise ConfigError("a 3-D mesh needs 3 coordinates per point", where)
