@@ -157,6 +157,8 @@ class SyntheticSpec:
     points: int | None = None
     seed: int = 0
     noise: str = "normal"
+    placement: str = "even"  # where the points go (synthetic_observations)
+    significant: float = 0.5
 
 
 @dataclass(eq=False)
@@ -231,6 +233,8 @@ class Study:
                 seed=spec.seed,
                 points=spec.points,
                 noise=spec.noise,  # type: ignore[arg-type]
+                placement=spec.placement,  # type: ignore[arg-type]
+                significant=spec.significant,
             )
         except ForwardModelError as exc:
             raise ConfigError(f"the forward model failed at the truth: {exc}", where) from None

@@ -564,7 +564,8 @@ class _Reader:
         if not coords:
             raise ConfigError("needs at least one coordinate", f"{where} coordinates")
         seed = spec.seed if spec.seed is not None else derived_seed(self.seed, SYNTHETIC_STREAM)
-        return SyntheticSpec(truth, coords, spec.noise_std, spec.points, seed, spec.noise)
+        extra = (spec.placement, spec.significant)  # where the measurement points go
+        return SyntheticSpec(truth, coords, spec.noise_std, spec.points, seed, spec.noise, *extra)
 
     def read_executor(self) -> ExecutorSpec:
         where = self.where("[executor]")

@@ -203,6 +203,8 @@ class SyntheticSection(Section):
     noise_std: Annotated[Number, Field(ge=0)] = 0.0
     noise: Literal["normal", "isotropic"] = "normal"
     points: Annotated[Integer, Field(ge=1, le=10_000_000)] | None = None
+    placement: Literal["even", "displacement"] = "even"
+    significant: Annotated[Number, Field(gt=0, lt=1)] = 0.5
     seed: Annotated[Integer, Field(ge=0)] | None = None
 
 

@@ -44,6 +44,8 @@ def synthetic_observations(
     seed: int | np.random.Generator,
     points: int | None = None,
     noise: Literal["normal", "isotropic"] = "normal",
+    placement: Literal["even", "displacement"] = "even",
+    significant: float = 0.5,
 ) -> list[Observation]:
     """Observations of ``model`` at the ground truth ``truth``, one per coordinate.
 
@@ -69,6 +71,17 @@ def synthetic_observations(
         ``"normal"``: a scalar N(0, noise_std^2) displacement along the unit vertex normal of
         every interface vertex and along the direction of every measurement point (Paper A);
         ``"isotropic"``: N(0, noise_std^2 I) on every coordinate (Paper B eq. 16 literally).
+    placement
+        Where the ``points`` go. ``"even"``: over the whole interface (above).
+        ``"displacement"``: evenly over the parts of the interface that moved significantly
+        along their normal, as Paper A places them ("evenly distributed in regions with
+        significant displacement", directions normal to the displaced interface): 2-D, the
+        edges whose normal displacement |u . n| (both end vertices) is at least
+        ``significant`` times its largest value, points at the midpoints of ``points`` equal
+        pieces of their total length; 3-D, farthest-point sampling of those vertices.  Needs
+        the model's ``undeformed()`` interface (vertex for vertex the solution's).
+    significant
+        The threshold of ``placement = "displacement"``, a fraction in (0, 1).
 
     Returns
     -------
@@ -96,6 +109,11 @@ def synthetic_observations(
         raise ConfigError(f"points must be a positive integer or None, got {points!r}")
     if points is not None and points < 1:
         raise ConfigError(f"points must be a positive integer or None, got {points!r}")
+    if placement not in ("even", "displacement"):
+        raise ConfigError(f"placement must be 'even' or 'displacement', got {placement!r}")
+    if not (isinstance(significant, (int, float)) and 0.0 < float(significant) < 1.0):
+        raise ConfigError(f"significant must be a fraction in (0, 1), got {significant!r}")
+    reference = _reference_interface(model) if placement == "displacement" else None
     coords = [check_coordinate(c, "synthetic_observations: coordinate") for c in coordinates]
     if not coords:
         raise ConfigError("synthetic_observations needs at least one coordinate")
@@ -119,7 +137,10 @@ def synthetic_observations(
         )
         mp, directions = None, None
         if points is not None:
-            mp, directions = _pick_points(gamma, points)
+            if reference is None:
+                mp, directions = _pick_points(gamma, points)
+            else:
+                mp, directions = _pick_displaced(gamma, reference, points, float(significant))
             mp = mp + _noise(rng, sigma, noise, directions)
         label = ", ".join(f"{k}={v:g}" for k, v in c.items())
         out.append(
@@ -143,6 +164,49 @@ def _noise(rng: np.random.Generator, sigma: float, kind: str, directions: FloatA
     return sigma * rng.standard_normal((n, dim))
 
 
+def _reference_interface(model: ForwardModel) -> Interface:
+    """The model's unloaded interface, for ``placement = "displacement"``."""
+    undeformed = getattr(model, "undeformed", None)
+    if not callable(undeformed):
+        raise ConfigError(
+            f"placement 'displacement' needs the model's undeformed() interface; "
+            f"{type(model).__name__} has none (use placement 'even')"
+        )
+    gamma = undeformed()
+    if not isinstance(gamma, Interface):
+        raise ConfigError(f"{type(model).__name__}.undeformed() must return an Interface")
+    return gamma
+
+
+def _pick_displaced(
+    gamma: Interface, reference: Interface, n: int, significant: float
+) -> tuple[FloatArray, FloatArray]:
+    """``n`` points spread evenly over the significantly displaced part of ``gamma``."""
+    if reference.vertices.shape != gamma.vertices.shape or not np.array_equal(
+        reference.cells, gamma.cells
+    ):
+        raise ConfigError(
+            "placement 'displacement': the model's undeformed() interface does not match the "
+            f"solution's vertex for vertex ({len(reference.vertices)} vs {len(gamma.vertices)} "
+            "vertices)"
+        )
+    u_n = np.abs(np.sum((gamma.vertices - reference.vertices) * gamma.vertex_normals, axis=1))
+    if not u_n.max() > 0.0:
+        raise ConfigError("placement 'displacement': the interface did not move at the truth")
+    moved = u_n >= significant * u_n.max()
+    if gamma.dim == 3:
+        keep = np.flatnonzero(moved)
+        if n > len(keep):
+            raise ConfigError(
+                f"points={n} exceeds the {len(keep)} significantly displaced vertices"
+            )
+        return _farthest_points(gamma.vertices[keep], gamma.vertex_normals[keep], n)
+    edges = np.flatnonzero(moved[gamma.cells].all(axis=1))
+    if len(edges) == 0:
+        raise ConfigError("placement 'displacement': no interface edge moved significantly")
+    return _points_along_curves(gamma, n, edges)
+
+
 def _pick_points(gamma: Interface, n: int) -> tuple[FloatArray, FloatArray]:
     """``n`` points spread evenly over the interface and the unit normals there."""
     if gamma.dim == 2:
@@ -151,27 +215,37 @@ def _pick_points(gamma: Interface, n: int) -> tuple[FloatArray, FloatArray]:
         raise ConfigError(
             f"points={n} exceeds the {len(gamma.vertices)} vertices of the 3-D interface"
         )
-    v = gamma.vertices
+    return _farthest_points(gamma.vertices, gamma.vertex_normals, n)
+
+
+def _farthest_points(v: FloatArray, normals: FloatArray, n: int) -> tuple[FloatArray, FloatArray]:
+    """Farthest-point sampling of ``n`` of the vertices ``v`` (deterministic, evenly spread),
+    starting at the highest one; their normals."""
     chosen = [int(np.argmax(v[:, 2]))]
     dist = np.linalg.norm(v - v[chosen[0]], axis=1)
-    for _ in range(n - 1):  # farthest-point sampling: deterministic and evenly spread
+    for _ in range(n - 1):
         k = int(np.argmax(dist))
         chosen.append(k)
         dist = np.minimum(dist, np.linalg.norm(v - v[k], axis=1))
     idx = np.array(chosen)
-    return v[idx].copy(), gamma.vertex_normals[idx]
+    return v[idx].copy(), normals[idx]
 
 
-def _points_along_curves(gamma: Interface, n: int) -> tuple[FloatArray, FloatArray]:
-    """Midpoints of ``n`` equal arc-length pieces of the polylines; interpolated vertex normals."""
-    p0 = gamma.vertices[gamma.cells[:, 0]]
-    p1 = gamma.vertices[gamma.cells[:, 1]]
-    ends: FloatArray = np.cumsum(gamma.sizes)
+def _points_along_curves(
+    gamma: Interface, n: int, edges: NDArray[np.int64] | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """Midpoints of ``n`` equal arc-length pieces of the polylines (of their ``edges`` only,
+    in order, if given); interpolated vertex normals."""
+    cells = gamma.cells if edges is None else gamma.cells[edges]
+    sizes = gamma.sizes if edges is None else gamma.sizes[edges]
+    p0 = gamma.vertices[cells[:, 0]]
+    p1 = gamma.vertices[cells[:, 1]]
+    ends: FloatArray = np.cumsum(sizes)
     s = (np.arange(n) + 0.5) * ends[-1] / n
     seg = np.minimum(np.searchsorted(ends, s), len(ends) - 1)
-    w = 1.0 - (ends[seg] - s) / gamma.sizes[seg]
+    w = 1.0 - (ends[seg] - s) / sizes[seg]
     pts = (1.0 - w)[:, None] * p0[seg] + w[:, None] * p1[seg]
     vn = gamma.vertex_normals
-    nrm = (1.0 - w)[:, None] * vn[gamma.cells[seg, 0]] + w[:, None] * vn[gamma.cells[seg, 1]]
+    nrm = (1.0 - w)[:, None] * vn[cells[seg, 0]] + w[:, None] * vn[cells[seg, 1]]
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     return pts, nrm

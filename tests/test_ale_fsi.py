@@ -348,3 +348,38 @@ def test_pickled_model_rebuilds_its_mesh_and_gives_the_same_answer(model, tmp_pa
     assert clone.options == model.options and clone._solver is None
     b = clone.solve({"E": 400.0, "nu": 0.3}, coords, tmp_path).interface(coords[0])
     assert np.abs(a.vertices - b.vertices).max() < 1e-12
+
+
+def test_undeformed_interface_and_named_outline(model, reference):
+    # undeformed(): the reference configuration, vertex for vertex the zero-inflow solution
+    rest = model.undeformed()
+    np.testing.assert_array_equal(rest.cells, reference.cells)
+    assert np.abs(rest.vertices - reference.vertices).max() < 1e-12
+    assert model.dim == 2 and AleFsiForwardModel(geometry="dome_3d").dim == 3
+    # the default outline has a name; naming it gives the same mesh
+    named = AleFsiForwardModel(**COARSE, outline="fig2_sketch", warm_start=False).undeformed()
+    np.testing.assert_array_equal(named.vertices, rest.vertices)
+    with pytest.raises(ValueError, match="fig2_sketch"):
+        AleFsiForwardModel(outline="no_such_outline")
+
+
+def test_synthetic_points_where_the_flow_cell_moved(model, tmp_path):
+    # Paper A Fig. 3: the points go to the parts of the interface that moved significantly
+    (obs,) = fbia.synthetic_observations(
+        model,
+        {"E": 400.0, "nu": 0.3},
+        [{"inflow_rate": 100.0}],
+        0.0,
+        1,
+        points=10,
+        placement="displacement",
+    )
+    gamma = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path).interface(
+        {"inflow_rate": 100.0}
+    )
+    u_n = np.abs(
+        np.sum((gamma.vertices - model.undeformed().vertices) * gamma.vertex_normals, axis=1)
+    )
+    pts = obs.measurement_points.points
+    near = np.argmin(np.linalg.norm(gamma.vertices[None] - pts[:, None], axis=2), axis=1)
+    assert len(pts) == 10 and (u_n[near] >= 0.45 * u_n.max()).all()

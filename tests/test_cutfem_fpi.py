@@ -126,7 +126,7 @@ def test_curved_biofilm_mesh_follows_the_outline_spline() -> None:
     miss the spline by ~5 um, second- and third-order geometry by ~1 and ~0.07 um."""
     import shapely
 
-    from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
+    from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE
     from fbia.plugins.cutfem_fpi.coupled import InterfaceSampler
     from fbia.plugins.cutfem_fpi.meshes import biofilm_mesh
 

@@ -98,7 +98,7 @@ def test_porosity_out_of_range_raises() -> None:
 def _extension_errors(h: float) -> tuple[float, float]:
     import ngsolve as ngs
 
-    from fbia.plugins.ale_fsi.geometry import DEFAULT_OUTLINE
+    from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE
     from fbia.plugins.cutfem_fpi.meshes import biofilm_mesh
     from fbia.plugins.cutfem_fpi.skeleton import Skeleton, SkeletonSettings
 

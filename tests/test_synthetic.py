@@ -150,3 +150,55 @@ def test_bad_arguments_and_failed_truth(m2):
         fbia.ForwardModelError, match=r"failed at the ground truth .*mesh distortion"
     ):
         synthetic_observations(failing, TRUTH, [Q], 0.1, seed=0)
+
+
+def test_points_placed_where_the_interface_moved_along_its_normal(m2, exact):
+    # Paper A Fig. 3: points "evenly distributed in regions with significant displacement",
+    # directions normal to the displaced interface
+    obs = synthetic_observations(
+        m2, TRUTH, [Q], noise_std=0.0, seed=1, points=10, placement="displacement"
+    )[0]
+    rest = m2.undeformed()
+    u_n = np.abs(np.sum((exact.vertices - rest.vertices) * exact.vertex_normals, axis=1))
+    moved = u_n >= 0.5 * u_n.max()
+    mp = obs.measurement_points
+    assert len(mp) == 10
+    # every point lies on an edge whose two ends moved by at least half the largest motion
+    nearest = np.argmin(np.linalg.norm(exact.vertices[None] - mp.points[:, None], axis=2), axis=1)
+    assert moved[nearest].all()
+    assert not moved.all()  # the criterion excludes part of the interface
+    np.testing.assert_allclose(np.linalg.norm(mp.directions, axis=1), 1.0, rtol=1e-12)
+    # a stricter threshold moves the points to where the interface moved most
+    strict = synthetic_observations(
+        m2,
+        TRUTH,
+        [Q],
+        noise_std=0.0,
+        seed=1,
+        points=10,
+        placement="displacement",
+        significant=0.9,
+    )[0]
+    sp = strict.measurement_points.points
+    near = np.argmin(np.linalg.norm(exact.vertices[None] - sp[:, None], axis=2), axis=1)
+    assert (u_n[near] >= 0.85 * u_n.max()).all()
+    assert not np.allclose(sp, mp.points)
+
+
+def test_displacement_placement_needs_the_undeformed_interface(m2):
+    class NoRest:
+        def __init__(self, model):
+            self.model = model
+
+        def parameter_names(self):
+            return self.model.parameter_names()
+
+        def solve(self, p, c, w):
+            return self.model.solve(p, c, w)
+
+    with pytest.raises(fbia.ConfigError, match="undeformed"):
+        synthetic_observations(NoRest(m2), TRUTH, [Q], 0.0, 1, points=5, placement="displacement")
+    with pytest.raises(fbia.ConfigError, match="significant"):
+        synthetic_observations(m2, TRUTH, [Q], 0.0, 1, points=5, significant=1.5)
+    with pytest.raises(fbia.ConfigError, match="placement"):
+        synthetic_observations(m2, TRUTH, [Q], 0.0, 1, points=5, placement="random")

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...core.errors import ConfigError, ForwardModelError
+from .outlines import DEFAULT_OUTLINE
 
 if TYPE_CHECKING:
     import ngsolve
@@ -53,26 +54,6 @@ BOUNDARY_NAMES = (
     "symmetry",
 )
 REQUIRED_BOUNDARIES = ("inflow", "interface", "solid_fixed")
-
-#: Outline of the default biofilm mound (mm), from the upstream foot over the top to the
-#: downstream foot, i.e. with the solid on the right (docs/architecture.md).  Shaped after Paper A
-#: Fig. 2: it fills about half of the 1 mm channel height and overhangs on the downstream side,
-#: while the downstream foot meets the floor almost at a right angle (an acute fluid wedge there
-#: inverts ALE elements for soft material).
-DEFAULT_OUTLINE: tuple[tuple[float, float], ...] = (
-    (0.50, 0.00),
-    (0.55, 0.11),
-    (0.64, 0.27),
-    (0.78, 0.41),
-    (0.94, 0.48),
-    (1.08, 0.46),
-    (1.18, 0.39),
-    (1.22, 0.30),
-    (1.21, 0.21),
-    (1.18, 0.13),
-    (1.17, 0.06),
-    (1.17, 0.00),
-)
 
 
 def _as_outline(points: ArrayLike, where: str) -> NDArray[np.float64]:

@@ -39,7 +39,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
-from .geometry import DEFAULT_OUTLINE, FLUID, SOLID, build_flow_cell, check_mesh, mesh_arrays
+from .geometry import FLUID, SOLID, build_flow_cell, check_mesh, mesh_arrays
+from .outlines import DEFAULT_OUTLINE
 
 if TYPE_CHECKING:
     import ngsolve

@@ -15,8 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from ...core.errors import ConfigError
-from .geometry import BOUNDARY_NAMES, DEFAULT_OUTLINE, FLUID, SOLID
+from .geometry import BOUNDARY_NAMES, FLUID, SOLID
 from .options import AleFsiOptions
+from .outlines import resolve_outline
 
 
 def build_mesh(o: AleFsiOptions) -> Any:
@@ -64,7 +65,7 @@ def build_mesh(o: AleFsiOptions) -> Any:
             depth=o.channel_width,
             length=o.channel_length,
             height=o.channel_height,
-            outline=DEFAULT_OUTLINE if o.outline is None else o.outline,
+            outline=resolve_outline(o.outline),
             smooth=o.smooth_outline,
             mesh_size=o.mesh_size,
             interface_mesh_size=o.interface_mesh_size,
@@ -75,7 +76,7 @@ def build_mesh(o: AleFsiOptions) -> Any:
     return geometry.build_flow_cell(
         length=o.channel_length,
         height=o.channel_height,
-        outline=DEFAULT_OUTLINE if o.outline is None else o.outline,
+        outline=resolve_outline(o.outline),
         smooth=o.smooth_outline,
         subdomains=o.subdomains,
         mesh_size=o.mesh_size,

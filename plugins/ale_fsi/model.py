@@ -293,6 +293,23 @@ class AleFsiForwardModel(Configurable):
             self._post = AleFsiPostprocess(self._solver)
         return self._solver
 
+    @property
+    def dim(self) -> int:
+        """The spatial dimension of the model's interfaces (2 or 3), from the options."""
+        o = self.options
+        if o.mesh_file is not None:
+            from .mesh_file3d import is_3d_mesh_file
+
+            return 3 if is_3d_mesh_file(o.mesh_file) else 2
+        return 2 if o.geometry == "flow_cell" else 3
+
+    def undeformed(self) -> Interface:
+        """The unloaded interface (the mesh's reference configuration), vertex for vertex
+        the one :meth:`solve` returns: the displacement of a vertex is the difference."""
+        self._get_solver()
+        interface: Interface = self._post.interface(deformed=False)
+        return interface
+
     def build_mesh(self) -> Any:
         """The NGSolve mesh this model solves on (built or read on every call)."""
         return build_mesh(self.options)

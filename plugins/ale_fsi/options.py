@@ -13,6 +13,7 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from ...core.options import PluginOptions
+from .outlines import NAMED_OUTLINES, OutlineName
 
 Point = tuple[float, float]
 Probe = tuple[float, float] | tuple[float, float, float]  # one coordinate per mesh dimension
@@ -68,10 +69,11 @@ class AleFsiOptions(PluginOptions):
         description="colony_3d: Gaussian smoothing width of the height field (voxel steps "
         "of a segmented surface, spline ringing at a steep foot); 0: none [mm]",
     )
-    outline: list[Point] | None = Field(
+    outline: list[Point] | OutlineName | None = Field(
         None,
         description="biofilm outline from the upstream to the downstream foot, both on "
-        "the floor y = 0; default: a mound shaped like Paper A Fig. 2 [mm]",
+        "the floor y = 0, or a named one; default 'fig2_sketch', a mound shaped like Paper "
+        "A Fig. 2 (fbia.plugins.ale_fsi.outlines) [mm]",
     )
     smooth_outline: bool = Field(
         True, description="interpolate the outline by a cubic spline (else polygon) [-]"
@@ -155,10 +157,20 @@ class AleFsiOptions(PluginOptions):
         "direct", description="Newton systems: Pardiso, or GMRes with block preconditioner [-]"
     )
 
+    @field_validator("outline", mode="before")
+    @classmethod
+    def _outline_name(cls, v: Any) -> Any:
+        if isinstance(v, str) and v not in NAMED_OUTLINES:
+            raise ValueError(
+                f"unknown outline {v!r}; named outlines: {', '.join(sorted(NAMED_OUTLINES))} "
+                "(or give the points)"
+            )
+        return v
+
     @field_validator("outline")
     @classmethod
-    def _outline_len(cls, v: list[Point] | None) -> list[Point] | None:
-        if v is not None and len(v) < 3:
+    def _outline_len(cls, v: list[Point] | str | None) -> list[Point] | str | None:
+        if isinstance(v, list) and len(v) < 3:
             raise ValueError("an outline needs at least 3 points")
         return v
 

@@ -399,7 +399,7 @@ class CutFemFpiForwardModel(Configurable):
 
     def _outline(self) -> np.ndarray:
         """The biofilm outline option (mm), checked like the ``ale_fsi`` flow cell checks it."""
-        from ..ale_fsi.geometry import DEFAULT_OUTLINE
+        from ..ale_fsi.outlines import DEFAULT_OUTLINE
 
         o = self.options
         where = "cutfem_fpi options: outline"

@@ -402,7 +402,9 @@ class GrowthForwardModel(Configurable):
         """The biofilm outline of the built mesh (mm): ``outline`` or the finger."""
         o = self.options
         if o.outline is not None:
-            return np.asarray(o.outline, dtype=float)
+            from ..ale_fsi.outlines import resolve_outline
+
+            return np.asarray(resolve_outline(o.outline), dtype=float)
         return finger_outline(o.finger_x0, o.finger_width, o.finger_height)
 
     def build_mesh(self) -> Any:
