@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +17,11 @@ from fbia.core.paper import KINDS, compare, lookup, read_paper
 from fbia.core.paper_report import PaperRecord, comparison_table, rules_table, write_summary
 from fbia.iterators.gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, PosteriorCheck
 from fbia.iterators.surrogate_convergence_result import ConvergenceRow, SurrogateConvergenceResult
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+PAPER_STUDIES = sorted(
+    p for p in EXAMPLES.glob("paper_*/*/*.toml") if "paper" in tomllib.loads(p.read_text())
+)
 
 PAPER = """
 [paper]
@@ -511,3 +518,14 @@ def test_a_paper_json_of_the_per_row_rules_is_listed_stale(tmp_path):
     assert "| [old](#old) | Paper A, Table 2 | stale | converged_gradient |" in text
     assert "This `paper.json` is stale: written by an older fbia" in text
     assert "within a factor 100" not in text and "magnitude" not in text
+
+
+@pytest.mark.parametrize("path", PAPER_STUDIES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_the_paper_examples_tables_read_under_the_kinds(path):
+    """Every [paper] table of examples/paper_*: kinds only, each row a kind's rule."""
+    spec = read_paper(tomllib.loads(path.read_text())["paper"], str(path))
+    assert spec.values and all(v.kind in KINDS for v in spec.values)
+
+
+def test_there_are_paper_examples_to_check():
+    assert len(PAPER_STUDIES) >= 22  # Paper A: 13, Paper B: 9 when the kinds came
