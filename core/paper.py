@@ -107,7 +107,7 @@ class Kind:
             "ordering": lambda: (
                 "f > g (`above = g`) or f < g (`below = g`), g a quantity of the result"
             ),
-            "none": lambda: "shown beside the paper's number, not judged",
+            "none": lambda: "fbia's number beside the paper's",
         }[self.rule]()
 
 
