@@ -1,7 +1,9 @@
 """Published numbers beside fbia's: the ``[paper]`` table of a study file and its comparison.
 
 A study that reproduces an example of a paper states, as data, what the paper reported and
-what "agrees" means for each number::
+what *kind* of quantity each number is; the kind alone says what "agrees" means (``KINDS``:
+one rule per kind, the same for every study, so that no row can choose a rule it cannot
+fail)::
 
     [paper]
     source = "Paper A, Table 2, row sigma = 1e-3 mm"
@@ -9,25 +11,35 @@ what "agrees" means for each number::
 
     [[paper.values]]
     quantity = "mean.E"        # a name the result exposes (Result.quantities())
+    kind = "modulus"           # KINDS below: modulus, ratio, scale, count, ordering, shown
     paper = 408.0              # the published value
     unit = "Pa"
-    rule = "relative"          # what "agrees" means (RULES below); default relative
-    tolerance = 0.05           # of the rule (relative: 5 %)
     label = "mean E"           # optional: how the report names the row
-    why = "different noise draw: the optimum moves with the noise (Table 2)"
+    why = "measured cause of a difference, or 'cause not found' and what was measured"
 
-:func:`read_paper` checks the table (unknown keys, wrong types, a rule without the tolerance
-it needs: one-line :class:`~fbia.core.errors.ConfigError` naming the file and the key) and
-returns a :class:`PaperSpec`; :func:`compare` looks each quantity up in the result's
+    [[paper.values]]           # an ordering the paper states, of two quantities of the result
+    quantity = "start.olive.iterations"
+    kind = "ordering"
+    above = "start.red.iterations"   # or below = "..."
+
+:func:`read_paper` checks the table (unknown keys, wrong types, an unknown kind, a kind
+without what it needs, the retired per-value ``rule``/``tolerance``: one-line
+:class:`~fbia.core.errors.ConfigError` naming the file and the entry) and returns a
+:class:`PaperSpec`; :func:`compare` looks each quantity up in the result's
 :meth:`~fbia.core.problem.Result.quantities` (an unknown name is a ConfigError that lists the
-available ones) and returns one :class:`Comparison` per value.  :mod:`fbia.core.paper_report`
-writes them as ``report.md`` and ``paper.json`` and composes the summary of many studies.
+available ones) and returns one :class:`Comparison` per value.  A result flagged
+``unreliable``, or one whose ``success`` is false, agrees with nothing: every judged row is
+"no", with that reason.  :mod:`fbia.core.paper_report` writes the rows as ``report.md`` and
+``paper.json`` and composes the summary of many studies, with the rules of ``KINDS`` stated
+once at the top.
 
 >>> spec = read_paper({"source": "Paper A", "values": [
-...     {"quantity": "x.E", "paper": 400.0, "unit": "Pa", "tolerance": 0.01}]}, "s.toml")
->>> rows = compare(spec, {"x.E": 402.0, "x.nu": 0.3})
->>> rows[0].agrees, round(rows[0].rel_diff, 4)
-(True, 0.005)
+...     {"quantity": "x.E", "kind": "modulus", "paper": 400.0, "unit": "Pa"}]}, "s.toml")
+>>> rows = compare(spec, {"x.E": 407.0, "x.nu": 0.3})
+>>> rows[0].agrees, round(rows[0].rel_diff, 4), rows[0].value.criterion()
+(True, 0.0175, 'within 2 %')
+>>> compare(spec, {"x.E": 407.0}, status="unreliable", success=False)[0].reason
+'the result is flagged unreliable (status unreliable)'
 >>> compare(spec, {"x.nu": 0.3})                               # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
@@ -37,7 +49,7 @@ fbia.core.errors.ConfigError: s.toml: [[paper.values]] #1 quantity: ... 'x.E'; a
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -45,8 +57,9 @@ from .errors import ConfigError
 from .study_schema import PaperSection, PaperValueSection, parse_section
 
 __all__ = [
-    "RULES",
+    "KINDS",
     "Comparison",
+    "Kind",
     "PaperSpec",
     "PaperValue",
     "compare",
@@ -55,31 +68,106 @@ __all__ = [
     "verdict",
 ]
 
-#: The rules and what "agrees" means under each (t: the tolerance, p: paper, f: fbia).
-RULES: dict[str, str] = {
-    "relative": "|f - p| <= t |p| (t required)",
-    "absolute": "|f - p| <= t (t required)",
-    "magnitude": "|log10(f / p)| <= t: the same order of magnitude (t default 1)",
-    "equal": "f == p (counts, flags such as converged = 1)",
-    "same_sign": "f and p have the same sign (0 counts as its own sign)",
-    "above": "f > the result's quantity `than` (an ordering the paper states)",
-    "below": "f < the result's quantity `than`",
-    "none": "shown, not judged (a number the paper gives that fbia cannot reproduce in kind)",
+
+@dataclass(frozen=True)
+class Kind:
+    """A kind of quantity and the one rule by which fbia's number f agrees with the paper's p.
+
+    ``rule``: ``relative`` (|f - p| <= t |p|), ``absolute`` (|f - p| <= t), ``factor``
+    (|log2(f / p)| <= log2 t), ``equal``, ``ordering`` (f above or below another quantity of
+    the result), ``none`` (shown, not judged); ``tolerance``: t.
+    """
+
+    rule: str
+    tolerance: float | None
+    covers: str  # which quantities are of this kind, in words
+
+    @property
+    def criterion(self) -> str:
+        """The rule in a few words, e.g. ``within 2 %``."""
+        t = self.tolerance
+        return {
+            "relative": lambda: f"within {100 * _num(t):g} %",
+            "absolute": lambda: f"within {_num(t):g}",
+            "factor": lambda: f"within a factor {_num(t):g}",
+            "equal": lambda: "equal",
+            "ordering": lambda: "the order the paper states",
+            "none": lambda: "not judged",
+        }[self.rule]()
+
+    @property
+    def formula(self) -> str:
+        """What "agrees" means exactly (f: fbia, p: the paper)."""
+        t = self.tolerance
+        return {
+            "relative": lambda: f"|f - p| <= {_num(t):g} |p|",
+            "absolute": lambda: f"|f - p| <= {_num(t):g}",
+            "factor": lambda: f"|log2(f / p)| <= {math.log2(_num(t)):g}",
+            "equal": lambda: "f = p exactly",
+            "ordering": lambda: (
+                "f > g (`above = g`) or f < g (`below = g`), g a quantity of the result"
+            ),
+            "none": lambda: "fbia's number beside the paper's",
+        }[self.rule]()
+
+
+#: The kinds of quantity and their rules: the only rules a [[paper.values]] entry can have.
+KINDS: dict[str, Kind] = {
+    "modulus": Kind(
+        "relative",
+        0.02,
+        "Young's moduli and other moduli or stiffness-like parameters (E, K, growth constants)",
+    ),
+    "ratio": Kind(
+        "absolute",
+        0.02,
+        "Poisson's ratio ν, porosity φ and other dimensionless parameters of order 1",
+    ),
+    "scale": Kind(
+        "factor", 2.0, "residuals, spreads (std), errors and other scale quantities (p > 0)"
+    ),
+    "count": Kind(
+        "equal",
+        None,
+        "iterations, numbers of converged starts, flags such as converged = 1",
+    ),
+    "ordering": Kind(
+        "ordering",
+        None,
+        "an ordering the paper states (olive needs more iterations than red)",
+    ),
+    "shown": Kind(
+        "none",
+        None,
+        "a number the paper gives that fbia's result does not reproduce in kind",
+    ),
 }
-_NEEDS_TOLERANCE = ("relative", "absolute")
-_ORDERING = ("above", "below")
+
+#: The tests of the rules that compare f with a published p (t: the kind's tolerance).
+_TESTS: dict[str, Callable[[float, float, float | None], bool]] = {
+    "relative": lambda f, p, t: abs(f - p) <= _num(t) * abs(p),
+    "absolute": lambda f, p, t: abs(f - p) <= _num(t),
+    "factor": lambda f, p, t: f > 0 and abs(math.log2(f / p)) <= math.log2(_num(t)),
+    "equal": lambda f, p, t: f == p,
+}
+#: the keys of the per-value rules before KINDS, and what to write instead
+_RETIRED = {
+    "rule": "give kind = one of {kinds} instead: the kind fixes the rule",
+    "tolerance": "give kind = one of {kinds} instead: the kind fixes the tolerance",
+    "than": 'an ordering is kind = "ordering" with above = or below = the other quantity',
+}
 
 
 @dataclass(frozen=True)
 class PaperValue:
-    """One published number (or ordering) and what "agrees" means for it."""
+    """One published number (or ordering) and the kind of quantity it is."""
 
     quantity: str
+    kind: str
     paper: float | None
     unit: str
-    rule: str
-    tolerance: float | None
-    than: str | None
+    above: str | None
+    below: str | None
     label: str
     why: str
 
@@ -88,18 +176,18 @@ class PaperValue:
         """How the report names the row: the label, else the quantity."""
         return self.label or self.quantity
 
+    @property
+    def than(self) -> str | None:
+        """The other quantity of an ordering."""
+        return self.above if self.above is not None else self.below
+
     def criterion(self) -> str:
-        """The rule in a few words, e.g. ``within 5 %``."""
-        t = self.tolerance
-        if self.rule == "relative":
-            return f"within {100 * (t or 0):g} %"
-        if self.rule == "absolute":
-            return f"within {t:g} {self.unit}".rstrip()
-        if self.rule == "magnitude":
-            return f"within a factor 10^{1.0 if t is None else t:g}"
-        if self.rule in _ORDERING:
-            return f"{'>' if self.rule == 'above' else '<'} {self.than}"
-        return {"equal": "equal", "same_sign": "same sign", "none": "not judged"}[self.rule]
+        """The kind's rule in a few words, e.g. ``within 2 %``, ``> start.red.iterations``."""
+        if self.above is not None:
+            return f"> {self.above}"
+        if self.below is not None:
+            return f"< {self.below}"
+        return KINDS[self.kind].criterion
 
 
 @dataclass(frozen=True)
@@ -116,8 +204,9 @@ class PaperSpec:
 class Comparison:
     """One row of the report: the published number, fbia's, their difference, the verdict.
 
-    ``agrees`` is None for rule ``none``; ``abs_diff``/``rel_diff`` are None where there is
-    no published number or the relative difference is undefined (paper value 0).
+    ``agrees`` is None for kind ``shown``; ``abs_diff``/``rel_diff`` are None where there is
+    no published number or the relative difference is undefined (paper value 0);
+    ``reason``: why a row counts as "no" whatever its numbers (the result's status).
     """
 
     value: PaperValue
@@ -125,7 +214,8 @@ class Comparison:
     abs_diff: float | None
     rel_diff: float | None
     agrees: bool | None
-    reference: float | None = None  # the `than` quantity's value (rules above/below)
+    reference: float | None = None  # the other quantity's value (kind ordering)
+    reason: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -146,6 +236,7 @@ class Comparison:
             data["rel_diff"],
             data["agrees"],
             data.get("reference"),
+            data.get("reason", ""),
         )
 
 
@@ -160,36 +251,56 @@ def read_paper(raw: Any, file: str, has_iterator: bool = True) -> PaperSpec:
     section = parse_section(PaperSection, raw, where)
     if not section.values:
         raise ConfigError("no [[paper.values]]: give at least one published number", where)
+    kinds = ", ".join(KINDS)
     values = []
     for k, item in enumerate(section.values, start=1):
         at = f"{file}: [[paper.values]] #{k}"
+        retired = next((key for key in _RETIRED if key in item), None)
+        if retired is not None:
+            hint = _RETIRED[retired].format(kinds=kinds)
+            raise ConfigError(
+                f"{retired!r} is no longer given per value: {hint}", f"{at} {retired}"
+            )
         v = parse_section(PaperValueSection, item, at)
-        needs_paper = v.rule not in _ORDERING
-        if needs_paper and v.paper is None:
-            raise ConfigError(f"rule {v.rule!r} needs the published value 'paper'", at)
-        if v.rule in _NEEDS_TOLERANCE and v.tolerance is None:
-            raise ConfigError(f"rule {v.rule!r} needs a 'tolerance'", at)
-        if v.tolerance is not None and v.rule not in (*_NEEDS_TOLERANCE, "magnitude"):
-            raise ConfigError(f"rule {v.rule!r} takes no 'tolerance'", f"{at} tolerance")
-        if v.rule in _ORDERING and v.than is None:
-            raise ConfigError(f"rule {v.rule!r} needs 'than' (the quantity to compare with)", at)
-        if v.than is not None and v.rule not in _ORDERING:
-            raise ConfigError(f"'than' only for the rules above and below, not {v.rule!r}", at)
-        if v.rule == "magnitude" and v.paper is not None and not v.paper > 0:
-            raise ConfigError(f"rule 'magnitude' needs a positive paper value, got {v.paper}", at)
+        if v.kind not in KINDS:
+            raise ConfigError(f"unknown kind {v.kind!r}; valid: {kinds}", f"{at} kind")
+        _check(v, at)
         values.append(
             PaperValue(
                 quantity=v.quantity,
+                kind=v.kind,
                 paper=v.paper,
                 unit=v.unit,
-                rule=v.rule,
-                tolerance=v.tolerance,
-                than=v.than,
+                above=v.above,
+                below=v.below,
                 label=v.label,
                 why=" ".join(v.why.split()),
             )
         )
     return PaperSpec(section.source, " ".join(section.note.split()), tuple(values), file)
+
+
+def _check(v: PaperValueSection, at: str) -> None:
+    """What a value of its kind needs: a published number, or one other quantity."""
+    if v.kind == "ordering":
+        if (v.above is None) == (v.below is None):
+            raise ConfigError(
+                "kind 'ordering' needs one of 'above' and 'below' (the quantity to compare with)",
+                at,
+            )
+        if v.paper is not None:
+            raise ConfigError(
+                "kind 'ordering' compares two quantities of the result: it takes no 'paper'",
+                f"{at} paper",
+            )
+        return
+    if v.above is not None or v.below is not None:
+        key = "above" if v.above is not None else "below"
+        raise ConfigError(f"{key!r} only for kind 'ordering', not {v.kind!r}", f"{at} {key}")
+    if v.paper is None and v.kind != "shown":
+        raise ConfigError(f"kind {v.kind!r} needs the published value 'paper'", at)
+    if v.kind == "scale" and v.paper is not None and not v.paper > 0:
+        raise ConfigError(f"kind 'scale' needs a positive paper value, got {v.paper}", at)
 
 
 def lookup(quantities: Mapping[str, float], name: str, where: str = "") -> float:
@@ -200,52 +311,53 @@ def lookup(quantities: Mapping[str, float], name: str, where: str = "") -> float
     raise ConfigError(f"the result has no quantity {name!r}; available: {available}", where)
 
 
-def compare(spec: PaperSpec, quantities: Mapping[str, float]) -> list[Comparison]:
-    """One :class:`Comparison` per value of ``spec``, fbia's number from ``quantities``."""
+def compare(
+    spec: PaperSpec, quantities: Mapping[str, float], status: str = "", success: bool = True
+) -> list[Comparison]:
+    """One :class:`Comparison` per value of ``spec``, fbia's number from ``quantities``.
+
+    ``status``, ``success``: the result's; a result with status ``unreliable`` or without
+    success agrees with nothing (every judged row "no", with that reason)."""
+    flagged = ""
+    if status == "unreliable":
+        flagged = f"the result is flagged unreliable (status {status})"
+    elif not success:
+        flagged = f"the result is not a success (status {status or 'unknown'})"
     rows = []
     for k, v in enumerate(spec.values, start=1):
         at = f"{spec.where}: [[paper.values]] #{k}" if spec.where else f"[[paper.values]] #{k}"
         f = lookup(quantities, v.quantity, f"{at} quantity")
-        ref = lookup(quantities, v.than, f"{at} than") if v.than is not None else None
-        rows.append(_judge(v, f, ref))
+        key = "above" if v.above is not None else "below"
+        ref = lookup(quantities, v.than, f"{at} {key}") if v.than is not None else None
+        rows.append(_judge(v, f, ref, flagged))
     return rows
 
 
-def _judge(v: PaperValue, f: float, ref: float | None) -> Comparison:
+def _judge(v: PaperValue, f: float, ref: float | None, flagged: str) -> Comparison:
+    kind = KINDS[v.kind]
     p = v.paper
     abs_diff = rel_diff = None
     if p is not None and math.isfinite(f):
         abs_diff = f - p
         rel_diff = abs_diff / abs(p) if p != 0 else None
     agrees: bool | None
+    if kind.rule == "none":
+        return Comparison(v, f, abs_diff, rel_diff, None, ref)
+    if flagged:
+        return Comparison(v, f, abs_diff, rel_diff, False, ref, flagged)
     if not math.isfinite(f):
-        agrees = None if v.rule == "none" else False
-    elif v.rule == "relative":
-        agrees = abs(f - _num(p)) <= _num(v.tolerance) * abs(_num(p))
-    elif v.rule == "absolute":
-        agrees = abs(f - _num(p)) <= _num(v.tolerance)
-    elif v.rule == "magnitude":
-        t = 1.0 if v.tolerance is None else v.tolerance
-        agrees = f > 0 and abs(math.log10(f / _num(p))) <= t
-    elif v.rule == "equal":
-        agrees = f == p
-    elif v.rule == "same_sign":
-        agrees = _sign(f) == _sign(_num(p))
-    elif v.rule in _ORDERING:
+        agrees = False
+    elif kind.rule == "ordering":
         r = _num(ref)
-        agrees = math.isfinite(r) and (f > r if v.rule == "above" else f < r)
+        agrees = math.isfinite(r) and (f > r if v.above is not None else f < r)
     else:
-        agrees = None
+        agrees = _TESTS[kind.rule](f, _num(p), kind.tolerance)
     return Comparison(v, f, abs_diff, rel_diff, agrees, ref)
 
 
 def _num(x: float | None) -> float:
-    assert x is not None  # read_paper guarantees it for the rule
+    assert x is not None  # read_paper and KINDS guarantee it for the rule
     return x
-
-
-def _sign(x: float) -> int:
-    return (x > 0) - (x < 0)
 
 
 def verdict(rows: Sequence[Comparison]) -> tuple[int, int]:

@@ -9,12 +9,18 @@ a ``[paper]`` table (:mod:`fbia.core.paper`): it writes into the output folder
   iterator options, synthetic data, executor), links to the figures and the result's summary;
 * ``paper.json``: the same rows and times, typed (:class:`PaperRecord`), for the summary.
 
+Each row is judged by the rule of its kind (:data:`fbia.core.paper.KINDS`); both pages state
+the rules once, generated from that table (:func:`rules_table`), so text and code cannot
+drift.  A result flagged unreliable (or without success) agrees with nothing.
+
 :func:`write_summary` (``fbia reproductions OUT.md DIR ...``) collects every ``paper.json``
-below the given folders into one page (``docs/reproductions.md``): per study the source,
-the verdict (rows that agree of rows judged), the times and the full table, so that the page
-reads on its own where the output folders are not checked in; and per example the section
-``## Measured times`` of its README (the wall time of a fresh run, which a session that took
-its runs from the store cannot measure).
+below the given folders into one page (``docs/reproductions.md``): the rules, per study the
+source, the verdict (rows that agree of rows judged), the times and the full table, so that
+the page reads on its own where the output folders are not checked in; and per example the
+section ``## Measured times`` of its README (the wall time of a fresh run, which a session
+that took its runs from the store cannot measure).  A ``paper.json`` written before the rules
+by kind (its rows carry their own ``rule`` and ``tolerance``) is listed as *stale*, without
+its verdicts: run its study again.
 """
 
 from __future__ import annotations
@@ -30,11 +36,11 @@ from typing import Any
 
 from .errors import ConfigError
 from .options import plugin_options
-from .paper import Comparison, compare, verdict
+from .paper import KINDS, Comparison, compare, verdict
 from .problem import Result
 from .study import Study
 
-__all__ = ["PaperRecord", "write_paper_report", "write_summary"]
+__all__ = ["PaperRecord", "rules_table", "write_paper_report", "write_summary"]
 
 RECORD_NAME = "paper.json"
 REPORT_NAME = "report.md"
@@ -57,20 +63,34 @@ class PaperRecord:
     finished: str
     rows: tuple[Comparison, ...]
     reused: int = 0  # runs this session took from the store instead of running them
+    stale: str = ""  # why the rows are not shown (set on reading a record of an older fbia)
 
     def to_dict(self) -> dict[str, Any]:
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "rows"}
+        skip = ("rows", "stale")
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in skip}
         out["rows"] = [r.to_dict() for r in self.rows]
         return out
 
     @classmethod
     def read(cls, path: Path) -> PaperRecord:
+        """The record in ``path``; one written under the per-row rules before ``KINDS``
+        comes back stale, without its rows (their verdicts were lenient)."""
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-            rows = tuple(Comparison.from_dict(r) for r in data.pop("rows"))
+            raw_rows = data.pop("rows")
+            if any("rule" in r["value"] for r in raw_rows):
+                return cls(**data, rows=(), stale=STALE)
+            rows = tuple(Comparison.from_dict(r) for r in raw_rows)
             return cls(**data, rows=rows)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ConfigError(f"not a paper.json of fbia: {exc}", str(path)) from None
+
+
+#: what the summary says of a paper.json written before the rules by kind
+STALE = (
+    "written by an older fbia, whose [paper] rows chose their own rules and tolerances: its "
+    "verdicts are not shown; run the study again to judge it by the rules above"
+)
 
 
 def write_paper_report(
@@ -85,7 +105,7 @@ def write_paper_report(
     (``reused``: how many runs the session took from the store)."""
     spec = study.paper
     assert spec is not None
-    rows = tuple(compare(spec, result.quantities()))
+    rows = tuple(compare(spec, result.quantities(), result.status, result.success))
     forward = sum(e.time for e in result.evaluations if math.isfinite(e.time))
     record = PaperRecord(
         study=study.name,
@@ -113,11 +133,13 @@ def _report(
     study: Study, result: Result, record: PaperRecord, out: Path, figures: Sequence[Path]
 ) -> str:
     good, judged = verdict(record.rows)
+    flagged = next((r.reason for r in record.rows if r.reason), "")
     lines = [
         f"# {study.name}: fbia beside {record.source}",
         "",
         f"Study file `{study.path.name}`; result: **{result.status}** ({result.message}).",
-        f"{good} of {judged} published numbers agree by their rule.",
+        f"{good} of {judged} published numbers agree by the rule of their kind"
+        + (f" ({flagged}: every judged row counts as no)." if flagged else "."),
         "",
         _times(record),
         "",
@@ -125,6 +147,7 @@ def _report(
     if record.note:
         lines += [record.note, ""]
     lines += ["## Paper and fbia", "", *comparison_table(record.rows), ""]
+    lines += ["## Rules", "", *rules_table(), ""]
     lines += ["## Settings", "", *_settings(study), ""]
     if figures:
         lines += ["## Figures", ""]
@@ -143,9 +166,25 @@ def _times(record: PaperRecord) -> str:
     )
 
 
+def rules_table() -> list[str]:
+    """The rules, one per kind of quantity, as a markdown table (from ``KINDS``)."""
+    out = [
+        "Every published number is judged by the one rule of its kind (f: fbia, p: the paper). "
+        "A result whose status is `unreliable`, or that is not a success, agrees with "
+        "nothing: every judged row of its study counts as no.",
+        "",
+        "| kind | for | agrees when |",
+        "|---|---|---|",
+    ]
+    for name, kind in KINDS.items():
+        formula = kind.formula.replace("|", "\\|")
+        out.append(f"| `{name}` | {kind.covers} | {kind.criterion}: {formula} |")
+    return out
+
+
 def comparison_table(rows: Sequence[Comparison]) -> list[str]:
     """The markdown table of a comparison: quantity | paper | fbia | difference | rel. |
-    agrees? | why."""
+    agrees? | why (rel.: f/p for kind ``scale``)."""
     out = [
         "| quantity | paper | fbia | difference | rel. | agrees? | why |",
         "|---|---|---|---|---|---|---|",
@@ -153,14 +192,19 @@ def comparison_table(rows: Sequence[Comparison]) -> list[str]:
     for r in rows:
         v = r.value
         unit = f" {v.unit}" if v.unit else ""
-        paper = f"{_num(v.paper)}{unit}" if v.paper is not None else v.criterion()
-        if v.rule in ("above", "below") and r.reference is not None:
-            paper = f"{v.criterion()} ({_num(r.reference)})"
+        paper = f"{_num(v.paper)}{unit}" if v.paper is not None else "-"
+        if v.than is not None:
+            ref = f" ({_num(r.reference)})" if r.reference is not None else ""
+            paper = f"{v.criterion()}{ref}"
         fbia = f"{_num(r.fbia)}{unit}"
         diff = "" if r.abs_diff is None else _num(r.abs_diff)
         rel = "" if r.rel_diff is None else f"{100 * r.rel_diff:+.3g} %"
+        if v.kind == "scale" and r.rel_diff is not None:
+            rel = f"f/p = {1 + r.rel_diff:.3g}"
         mark = {True: "yes", False: "**no**", None: "-"}[r.agrees]
-        agrees = f"{mark} ({v.criterion()})" if r.agrees is not None else mark
+        agrees = mark
+        if r.agrees is not None:
+            agrees = f"{mark}: {r.reason}" if r.reason else f"{mark} ({v.criterion()})"
         why = v.why.replace("|", "\\|")
         out.append(f"| {v.name} | {paper} | {fbia} | {diff} | {rel} | {agrees} | {why} |")
     return out
@@ -236,7 +280,14 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
         "Generated by `fbia reproductions` from the `paper.json` files that `fbia run` writes "
         "beside `report.md` for every study with a `[paper]` table (`make reproduce` runs "
         "them all and regenerates this page). Each table puts the published number beside "
-        "fbia's, with the rule by which it counts as agreeing and why it differs.",
+        "fbia's, with the verdict by the rule of its kind and, where they differ, the "
+        'measured cause or "cause not found" and what was measured.',
+        "",
+        "## Rules",
+        "",
+        *rules_table(),
+        "",
+        "## Studies",
         "",
         "| study | source | agree | status | wall time of the last session | forward runs "
         "(their summed time) |",
@@ -245,8 +296,9 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     root = target.parent.resolve()
     for _, rec in records:
         good, judged = verdict(rec.rows)
+        agree = "stale" if rec.stale else f"{good} / {judged}"
         lines.append(
-            f"| [{rec.study}](#{_anchor(rec.study)}) | {rec.source} | {good} / {judged} | "
+            f"| [{rec.study}](#{_anchor(rec.study)}) | {rec.source} | {agree} | "
             f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
             f"{rec.nfev} ({rec.forward_time:.0f} s) |"
         )
@@ -265,6 +317,9 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
             _times(rec),
             "",
         ]
+        if rec.stale:
+            lines.append(f"This `paper.json` is stale: {rec.stale}.")
+            continue
         if rec.note:
             lines += [rec.note, ""]
         lines += comparison_table(rec.rows)

@@ -80,7 +80,7 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     cluster_options = { cores = 8, memory = "16GB", walltime = "04:00:00" }  # passed through
 
     [paper]                     # published numbers beside the result (fbia.core.paper)
-    source = "Paper A, Table 2" # [[paper.values]]: quantity, paper, unit, rule, tolerance, ...
+    source = "Paper A, Table 2" # [[paper.values]]: quantity, kind (its rule), paper, unit, ...
 
 Resume: every finished run is stored in ``<output>/store.sqlite`` the moment it ends.  Running
 the study again on the same output folder reuses every stored forward run of the same model

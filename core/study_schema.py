@@ -246,21 +246,16 @@ class ExecutorSection(Section):
         return self
 
 
-#: what "agrees" can mean for a [[paper.values]] entry (fbia.core.paper.RULES explains each)
-PAPER_RULES = ("relative", "absolute", "magnitude", "equal", "same_sign", "above", "below", "none")
-
-
 class PaperValueSection(Section):
-    """One ``[[paper.values]]`` table: a published number beside a quantity of the result."""
+    """One ``[[paper.values]]`` table: a published number beside a quantity of the result
+    (``kind`` is checked against fbia.core.paper.KINDS, which gives its rule)."""
 
     quantity: Text
+    kind: Text
     paper: Number | None = None
     unit: Label = ""
-    rule: Literal[
-        "relative", "absolute", "magnitude", "equal", "same_sign", "above", "below", "none"
-    ] = "relative"
-    tolerance: Annotated[Number, Field(ge=0)] | None = None
-    than: Text | None = None
+    above: Text | None = None
+    below: Text | None = None
     label: Label = ""
     why: Label = ""
 
@@ -283,7 +278,7 @@ class _KeyError(ValueError):
 
 S = TypeVar("S", bound=Section)
 
-_LITERAL_NAMES = {"kind": "executor", "cluster": "cluster", "noise": "noise", "rule": "rule"}
+_LITERAL_NAMES = {"kind": "executor", "cluster": "cluster", "noise": "noise"}
 
 
 def parse_section(model: type[S], value: Any, where: str) -> S:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,10 +13,15 @@ from _studies import STUDY, one_error_line, write_study
 
 import fbia
 from fbia.core.cli import main
-from fbia.core.paper import compare, lookup, read_paper
-from fbia.core.paper_report import PaperRecord, comparison_table, write_summary
+from fbia.core.paper import KINDS, compare, lookup, read_paper
+from fbia.core.paper_report import PaperRecord, comparison_table, rules_table, write_summary
 from fbia.iterators.gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, PosteriorCheck
 from fbia.iterators.surrogate_convergence_result import ConvergenceRow, SurrogateConvergenceResult
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+PAPER_STUDIES = sorted(
+    p for p in EXAMPLES.glob("paper_*/*/*.toml") if "paper" in tomllib.loads(p.read_text())
+)
 
 PAPER = """
 [paper]
@@ -23,29 +30,30 @@ note = "exact data"
 
 [[paper.values]]
 quantity = "x.E"
+kind = "modulus"
 paper = 400.0
 unit = "Pa"
-tolerance = 0.01
 why = "exact data: the optimum is the truth"
 
 [[paper.values]]
 quantity = "x.nu"
+kind = "ratio"
 paper = 0.35
-rule = "absolute"
-tolerance = 0.01
 why = "a number chosen to disagree"
 
 [[paper.values]]
 quantity = "x.E"
-rule = "above"
-than = "x.nu"
+kind = "ordering"
+above = "x.nu"
 label = "E above nu"
 
 [[paper.values]]
 quantity = "converged"
+kind = "count"
 paper = 1
-rule = "equal"
 """
+
+KINDS_LIST = "modulus, ratio, scale, count, ordering, shown"
 
 
 def _spec(values: list[dict], **paper) -> fbia.core.paper.PaperSpec:
@@ -63,45 +71,75 @@ def _spec(values: list[dict], **paper) -> fbia.core.paper.PaperSpec:
         ({}, [], "s.toml: [paper]: no [[paper.values]]: give at least one published number"),
         (
             {},
-            [{"quantity": "x.E", "paper": 1.0, "tol": 1}],
-            "s.toml: [[paper.values]] #1: unknown key 'tol'; valid keys: quantity, paper, unit, "
-            "rule, tolerance, than, label, why",
+            [{"quantity": "x.E", "kind": "modulus", "paper": 1.0, "tol": 1}],
+            "s.toml: [[paper.values]] #1: unknown key 'tol'; valid keys: quantity, kind, paper, "
+            "unit, above, below, label, why",
         ),
         (
             {},
-            [{"quantity": "x.E", "paper": "400"}],
+            [{"quantity": "x.E", "kind": "modulus", "paper": "400"}],
             "s.toml: [[paper.values]] #1 paper: expected a number, got a string '400'",
         ),
         (
             {},
             [{"quantity": "x.E", "paper": 1.0}],
-            "s.toml: [[paper.values]] #1: rule 'relative' needs a 'tolerance'",
+            "s.toml: [[paper.values]] #1: missing key 'kind'",
         ),
         (
             {},
-            [{"quantity": "x.E", "paper": 1.0, "rule": "close"}],
-            "s.toml: [[paper.values]] #1 rule: unknown rule 'close'; valid: relative, absolute, "
-            "magnitude, equal, same_sign, above, below, none",
+            [{"quantity": "x.E", "paper": 1.0, "rule": "relative", "tolerance": 0.05}],
+            "s.toml: [[paper.values]] #1 rule: 'rule' is no longer given per value: give kind = "
+            f"one of {KINDS_LIST} instead: the kind fixes the rule",
         ),
         (
             {},
-            [{"quantity": "x.E", "rule": "equal"}],
-            "s.toml: [[paper.values]] #1: rule 'equal' needs the published value 'paper'",
+            [{"quantity": "x.E", "kind": "modulus", "paper": 1.0, "tolerance": 0.5}],
+            "s.toml: [[paper.values]] #1 tolerance: 'tolerance' is no longer given per value: "
+            f"give kind = one of {KINDS_LIST} instead: the kind fixes the tolerance",
         ),
         (
             {},
-            [{"quantity": "x.E", "rule": "above"}],
-            "s.toml: [[paper.values]] #1: rule 'above' needs 'than' (the quantity to compare with)",
+            [{"quantity": "x.E", "kind": "ordering", "than": "x.nu"}],
+            "s.toml: [[paper.values]] #1 than: 'than' is no longer given per value: an ordering "
+            'is kind = "ordering" with above = or below = the other quantity',
         ),
         (
             {},
-            [{"quantity": "x.E", "paper": 1.0, "rule": "equal", "tolerance": 1.0}],
-            "s.toml: [[paper.values]] #1 tolerance: rule 'equal' takes no 'tolerance'",
+            [{"quantity": "x.E", "kind": "close", "paper": 1.0}],
+            f"s.toml: [[paper.values]] #1 kind: unknown kind 'close'; valid: {KINDS_LIST}",
         ),
         (
             {},
-            [{"quantity": "x.E", "paper": -1.0, "rule": "magnitude"}],
-            "s.toml: [[paper.values]] #1: rule 'magnitude' needs a positive paper value, got -1.0",
+            [{"quantity": "x.E", "kind": "count"}],
+            "s.toml: [[paper.values]] #1: kind 'count' needs the published value 'paper'",
+        ),
+        (
+            {},
+            [{"quantity": "x.E", "kind": "ordering"}],
+            "s.toml: [[paper.values]] #1: kind 'ordering' needs one of 'above' and 'below' (the "
+            "quantity to compare with)",
+        ),
+        (
+            {},
+            [{"quantity": "x.E", "kind": "ordering", "above": "a", "below": "b"}],
+            "s.toml: [[paper.values]] #1: kind 'ordering' needs one of 'above' and 'below' (the "
+            "quantity to compare with)",
+        ),
+        (
+            {},
+            [{"quantity": "x.E", "kind": "ordering", "above": "x.nu", "paper": 1.0}],
+            "s.toml: [[paper.values]] #1 paper: kind 'ordering' compares two quantities of the "
+            "result: it takes no 'paper'",
+        ),
+        (
+            {},
+            [{"quantity": "x.E", "kind": "modulus", "paper": 1.0, "below": "x.nu"}],
+            "s.toml: [[paper.values]] #1 below: 'below' only for kind 'ordering', not 'modulus'",
+        ),
+        (
+            {},
+            [{"quantity": "x.E", "kind": "scale", "paper": -1.0}],
+            "s.toml: [[paper.values]] #1: kind 'scale' needs a positive paper value, got -1.0",
         ),
     ],
 )
@@ -111,45 +149,101 @@ def test_paper_table_mistakes_are_one_located_line(paper, values, message):
     assert str(err.value) == message
 
 
-def test_rules_judge_as_documented():
-    q = {"a": 105.0, "b": -2.0, "c": 3e-3, "n": 2.0, "bad": math.nan}
+@pytest.mark.parametrize(
+    ("kind", "paper", "fbia_value", "agrees"),
+    [
+        ("modulus", 400.0, 400.0 * 1.019, True),  # 1.9 % off
+        ("modulus", 400.0, 400.0 * 0.981, True),
+        ("modulus", 400.0, 400.0 * 1.021, False),  # 2.1 % off
+        ("modulus", 400.0, 400.0 * 0.979, False),
+        ("ratio", 0.3, 0.319, True),  # 0.019 off
+        ("ratio", 0.3, 0.281, True),
+        ("ratio", 0.3, 0.321, False),  # 0.021 off
+        ("ratio", -0.6, -0.579, False),
+        ("ratio", 0.0, 0.019, True),
+        ("scale", 1e-3, 1.9e-3, True),  # a factor 1.9
+        ("scale", 1e-3, 1e-3 / 1.9, True),
+        ("scale", 1e-3, 2.1e-3, False),  # a factor 2.1
+        ("scale", 1e-3, 1e-3 / 2.1, False),
+        ("scale", 1e-3, -1e-3, False),
+        ("count", 11.0, 11.0, True),
+        ("count", 11.0, 10.0, False),
+        ("count", 1.0, 1.0 + 1e-12, False),  # counts are exact
+        ("modulus", 400.0, math.nan, False),  # no result agrees with nothing
+        ("shown", 400.0, 100.0, None),
+        ("shown", 400.0, math.nan, None),
+    ],
+)
+def test_each_kind_has_one_rule_strict_enough_to_fail(kind, paper, fbia_value, agrees):
+    (row,) = compare(_spec([{"quantity": "q", "kind": kind, "paper": paper}]), {"q": fbia_value})
+    assert row.agrees is agrees
+    assert row.reason == ""
+
+
+def test_orderings_compare_two_quantities_of_the_result():
+    q = {"olive": 57.0, "red": 8.0, "bad": math.nan}
     spec = _spec(
         [
-            {"quantity": "a", "paper": 100.0, "tolerance": 0.05},  # 5 % off: agrees
-            {"quantity": "a", "paper": 100.0, "tolerance": 0.04},
-            {"quantity": "a", "paper": 100.0, "rule": "absolute", "tolerance": 4.9},
-            {"quantity": "c", "paper": 1e-3, "rule": "magnitude"},
-            {"quantity": "c", "paper": 1e-4, "rule": "magnitude"},
-            {"quantity": "b", "paper": -0.1, "rule": "same_sign"},
-            {"quantity": "b", "paper": 0.1, "rule": "same_sign"},
-            {"quantity": "n", "paper": 2.0, "rule": "equal"},
-            {"quantity": "a", "rule": "above", "than": "n"},
-            {"quantity": "a", "rule": "below", "than": "n"},
-            {"quantity": "bad", "paper": 1.0, "rule": "absolute", "tolerance": 10.0},
-            {"quantity": "bad", "paper": 1.0, "rule": "none"},
+            {"quantity": "olive", "kind": "ordering", "above": "red"},
+            {"quantity": "olive", "kind": "ordering", "below": "red"},
+            {"quantity": "red", "kind": "ordering", "below": "olive"},
+            {"quantity": "olive", "kind": "ordering", "above": "bad"},
         ]
     )
     rows = compare(spec, q)
-    assert [r.agrees for r in rows] == [
-        True,
-        False,
-        False,
-        True,
-        False,
-        True,
-        False,
-        True,
-        True,
-        False,
-        False,
-        None,
-    ]
-    assert rows[0].abs_diff == pytest.approx(5.0) and rows[0].rel_diff == pytest.approx(0.05)
-    assert rows[8].reference == 2.0
+    assert [r.agrees for r in rows] == [True, False, True, False]
+    assert rows[0].reference == 8.0 and rows[0].value.criterion() == "> red"
+    assert rows[1].value.criterion() == "< red"
+    with pytest.raises(fbia.ConfigError, match=r"#1 above: the result has no quantity 'red'"):
+        compare(spec, {"olive": 1.0})
+
+
+@pytest.mark.parametrize(
+    ("status", "success", "reason"),
+    [
+        ("unreliable", False, "the result is flagged unreliable (status unreliable)"),
+        ("unreliable", True, "the result is flagged unreliable (status unreliable)"),
+        ("max_iterations", False, "the result is not a success (status max_iterations)"),
+    ],
+)
+def test_an_unreliable_result_agrees_with_nothing(status, success, reason):
+    q = {"x.E": 400.0, "x.nu": 0.3, "n": 2.0, "m": 1.0}
+    spec = _spec(
+        [
+            {"quantity": "x.E", "kind": "modulus", "paper": 400.0},
+            {"quantity": "x.nu", "kind": "ratio", "paper": 0.3},
+            {"quantity": "n", "kind": "count", "paper": 2.0},
+            {"quantity": "n", "kind": "ordering", "above": "m"},
+            {"quantity": "x.E", "kind": "shown", "paper": 400.0},
+        ]
+    )
+    assert [r.agrees for r in compare(spec, q, "completed", True)] == [True] * 4 + [None]
+    rows = compare(spec, q, status, success)
+    assert [r.agrees for r in rows] == [False] * 4 + [None]  # shown rows stay unjudged
+    assert [r.reason for r in rows] == [reason] * 4 + [""]
+    assert rows[0].rel_diff == 0.0  # the numbers are still shown
+    line = comparison_table(rows)[2]
+    assert f"| **no**: {reason} |" in line
+
+
+def test_the_rules_are_the_kinds_table():
+    assert {k: (v.rule, v.tolerance) for k, v in KINDS.items()} == {
+        "modulus": ("relative", 0.02),
+        "ratio": ("absolute", 0.02),
+        "scale": ("factor", 2.0),
+        "count": ("equal", None),
+        "ordering": ("ordering", None),
+        "shown": ("none", None),
+    }
+    text = "\n".join(rules_table())
+    for name, kind in KINDS.items():
+        assert f"| `{name}` | {kind.covers} | {kind.criterion}: " in text
+    assert "within 2 %: \\|f - p\\| <= 0.02 \\|p\\|" in text
+    assert "within a factor 2: \\|log2(f / p)\\| <= 1" in text
 
 
 def test_an_unknown_quantity_lists_the_available_ones():
-    spec = _spec([{"quantity": "mean.E", "paper": 1.0, "rule": "equal"}])
+    spec = _spec([{"quantity": "mean.E", "paper": 1.0, "kind": "count"}])
     with pytest.raises(fbia.ConfigError) as err:
         compare(spec, {"x.E": 1.0, "x.nu": 0.2})
     assert str(err.value) == (
@@ -265,7 +359,7 @@ def test_surrogate_convergence_quantities_per_n_train():
     )
     assert (q["x.E"], q["n_test"], q["n_train.200.ml_log_likelihood"]) == (401.0, 100.0, -1.0)
     spec = _spec(
-        [{"quantity": "n_train.200.distance", "rule": "below", "than": "n_train.10.distance"}]
+        [{"quantity": "n_train.200.distance", "kind": "ordering", "below": "n_train.10.distance"}]
     )
     assert compare(spec, q)[0].agrees is True
 
@@ -273,13 +367,25 @@ def test_surrogate_convergence_quantities_per_n_train():
 def test_comparison_table_has_the_published_and_fbia_columns():
     rows = compare(
         _spec(
-            [{"quantity": "x.E", "paper": 400.0, "unit": "Pa", "tolerance": 0.01, "why": "a | b"}]
+            [
+                {
+                    "quantity": "x.E",
+                    "kind": "modulus",
+                    "paper": 400.0,
+                    "unit": "Pa",
+                    "why": "a | b",
+                },
+                {"quantity": "s", "kind": "scale", "paper": 1e-3, "unit": "mm"},
+            ]
         ),
-        {"x.E": 410.0},
+        {"x.E": 410.0, "s": 4e-4},
     )
     lines = comparison_table(rows)
     assert lines[0] == "| quantity | paper | fbia | difference | rel. | agrees? | why |"
-    assert lines[2] == "| x.E | 400 Pa | 410 Pa | 10 | +2.5 % | **no** (within 1 %) | a \\| b |"
+    assert lines[2] == "| x.E | 400 Pa | 410 Pa | 10 | +2.5 % | **no** (within 2 %) | a \\| b |"
+    assert lines[3] == (
+        "| s | 0.001 mm | 0.0004 mm | -0.0006 | f/p = 0.4 | **no** (within a factor 2) |  |"
+    )
 
 
 def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, capsys):
@@ -289,9 +395,10 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     out = tmp_path / "out"
     report = (out / "report.md").read_text()
     assert report.startswith("# tiny: fbia beside Toy paper, Table 9")
-    assert "3 of 4 published numbers agree by their rule." in report
-    assert "| x.nu | 0.35 | 0.3 | -0.05 | -14.3 % | **no** (within 0.01) |" in report
+    assert "3 of 4 published numbers agree by the rule of their kind." in report
+    assert "| x.nu | 0.35 | 0.3 | -0.05 | -14.3 % | **no** (within 0.02) |" in report
     assert "| E above nu | > x.nu (0.3) | 400 |  |  | yes (> x.nu) |" in report
+    assert "## Rules\n\n" + "\n".join(rules_table()) in report
     assert "- [plots/interfaces.png](plots/interfaces.png)" in report
     assert (
         "- model `analytic_mound_2d`: n_points = 41; the other options at their defaults" in report
@@ -307,6 +414,8 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     assert main(["reproductions", "docs/summary.md", "."]) == 0
     page = (tmp_path / "docs" / "summary.md").read_text()
     assert "| [tiny](#tiny) | Toy paper, Table 9 | 3 / 4 | " in page
+    assert page.count("| `modulus` |") == 1  # the rules once, at the top
+    assert page.index("## Rules") < page.index("## tiny")
     assert "Study file [../study.toml](../study.toml)" in page
     assert "## Measured times per example" not in page  # no README: nothing to copy
     (tmp_path / "README.md").write_text(
@@ -351,3 +460,72 @@ def test_summary_refuses_a_foreign_json(tmp_path):
     (tmp_path / "paper.json").write_text(json.dumps({"x": 1}))
     with pytest.raises(fbia.ConfigError, match="not a paper.json of fbia"):
         write_summary(tmp_path / "s.md", [tmp_path])
+
+
+def test_a_study_file_with_a_per_value_rule_is_one_line_naming_the_file(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    old = PAPER.replace('kind = "ratio"', 'rule = "absolute"\ntolerance = 0.1')
+    write_study(tmp_path, STUDY + old)
+    assert main(["validate", "study.toml"]) == 2
+    assert one_error_line(capsys) == (
+        "study.toml: [[paper.values]] #2 rule: 'rule' is no longer given per value: give kind "
+        f"= one of {KINDS_LIST} instead: the kind fixes the rule"
+    )
+
+
+def test_a_paper_json_of_the_per_row_rules_is_listed_stale(tmp_path):
+    """paper.json files written before the kinds (rows with their own rule and tolerance)
+    keep their lenient verdicts out of the summary."""
+    old_row = {
+        "value": {
+            "quantity": "std.E",
+            "paper": 0.01168,
+            "unit": "Pa",
+            "rule": "magnitude",
+            "tolerance": 2.0,
+            "than": None,
+            "label": "",
+            "why": "within a factor 100",
+        },
+        "fbia": 0.0005119,
+        "abs_diff": -0.01117,
+        "rel_diff": -0.956,
+        "agrees": True,
+        "reference": None,
+    }
+    record = {
+        "study": "old",
+        "study_file": str(tmp_path / "study.toml"),
+        "source": "Paper A, Table 2",
+        "note": "",
+        "status": "converged_gradient",
+        "wall_time": 64.0,
+        "forward_time": 60.0,
+        "nfev": 444,
+        "finished": "2024-01-01",
+        "rows": [old_row],
+        "reused": 0,
+    }
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "paper.json").write_text(json.dumps(record))
+    rec = PaperRecord.read(tmp_path / "out" / "paper.json")
+    assert rec.stale and rec.rows == ()
+    page, n = write_summary(tmp_path / "s.md", [tmp_path])
+    text = page.read_text()
+    assert n == 1
+    assert "| [old](#old) | Paper A, Table 2 | stale | converged_gradient |" in text
+    assert "This `paper.json` is stale: written by an older fbia" in text
+    assert "within a factor 100" not in text and "magnitude" not in text
+
+
+@pytest.mark.parametrize("path", PAPER_STUDIES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_the_paper_examples_tables_read_under_the_kinds(path):
+    """Every [paper] table of examples/paper_*: kinds only, each row a kind's rule."""
+    spec = read_paper(tomllib.loads(path.read_text())["paper"], str(path))
+    assert spec.values and all(v.kind in KINDS for v in spec.values)
+
+
+def test_there_are_paper_examples_to_check():
+    assert len(PAPER_STUDIES) >= 22  # Paper A: 13, Paper B: 9 when the kinds came
