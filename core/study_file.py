@@ -50,7 +50,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     coordinates = [ { inflow_rate = 100.0 } ]
     noise_std = 0.005           # mm (0: exact data)
     noise = "normal"            # along the normals (Paper A) | "isotropic" (Paper B eq. 16)
-    points = 12                 # optional number of measurement points (for "ray")
+    points = 12                 # optional number of measurement points (for "ray"), put
+    placement = "displacement"  # where |u.n| >= significant (0.5) x max, or "even" (default)
     seed = 7                    # optional; default: derived from [study] seed
 
     [measure]                   # ray | cpp | rkhs (or a plugin's)
@@ -68,10 +69,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     [executor]
     kind = "processes"          # serial | processes | dask (default processes)
     workers = 2                 # default: the number of cores
-    keep_runs = false           # keep every successful run's folder in <output>/runs too
-                                # (failed runs' folders are always kept)
-    timeout = 3600.0            # optional wall-time limit of one run [s]; a run past it is
-                                # killed and recorded as failed ("time-out after 3600 s")
+    keep_runs = false           # keep successful runs' folders in <output>/runs (failed: always)
+    timeout = 3600.0            # optional limit of a run's wall time [s]; past it: failed
     isolate = true              # each run in a child process of its own (default: with a
                                 # timeout, and always for dask); a crash costs that child only
     address = "tcp://10.0.0.5:8786"   # dask: a running scheduler ...
