@@ -29,25 +29,13 @@ import math
 import tempfile
 
 import numpy as np
+from bench_ale_fsi import TABLE_1  # Paper A Table 1 (this folder)
 
 from fbia import ForwardModelError
 from fbia.plugins.ale_fsi import AleFsiForwardModel
 from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE
 
 TRUTH_DISPLACEMENT = 0.053  # mm, Paper A text below Table 1
-TABLE_1 = {
-    "blue": (200.0, 0.4),
-    "orange": (200.0, 0.0),
-    "green": (400.0, 0.45),
-    "red": (400.0, 0.0),
-    "purple": (600.0, 0.4),
-    "brown": (600.0, 0.0),
-    "pink": (400.0, -0.3),
-    "gray": (400.0, -0.6),
-    "olive": (400.0, -0.9),
-    "cyan": (1000.0, 0.0),
-    "black": (1000.0, 0.4),
-}
 WORKDIR = tempfile.mkdtemp(prefix="fbia-outline-")
 
 

@@ -113,6 +113,8 @@ def synthetic_observations(
         raise ConfigError(f"placement must be 'even' or 'displacement', got {placement!r}")
     if not (isinstance(significant, (int, float)) and 0.0 < float(significant) < 1.0):
         raise ConfigError(f"significant must be a fraction in (0, 1), got {significant!r}")
+    if placement == "displacement" and points is None:
+        raise ConfigError("placement 'displacement' places measurement points: give points")
     reference = _reference_interface(model) if placement == "displacement" else None
     coords = [check_coordinate(c, "synthetic_observations: coordinate") for c in coordinates]
     if not coords:

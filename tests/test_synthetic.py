@@ -202,3 +202,5 @@ def test_displacement_placement_needs_the_undeformed_interface(m2):
         synthetic_observations(m2, TRUTH, [Q], 0.0, 1, points=5, significant=1.5)
     with pytest.raises(fbia.ConfigError, match="placement"):
         synthetic_observations(m2, TRUTH, [Q], 0.0, 1, points=5, placement="random")
+    with pytest.raises(fbia.ConfigError, match="give points"):
+        synthetic_observations(m2, TRUTH, [Q], 0.0, 1, placement="displacement")

@@ -12,15 +12,16 @@ An outline derived from the published facts (issue 26) is not found yet.  What w
 (``benchmarks/flow_cell_outline.py`` prints these figures for any candidate; Saint
 Venant-Kirchhoff, the default mesh):
 
-- In every one of ~25 outline families tried (gentle and steep feet, symmetric, overhanging,
-  waisted, mushroom; heights set by bisection so that the largest displacement at the truth
-  is 0.053 mm) the steady branch ends (a limit point: SVK softens in compression, det F ~ 1/3
-  to 0.6 at a concave spot) where the largest displacement reaches about 0.10 mm, twice the
-  truth's; E = 200 Pa gives about that, so the blue and orange starts sit at the edge in all.
+- In every one of about 45 candidate outlines from 8 families (scaled fig2_sketch, gentle
+  feet, no overhang, symmetric, steep upstream face, waisted, mushroom; heights set by
+  bisection so that the largest displacement at the truth is 0.053 mm) the steady branch
+  ends (a limit point: SVK softens in compression, det F 0.3 to 0.7 at a concave spot) where
+  the largest displacement reaches about 0.10 mm, twice the truth's; E = 200 Pa gives about
+  that, so the blue and orange starts sit at the edge in all.
 - Outlines without a waist keep the thesis' E-nu band (the largest displacement grows with
   nu: 0.0341, 0.0454, 0.0517 mm at nu = 0, 0.3, 0.45 for ``fig2_sketch``; Paper B: "an
   underestimation of E is coupled to an underestimation of nu"), but their branch at
-  200 Pa, nu = 0.4 ends below 100 mm^2/s (91-97 mm^2/s).
+  200 Pa, nu = 0.4 ends below 100 mm^2/s (85-98 mm^2/s).
 - Waisted outlines (a cap on a narrower neck) carry 200 Pa at nu = 0 and 0.4 (the lowest
   E with a steady state: 190 Pa at nu = 0, 150 Pa at nu = 0.4 for the best), but the deeper
   the waist, the flatter or reversed the nu trend (0.0531, 0.0530, 0.0493 mm at
