@@ -50,8 +50,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
+
+import numpy as np
 
 from .errors import ConfigError
 from .study_schema import PaperSection, PaperValueSection, parse_section
@@ -62,7 +64,9 @@ __all__ = [
     "Kind",
     "PaperSpec",
     "PaperValue",
+    "DRAWS_RULE",
     "compare",
+    "compare_draws",
     "lookup",
     "read_paper",
     "verdict",
@@ -216,6 +220,9 @@ class Comparison:
     agrees: bool | None
     reference: float | None = None  # the other quantity's value (kind ordering)
     reason: str = ""
+    low: float | None = None  # over noise draws (compare_draws): the 2.5 % percentile
+    high: float | None = None  # ... the 97.5 % percentile (ordering: share that holds)
+    n_draws: int = 0  # the draws judged; 0: one result
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -237,6 +244,9 @@ class Comparison:
             data["agrees"],
             data.get("reference"),
             data.get("reason", ""),
+            data.get("low"),
+            data.get("high"),
+            int(data.get("n_draws", 0)),
         )
 
 
@@ -353,6 +363,85 @@ def _judge(v: PaperValue, f: float, ref: float | None, flagged: str) -> Comparis
     else:
         agrees = _TESTS[kind.rule](f, _num(p), kind.tolerance)
     return Comparison(v, f, abs_diff, rel_diff, agrees, ref)
+
+
+#: the rule of a study judged over noise draws ([synthetic] draws, fbia.core.draws)
+DRAWS_RULE = (
+    "over noise draws (a study with [synthetic] draws = N): a published number agrees when it "
+    "lies within fbia's central 95 % range over the draws (the 2.5 and 97.5 % percentiles, "
+    "linear interpolation, of the quantity over the draws that gave a result), an ordering "
+    "when it holds in at least half of them; the kinds only say which rows are shown"
+)
+
+
+def compare_draws(
+    spec: PaperSpec,
+    draws: Sequence[Mapping[str, float]],
+    status: str = "",
+    success: bool = True,
+) -> list[Comparison]:
+    """One :class:`Comparison` per value of ``spec``, judged over noise draws (``DRAWS_RULE``).
+
+    ``draws``: the quantities of each draw that gave a result (at least one); fbia's number
+    is the median over them, ``low``/``high`` the 2.5/97.5 % percentiles (an ordering: the
+    median of the quantity and, as ``high``, the share of draws in which it holds).
+    ``status``/``success``: of the draws as a whole; flagged, every judged row is "no".
+
+    >>> spec = read_paper({"source": "A", "values": [
+    ...     {"quantity": "E", "kind": "modulus", "paper": 506.0}]}, "s.toml")
+    >>> row = compare_draws(spec, [{"E": e} for e in range(400, 621, 10)])[0]
+    >>> row.agrees, row.fbia, round(row.low, 1), round(row.high, 1), row.n_draws
+    (True, 510.0, 405.5, 614.5, 23)
+    """
+    if not draws:
+        raise ValueError("compare_draws needs the quantities of at least one draw")
+    flagged = (
+        ""
+        if status != "unreliable" and success
+        else (f"the draws as a whole are flagged unreliable (status {status or 'unknown'})")
+    )
+    rows = []
+    for k, v in enumerate(spec.values, start=1):
+        at = f"{spec.where}: [[paper.values]] #{k}" if spec.where else f"[[paper.values]] #{k}"
+        f = _over_draws(draws, v.quantity, f"{at} quantity")
+        ok = f[np.isfinite(f)]
+        med = float(np.median(ok)) if ok.size else math.nan
+        low, high = (
+            (float(np.percentile(ok, 2.5)), float(np.percentile(ok, 97.5)))
+            if ok.size
+            else (math.nan, math.nan)
+        )
+        p = v.paper
+        abs_diff = med - p if p is not None and math.isfinite(med) else None
+        rel_diff = abs_diff / abs(p) if abs_diff is not None and p else None
+        agrees: bool | None
+        if v.than is not None:
+            key = "above" if v.above is not None else "below"
+            g = _over_draws(draws, v.than, f"{at} {key}")
+            holds = f > g if v.above is not None else f < g
+            share = float(np.mean(holds & np.isfinite(f) & np.isfinite(g)))
+            agrees = share >= 0.5
+            ref = float(np.median(g[np.isfinite(g)])) if np.isfinite(g).any() else math.nan
+            row = Comparison(v, med, None, None, agrees, ref, "", None, share, len(draws))
+        else:
+            agrees = (
+                None
+                if KINDS[v.kind].rule == "none"
+                else (p is not None and bool(ok.size) and low <= p <= high)
+            )
+            row = Comparison(v, med, abs_diff, rel_diff, agrees, None, "", low, high, len(draws))
+        if flagged and row.agrees is not None:
+            row = replace(row, agrees=False, reason=flagged)
+        rows.append(row)
+    return rows
+
+
+def _over_draws(draws: Sequence[Mapping[str, float]], name: str, where: str) -> np.ndarray:
+    """The quantity ``name`` of every draw (NaN where a draw lacks it: no result there);
+    a name that no draw has is a ConfigError listing the available ones."""
+    if not any(name in q for q in draws):
+        lookup({k: 0.0 for q in draws for k in q}, name, where)
+    return np.array([q.get(name, math.nan) for q in draws], dtype=float)
 
 
 def _num(x: float | None) -> float:

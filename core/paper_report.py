@@ -36,7 +36,7 @@ from typing import Any
 
 from .errors import ConfigError
 from .options import plugin_options
-from .paper import KINDS, Comparison, compare, verdict
+from .paper import DRAWS_RULE, KINDS, Comparison, compare, verdict
 from .problem import Result
 from .study import Study
 
@@ -100,13 +100,21 @@ def write_paper_report(
     wall_time: float,
     files: Sequence[str] = (),
     reused: int = 0,
+    rows: Sequence[Comparison] | None = None,
+    forward_time: float | None = None,
 ) -> Path:
     """Compare ``result`` with ``study.paper``; write ``report.md`` and ``paper.json``
-    (``reused``: how many runs the session took from the store)."""
+    (``reused``: how many runs the session took from the store; ``rows``: the comparison
+    when made otherwise, e.g. over noise draws; ``forward_time``: the summed time of the
+    forward runs when ``result`` does not hold them)."""
     spec = study.paper
     assert spec is not None
-    rows = tuple(compare(spec, result.quantities(), result.status, result.success))
-    forward = sum(e.time for e in result.evaluations if math.isfinite(e.time))
+    if rows is None:
+        rows = compare(spec, result.quantities(), result.status, result.success)
+    rows = tuple(rows)
+    forward = forward_time
+    if forward is None:
+        forward = sum(e.time for e in result.evaluations if math.isfinite(e.time))
     record = PaperRecord(
         study=study.name,
         study_file=str(study.path.resolve()),
@@ -139,6 +147,11 @@ def _report(
         "",
         f"Study file `{study.path.name}`; result: **{result.status}** ({result.message}).",
         f"{good} of {judged} published numbers agree by the rule of their kind"
+        + (
+            f" over {record.rows[0].n_draws} noise draws"
+            if record.rows and record.rows[0].n_draws
+            else ""
+        )
         + (f" ({flagged}: every judged row counts as no)." if flagged else "."),
         "",
         _times(record),
@@ -179,6 +192,11 @@ def rules_table() -> list[str]:
     for name, kind in KINDS.items():
         formula = kind.formula.replace("|", "\\|")
         out.append(f"| `{name}` | {kind.covers} | {kind.criterion}: {formula} |")
+    out += [
+        "",
+        f"Noisy data are judged {DRAWS_RULE}; the table then gives fbia's median and "
+        "[2.5 %, 97.5 %] range.",
+    ]
     return out
 
 
@@ -197,6 +215,10 @@ def comparison_table(rows: Sequence[Comparison]) -> list[str]:
             ref = f" ({_num(r.reference)})" if r.reference is not None else ""
             paper = f"{v.criterion()}{ref}"
         fbia = f"{_num(r.fbia)}{unit}"
+        if r.n_draws and v.than is not None:  # over draws: the share that holds
+            fbia = f"{_num(r.fbia)} (holds in {100 * (r.high or 0.0):.0f} % of {r.n_draws} draws)"
+        elif r.n_draws:  # over draws: the median and the central 95 % range
+            fbia = f"{_num(r.fbia)} [{_num(r.low)}, {_num(r.high)}]{unit} ({r.n_draws} draws)"
         diff = "" if r.abs_diff is None else _num(r.abs_diff)
         rel = "" if r.rel_diff is None else f"{100 * r.rel_diff:+.3g} %"
         if v.kind == "scale" and r.rel_diff is not None:
@@ -204,7 +226,10 @@ def comparison_table(rows: Sequence[Comparison]) -> list[str]:
         mark = {True: "yes", False: "**no**", None: "-"}[r.agrees]
         agrees = mark
         if r.agrees is not None:
-            agrees = f"{mark}: {r.reason}" if r.reason else f"{mark} ({v.criterion()})"
+            rule = v.criterion()
+            if r.n_draws:
+                rule = "holds in half the draws" if v.than is not None else "inside the range"
+            agrees = f"{mark}: {r.reason}" if r.reason else f"{mark} ({rule})"
         why = v.why.replace("|", "\\|")
         out.append(f"| {v.name} | {paper} | {fbia} | {diff} | {rel} | {agrees} | {why} |")
     return out

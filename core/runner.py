@@ -147,9 +147,16 @@ def run_study(
     if study.iterator is None:
         echo("the study has no [iterator]: one forward run at the start point")
         return _forward(study, None, out, echo, started)
+    store_path = study.store if study.store is not None else out / STORE_NAME
+    if study.synthetic is not None and study.synthetic.draws > 1:  # fbia.core.draws
+
+        def run_one(sub: Study, k: int) -> Result:
+            again = {"fresh": fresh and k == 0, "retry_failed": retry_failed}
+            return run_study(sub, sub.output, workers, echo, address=address, **again)
+
+        return _run_draws(study, out, store_path, run_one, echo, started)
     problem = study.problem
     executor = study.executor.with_workers(workers).with_address(address)
-    store_path = study.store if study.store is not None else out / STORE_NAME
     with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh) as store:
         if fresh:
             clear_runs(out / "runs")
@@ -163,6 +170,34 @@ def run_study(
             return _run_stored(
                 study, problem, executor, store, out, started, say, retry_failed, fresh
             )
+
+
+def _run_draws(
+    study: Study,
+    out: Path,
+    store: Path,
+    run_one: Callable[[Study, int], Result],
+    echo: Echo,
+    started: str,
+) -> Result:
+    """A study over noise draws (:mod:`fbia.core.draws`): every draw, then the result over
+    them and its comparison with the paper, judged over the draws."""
+    from .draws import judge_draws, run_draws
+
+    t0 = time.perf_counter()
+    with OutputLock(out, "fbia run"):
+        result = run_draws(study, out, store, run_one, echo)
+        _finish(study, result, out, started, echo)
+        if study.paper is not None:
+            from .paper_report import write_paper_report
+
+            wall = time.perf_counter() - t0
+            rows = judge_draws(study.paper, result)
+            report_md = write_paper_report(
+                study, result, out, wall, rows=rows, forward_time=result.forward_time
+            )
+            echo(f"comparison with {study.paper.source} over the draws: {report_md}")
+    return result
 
 
 @dataclass
@@ -350,6 +385,8 @@ def _extras(
         else:
             warnings.append(f"the forward run at the result's x {best.status}: {best.message}")
             echo(f"warning: {warnings[-1]}")
+    if not study.figures:  # e.g. one noise draw of many (fbia.core.draws)
+        return files, warnings
     write_plots = getattr(study.iterator, "write_plots", None)
     if callable(write_plots):  # an iterator's own plots: write_plots(result, problem, folder)
         made = extra("the iterator's plots", lambda: write_plots(result, problem, out / "plots"))
@@ -455,6 +492,8 @@ def _write_solution(study: Study, solution: Any, out: Path, title: str) -> dict[
     fields = report.copy_fields(solution, out / "fields", root=out)
     if fields:
         files["fields"] = {k: str(v) for k, v in fields.items()}
+    if not study.figures:
+        return files
     png = plot_interfaces(out / "plots" / "interfaces.png", problem, solution, title)
     if png is not None:
         files["interfaces plot"] = str(png)

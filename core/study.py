@@ -159,6 +159,7 @@ class SyntheticSpec:
     noise: str = "normal"
     placement: str = "even"  # where the points go (synthetic_observations)
     significant: float = 0.5
+    draws: int = 1  # noise draws: the study runs once per draw (fbia.core.draws)
 
 
 @dataclass(eq=False)
@@ -192,6 +193,7 @@ class Study:
     text: str = field(repr=False)
     sha256: str = ""
     paper: PaperSpec | None = field(default=None, repr=False)  # [paper]: published numbers
+    figures: bool = True  # False: no plots (each noise draw of fbia.core.draws)
 
     @property
     def file(self) -> str:
@@ -284,8 +286,10 @@ class Study:
 
         obs = [f"{o.label()} (file)" for o in self.observations]
         if self.synthetic is not None:
+            draws = self.synthetic.draws
+            tag = f" (synthetic, {draws} noise draws)" if draws > 1 else " (synthetic)"
             obs += [
-                ", ".join(f"{k}={v:g}" for k, v in c.items()) + " (synthetic)"
+                ", ".join(f"{k}={v:g}" for k, v in c.items()) + tag
                 for c in self.synthetic.coordinates
             ]
         lines = [

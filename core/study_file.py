@@ -53,14 +53,14 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     points = 12                 # optional number of measurement points (for "ray"), put
     placement = "displacement"  # where |u.n| >= significant (0.5) x max, or "even" (default)
     seed = 7                    # optional; default: derived from [study] seed
+    draws = 20                  # optional: run once per noise draw, judge over the draws
 
     [measure]                   # ray | cpp | rkhs (or a plugin's)
     name = "cpp"
     options = {}
 
-    [likelihood]
-    noise_std = 0.01            # sigma_N in mm (Paper B eq. 5), or when it is not known:
-    # noise_prior = { distribution = "lognormal", mu_ln = -4.6, sigma_ln = 1.0 }   # inferred
+    [likelihood]                # sigma_N in mm (Paper B eq. 5), or a noise_prior (inferred)
+    noise_std = 0.01            # noise_prior = { distribution = "lognormal", mu_ln = -4.6, ... }
 
     [iterator]                  # optional; without it `fbia run` does one forward run
     name = "levenberg_marquardt"
@@ -563,7 +563,7 @@ class _Reader:
         if not coords:
             raise ConfigError("needs at least one coordinate", f"{where} coordinates")
         seed = spec.seed if spec.seed is not None else derived_seed(self.seed, SYNTHETIC_STREAM)
-        extra = (spec.placement, spec.significant)  # where the measurement points go
+        extra = (spec.placement, spec.significant, spec.draws)
         return SyntheticSpec(truth, coords, spec.noise_std, spec.points, seed, spec.noise, *extra)
 
     def read_executor(self) -> ExecutorSpec:

@@ -206,6 +206,13 @@ class SyntheticSection(Section):
     placement: Literal["even", "displacement"] = "even"
     significant: Annotated[Number, Field(gt=0, lt=1)] = 0.5
     seed: Annotated[Integer, Field(ge=0)] | None = None
+    draws: Annotated[Integer, Field(ge=1, le=100_000)] = 1  # noise draws (fbia.core.draws)
+
+    @model_validator(mode="after")
+    def _noisy_draws(self) -> SyntheticSection:
+        if self.draws > 1 and self.noise_std == 0:
+            raise _KeyError("draws", "draws > 1 needs noise_std > 0: exact data draw alike")
+        return self
 
 
 class ExecutorSection(Section):

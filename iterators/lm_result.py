@@ -173,19 +173,22 @@ class LMResult(Result):
         return out
 
     def quantities(self) -> dict[str, float]:
-        """Besides :meth:`Result.quantities`: ``err_res``, ``err_grad``, ``iterations`` of the
-        best start; per start k (1-based, and by its label from ``x0_labels``, spaces as
-        ``_``) ``start.<k>.<name>``, ``.err_res``, ``.err_grad``, ``.iterations``, ``.nfev``,
-        ``.converged`` (1/0), ``.at_bound`` (parameters on a bound) (NaN where the start gave
-        no result); over the starts with a result ``mean.<q>`` and ``std.<q>`` (population
-        std, ddof 0) of every parameter and err_res, and ``n_starts``, ``n_results``,
-        ``n_converged``."""
+        """Besides :meth:`Result.quantities`: ``err_res``, ``err_grad``, ``iterations`` and
+        ``stderr.<name>`` (the standard errors of the covariance sigma^2 (J^T J)^-1, where it
+        exists) of the best start; per start k (1-based, and by its label from ``x0_labels``,
+        spaces as ``_``) ``start.<k>.<name>``, ``.err_res``, ``.err_grad``, ``.iterations``,
+        ``.nfev``, ``.converged`` (1/0), ``.at_bound`` (parameters on a bound) (NaN where the
+        start gave no result); over the starts with a result ``mean.<q>`` and ``std.<q>``
+        (population std, ddof 0) of every parameter and err_res, and ``n_starts``,
+        ``n_results``, ``n_converged``."""
         out = super().quantities()
         nan = math.nan
         for key in ("err_res", "err_grad"):
             value = getattr(self, key)
             out[key] = nan if value is None else float(value)
         out["iterations"] = float(self.iterations)
+        for name, se in (self.stderr or {}).items():
+            out[f"stderr.{name}"] = float(se)
         with_x = [s for s in self.starts if s["x"] is not None]
         for s in self.starts:
             x = s["x"] or {}
