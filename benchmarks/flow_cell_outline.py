@@ -33,7 +33,7 @@ from bench_ale_fsi import TABLE_1  # Paper A Table 1 (this folder)
 
 from fbia import ForwardModelError
 from fbia.plugins.ale_fsi import AleFsiForwardModel
-from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE
+from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE, DEFAULT_OUTLINE_NAME
 
 TRUTH_DISPLACEMENT = 0.053  # mm, Paper A text below Table 1
 WORKDIR = tempfile.mkdtemp(prefix="fbia-outline-")
@@ -47,9 +47,11 @@ def waisted(a: float, b: float, x0: float, w: float, h: float) -> np.ndarray:
     return np.c_[x0 + w * s[:, 0], h * s[:, 1]]
 
 
-def largest(outline: np.ndarray, E: float, nu: float, **options: float) -> float:
-    """The largest interface displacement (mm) at 100 mm^2/s, NaN if the run fails."""
-    model = AleFsiForwardModel(outline=outline.tolist(), warm_start=False, **options)
+def largest(outline: np.ndarray | None, E: float, nu: float, **options: float) -> float:
+    """The largest interface displacement (mm) at 100 mm^2/s, NaN if the run fails
+    (``outline`` None: the default flow cell, with its own interface element size)."""
+    points = None if outline is None else outline.tolist()
+    model = AleFsiForwardModel(outline=points, warm_start=False, **options)
     try:
         sol = model.solve({"E": E, "nu": nu}, [{"inflow_rate": 100.0}], WORKDIR)
     except ForwardModelError:
@@ -78,7 +80,7 @@ def fit_height(shape: list[float], h: float = 0.4) -> float:
     return h
 
 
-def lowest_e(outline: np.ndarray, nu: float, lo: float = 100.0, hi: float = 260.0) -> float:
+def lowest_e(outline: np.ndarray | None, nu: float, lo: float = 100.0, hi: float = 260.0) -> float:
     """The lowest E (Pa, to 10 Pa) with a steady state at ``nu`` in [lo, hi]."""
     if math.isnan(largest(outline, hi, nu)):
         return math.inf
@@ -102,10 +104,13 @@ def main() -> None:
         outline = waisted(*shape, h)
         print(f"waisted a, b, x0, w = {shape}, h = {h:.4f} mm")
     else:
-        outline = np.asarray(DEFAULT_OUTLINE, dtype=float)
-        print("the default outline")
-    print("points:", np.round(outline, 4).tolist())
-    model = AleFsiForwardModel(outline=outline.tolist(), warm_start=False)
+        outline = None
+        print(f"the default outline ({DEFAULT_OUTLINE_NAME!r})")
+    shown = np.asarray(DEFAULT_OUTLINE if outline is None else outline, dtype=float)
+    print("points:", np.round(shown, 4).tolist())
+    model = AleFsiForwardModel(
+        outline=None if outline is None else outline.tolist(), warm_start=False
+    )
     sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], WORKDIR)
     d = sol.diagnostics["max_displacement"][0]
     n = len(sol.interface({"inflow_rate": 100.0}).vertices)

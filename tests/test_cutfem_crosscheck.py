@@ -41,6 +41,7 @@ import shapely  # noqa: E402
 
 import fbia  # noqa: E402
 from fbia.plugins.cutfem_fpi import CutFemFpiForwardModel  # noqa: E402
+from fbia.plugins.cutfem_fpi.model import POROELASTIC_OUTLINE  # noqa: E402
 
 LEVEL = {"inflow_rate": 100.0}
 
@@ -51,7 +52,13 @@ def _distances(nu: float, tmp_path) -> dict[str, float]:  # type: ignore[no-unty
     and an ale_fsi mesh of the same interface resolution (coarser meshes put several um of
     discretisation error on either side)."""
     ale = fbia.forward_model(
-        "ale_fsi", material="neo_hooke", E=300.0, nu=nu, mesh_size=0.12, interface_mesh_size=0.04
+        "ale_fsi",
+        material="neo_hooke",
+        E=300.0,
+        nu=nu,
+        mesh_size=0.12,
+        interface_mesh_size=0.04,
+        outline=POROELASTIC_OUTLINE,  # cutfem_fpi's default mound
     )
     ref = shapely.LineString(ale.solve({}, [LEVEL], tmp_path).interface(LEVEL).vertices)
     cut = CutFemFpiForwardModel(E=300.0, nu=nu, coupling_tol=1e-7, threads=1)

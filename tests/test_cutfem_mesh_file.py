@@ -19,7 +19,9 @@ import shapely  # noqa: E402
 
 import fbia  # noqa: E402
 from fbia.core.cli import main  # noqa: E402
+from fbia.plugins.ale_fsi.outlines import NAMED_OUTLINES  # noqa: E402
 from fbia.plugins.cutfem_fpi import CutFemFpiForwardModel  # noqa: E402
+from fbia.plugins.cutfem_fpi.model import POROELASTIC_OUTLINE  # noqa: E402
 
 LEVEL = {"inflow_rate": 100.0}
 COMMON = {"background_mesh_size": 0.1, "coupling_tol": 1e-7}
@@ -30,7 +32,13 @@ H = 0.08  # interface and solid element size of the file [mm]
 def cell(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from fbia.plugins.ale_fsi.geometry import build_flow_cell, write_mesh
 
-    mesh = build_flow_cell(mesh_size=0.2, interface_mesh_size=H, solid_mesh_size=H, curve_order=1)
+    mesh = build_flow_cell(
+        outline=NAMED_OUTLINES[POROELASTIC_OUTLINE],  # cutfem_fpi's default mound
+        mesh_size=0.2,
+        interface_mesh_size=H,
+        solid_mesh_size=H,
+        curve_order=1,
+    )
     return write_mesh(mesh, tmp_path_factory.mktemp("mesh") / "cell.msh")
 
 
@@ -117,7 +125,13 @@ def test_solid_subdomains_merge_into_one_skeleton(tmp_path) -> None:
     from fbia.plugins.ale_fsi.geometry import build_flow_cell, mesh_arrays, write_mesh
 
     layer = [(0.0, -0.1), (2.0, -0.1), (2.0, 0.08), (0.0, 0.08)]
-    mesh = build_flow_cell(mesh_size=0.2, interface_mesh_size=H, subdomains=[layer], curve_order=1)
+    mesh = build_flow_cell(
+        outline=NAMED_OUTLINES[POROELASTIC_OUTLINE],
+        mesh_size=0.2,
+        interface_mesh_size=H,
+        subdomains=[layer],
+        curve_order=1,
+    )
     _, regions, boundaries = mesh_arrays(mesh)
     assert set(regions) == {"fluid", "solid_1", "solid_2"} and "internal" in boundaries
     model = CutFemFpiForwardModel(mesh_file=write_mesh(mesh, tmp_path / "layers.msh"), **COMMON)

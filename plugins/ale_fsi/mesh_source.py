@@ -41,7 +41,7 @@ def build_mesh(o: AleFsiOptions) -> Any:
             dome_radius=o.dome_radius,
             dome_height=o.dome_height,
             mesh_size=o.mesh_size,
-            interface_mesh_size=o.interface_mesh_size,
+            interface_mesh_size=o.interface_size,
             curve_order=o.order if o.curved else 1,
         )
     if o.geometry == "colony_3d" and o.colony_surface is not None:
@@ -56,7 +56,7 @@ def build_mesh(o: AleFsiOptions) -> Any:
             resolution=o.colony_resolution,
             smoothing=o.colony_smoothing,
             mesh_size=o.mesh_size,
-            interface_mesh_size=o.interface_mesh_size,
+            interface_mesh_size=o.interface_size,
         )
     if o.geometry == "ridge_3d":
         from .geometry3d import build_ridge_cell
@@ -68,9 +68,9 @@ def build_mesh(o: AleFsiOptions) -> Any:
             outline=resolve_outline(o.outline),
             smooth=o.smooth_outline,
             mesh_size=o.mesh_size,
-            interface_mesh_size=o.interface_mesh_size,
+            interface_mesh_size=o.interface_size,
             solid_mesh_size=(
-                2.0 * o.interface_mesh_size if o.solid_mesh_size is None else o.solid_mesh_size
+                2.0 * o.interface_size if o.solid_mesh_size is None else o.solid_mesh_size
             ),
         )
     return geometry.build_flow_cell(
@@ -80,9 +80,9 @@ def build_mesh(o: AleFsiOptions) -> Any:
         smooth=o.smooth_outline,
         subdomains=o.subdomains,
         mesh_size=o.mesh_size,
-        interface_mesh_size=o.interface_mesh_size,
+        interface_mesh_size=o.interface_size,
         solid_mesh_size=(
-            2.0 * o.interface_mesh_size if o.solid_mesh_size is None else o.solid_mesh_size
+            2.0 * o.interface_size if o.solid_mesh_size is None else o.solid_mesh_size
         ),
         curve_order=2 if o.curved else 1,
     )

@@ -13,7 +13,7 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from ...core.options import PluginOptions
-from .outlines import NAMED_OUTLINES, OutlineName
+from .outlines import DEFAULT_INTERFACE_MESH_SIZE, NAMED_OUTLINES, OutlineName, outline_mesh_size
 
 Point = tuple[float, float]
 Probe = tuple[float, float] | tuple[float, float, float]  # one coordinate per mesh dimension
@@ -72,8 +72,9 @@ class AleFsiOptions(PluginOptions):
     outline: list[Point] | OutlineName | None = Field(
         None,
         description="biofilm outline from the upstream to the downstream foot, both on "
-        "the floor y = 0, or a named one; default 'fig2_sketch', a mound shaped like Paper "
-        "A Fig. 2 (fbia.plugins.ale_fsi.outlines) [mm]",
+        "the floor y = 0, or a named one; default 'paper_a_facts', derived from the facts "
+        "the thesis publishes about its mound ('fig2_sketch': fbia's earlier one; "
+        "fbia.plugins.ale_fsi.outlines) [mm]",
     )
     smooth_outline: bool = Field(
         True, description="interpolate the outline by a cubic spline (else polygon) [-]"
@@ -96,8 +97,12 @@ class AleFsiOptions(PluginOptions):
         "have straight sides) [-]",
     )
     mesh_size: float = Field(0.12, gt=0, description="maximum element size [mm]")
-    interface_mesh_size: float = Field(
-        0.03, gt=0, description="element size at the fluid-biofilm interface [mm]"
+    interface_mesh_size: float | None = Field(
+        None,
+        gt=0,
+        description="element size at the fluid-biofilm interface; default: a named "
+        "outline's own (paper_a_facts: 0.057, 67 interface vertices as Paper B's n_in = 66), "
+        "else 0.03 [mm]",
     )
     solid_mesh_size: float | None = Field(
         None,
@@ -156,6 +161,16 @@ class AleFsiOptions(PluginOptions):
     linear_solver: Literal["direct", "block_gmres"] = Field(
         "direct", description="Newton systems: Pardiso, or GMRes with block preconditioner [-]"
     )
+
+    @property
+    def interface_size(self) -> float:
+        """The interface element size in use (mm): ``interface_mesh_size``, else the
+        outline's own in the 2-D flow cell and ridge (named outlines), else 0.03."""
+        if self.interface_mesh_size is not None:
+            return self.interface_mesh_size
+        if self.mesh_file is None and self.geometry in ("flow_cell", "ridge_3d"):
+            return outline_mesh_size(self.outline)
+        return DEFAULT_INTERFACE_MESH_SIZE
 
     @field_validator("outline", mode="before")
     @classmethod

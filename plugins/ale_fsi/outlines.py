@@ -1,38 +1,40 @@
 """The named biofilm outlines of the 2-D flow cell (the ``outline`` option takes a name).
 
-``"fig2_sketch"`` (the default) is fbia's outline drawn after Paper A Fig. 2 by eye: it fills
-about half of the channel height and overhangs on the downstream side, while the downstream
-foot meets the floor almost at a right angle (an acute fluid wedge there inverts ALE
-elements).  Against the facts the thesis publishes about its own mound it is off: largest
-displacement 0.0454 mm at E = 400 Pa, nu = 0.3, 100 mm^2/s (thesis: ~5.3e-2 mm), 91 interface
-vertices at the default 0.03 mm (Paper B: n_in = 66), and the blue Table 1 start
+``"paper_a_facts"`` (the default) is derived from what the thesis publishes about its mound,
+which it calls "arbitrary, inspired by experiments" and gives no coordinates of (issue 26):
+
+1. the largest displacement at E = 400 Pa, nu = 0.3, 100 mm^2/s is ~5.3e-2 mm (Paper A, text
+   below Table 1): fbia 0.0528 mm (-0.4 %);
+2. the likelihood's E-nu band: "an underestimation of E is coupled to an underestimation of
+   nu" (Paper B), i.e. the largest displacement grows with nu at fixed E: 0.0431, 0.0528,
+   0.0579 mm at nu = 0, 0.3, 0.45;
+3. failures only for soft material (Paper B), and the Table 1 starts at 200 Pa ran: the
+   lowest E with a steady state at 100 mm^2/s is 150 Pa at nu = 0 and 140 Pa at nu = 0.4;
+4. all eleven Table 1 starts have a steady state;
+5. n_in = 66 interface nodes (Paper B): 67 at the outline's interface element size
+   0.057 mm (netgen gives 65 or 67 near it, never 66) -- the size the flow cell uses for this
+   outline unless ``interface_mesh_size`` is given (:data:`OUTLINE_MESH_SIZES`).
+
+(Saint Venant-Kirchhoff, quasi-static, the default mesh otherwise;
+``benchmarks/flow_cell_outline.py`` prints these figures for any outline.)  How it was found:
+about 45 candidates from 8 families (scaled ``fig2_sketch``, gentle feet, no overhang,
+symmetric, steep upstream face, waisted, mushroom), each with its height set by bisection for
+fact 1, all failed fact 3 or fact 2: the steady branch ends at a limit point (SVK softens in
+compression, det F 0.3-0.7 at a concave spot) at about 0.10 mm, twice the truth's, so the
+200 Pa starts sit at the edge; a waist carries 200 Pa but reverses the nu trend, the more so
+upstream (an upstream-only waist: spread d(0.45) - d(0) = +0.0007 mm; downstream-only
++0.0123 mm).  What moves the limit point is a **downstream lean** of the cap (x shifted by
+lean * w * y / h): it turns the upstream face into a ramp, so that at nu = 0.4 the branch
+reaches 0.145-0.16 mm (lowest E, no upstream waist, downstream waist 0.6, w = 0.9 mm: 250,
+210, 180, 150 Pa at lean 0, 0.15, 0.3, 0.45 at nu = 0.4), while a moderate downstream waist
+keeps the nu = 0 displacement at 200 Pa near 0.08 mm.  ``paper_a_facts`` is that shape
+(lean 0.45, footprint 0.5-1.4 mm, height fitted to 0.5036 mm); its cap overhangs the
+downstream foot by 0.09 mm, as the mound of Paper A Fig. 2 does.  Coarser or finer meshes move
+its limit by 10-20 Pa (interface 0.015 mm: 160/170 Pa; 0.06 mm: 150/140 Pa).
+
+``"fig2_sketch"`` is fbia's earlier outline, drawn after Paper A Fig. 2 by eye: largest
+displacement 0.0454 mm at the truth, 91 interface vertices at 0.03 mm, and the blue start
 (200 Pa, 0.4) has no steady state beyond 97.7 mm^2/s.
-
-An outline derived from the published facts (issue 26) is not found yet.  What was measured
-(``benchmarks/flow_cell_outline.py`` prints these figures for any candidate; Saint
-Venant-Kirchhoff, the default mesh):
-
-- In every one of about 45 candidate outlines from 8 families (scaled fig2_sketch, gentle
-  feet, no overhang, symmetric, steep upstream face, waisted, mushroom; heights set by
-  bisection so that the largest displacement at the truth is 0.053 mm) the steady branch
-  ends (a limit point: SVK softens in compression, det F 0.3 to 0.7 at a concave spot) where
-  the largest displacement reaches about 0.10 mm, twice the truth's; E = 200 Pa gives about
-  that, so the blue and orange starts sit at the edge in all.
-- Outlines without a waist keep the thesis' E-nu band (the largest displacement grows with
-  nu: 0.0341, 0.0454, 0.0517 mm at nu = 0, 0.3, 0.45 for ``fig2_sketch``; Paper B: "an
-  underestimation of E is coupled to an underestimation of nu"), but their branch at
-  200 Pa, nu = 0.4 ends below 100 mm^2/s (85-98 mm^2/s).
-- Waisted outlines (a cap on a narrower neck) carry 200 Pa at nu = 0 and 0.4 (the lowest
-  E with a steady state: 190 Pa at nu = 0, 150 Pa at nu = 0.4 for the best), but the deeper
-  the waist, the flatter or reversed the nu trend (0.0531, 0.0530, 0.0493 mm at
-  nu = 0, 0.3, 0.45): the fit then pulls the blue start to nu -> 0.5, where Paper A's
-  algorithm stops at the bound (measured: blue ends with damping_limit at nu = 0.499).
-  On a mesh with interface size 0.015 mm, orange (200 Pa, 0.0) fails on that outline too.
-
-So no outline among those tried meets all of: 0.053 mm at the truth, the thesis' sign of the
-E-nu band, and steady states at both 200 Pa starts.  The candidates and their figures are in
-the benchmark; the next step is a wider family (or a measured reason why the thesis' coarse
-linear elements carried 200 Pa: they do not resolve the compressed concave spot).
 """
 
 from __future__ import annotations
@@ -41,7 +43,22 @@ from typing import Literal
 
 Point = tuple[float, float]
 
-#: fbia's outline (mm) after Paper A Fig. 2, upstream foot -> top -> downstream foot.
+#: the outline derived from the thesis' published facts (mm), upstream foot -> downstream foot
+PAPER_A_FACTS_OUTLINE: tuple[Point, ...] = (
+    (0.5, 0.0),
+    (0.5846, 0.0604),
+    (0.747, 0.1763),
+    (0.923, 0.3022),
+    (1.1345, 0.4532),
+    (1.355, 0.5036),
+    (1.4945, 0.4532),
+    (1.3928, 0.3022),
+    (1.3106, 0.1763),
+    (1.3694, 0.0604),
+    (1.4, 0.0),
+)
+
+#: fbia's earlier outline (mm) after Paper A Fig. 2, upstream foot -> top -> downstream foot.
 FIG2_SKETCH_OUTLINE: tuple[Point, ...] = (
     (0.50, 0.00),
     (0.55, 0.11),
@@ -57,12 +74,21 @@ FIG2_SKETCH_OUTLINE: tuple[Point, ...] = (
     (1.17, 0.00),
 )
 
-OutlineName = Literal["fig2_sketch"]
+OutlineName = Literal["paper_a_facts", "fig2_sketch"]
 
 #: name -> outline (mm)
-NAMED_OUTLINES: dict[str, tuple[Point, ...]] = {"fig2_sketch": FIG2_SKETCH_OUTLINE}
+NAMED_OUTLINES: dict[str, tuple[Point, ...]] = {
+    "paper_a_facts": PAPER_A_FACTS_OUTLINE,
+    "fig2_sketch": FIG2_SKETCH_OUTLINE,
+}
 
-DEFAULT_OUTLINE_NAME: OutlineName = "fig2_sketch"
+#: name -> the interface element size (mm) the flow cell uses for it when none is given
+OUTLINE_MESH_SIZES: dict[str, float] = {"paper_a_facts": 0.057, "fig2_sketch": 0.03}
+
+#: the interface element size (mm) of an outline given as points, and of 3-D geometries
+DEFAULT_INTERFACE_MESH_SIZE = 0.03
+
+DEFAULT_OUTLINE_NAME: OutlineName = "paper_a_facts"
 
 #: the default outline's points (mm)
 DEFAULT_OUTLINE = NAMED_OUTLINES[DEFAULT_OUTLINE_NAME]
@@ -75,3 +101,13 @@ def resolve_outline(outline: str | list[Point] | tuple[Point, ...] | None) -> tu
     if isinstance(outline, str):
         return NAMED_OUTLINES[outline]
     return tuple((float(x), float(y)) for x, y in outline)
+
+
+def outline_mesh_size(outline: str | list[Point] | tuple[Point, ...] | None) -> float:
+    """The interface element size (mm) for an ``outline`` option when none is given: a named
+    outline's own (:data:`OUTLINE_MESH_SIZES`), else :data:`DEFAULT_INTERFACE_MESH_SIZE`."""
+    if outline is None:
+        outline = DEFAULT_OUTLINE_NAME
+    if isinstance(outline, str):
+        return OUTLINE_MESH_SIZES[outline]
+    return DEFAULT_INTERFACE_MESH_SIZE
