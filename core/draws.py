@@ -17,10 +17,10 @@ runs the study's iterator N times, each on its own synthetic data:
 - its ``[paper]`` rows are judged over the draws (:func:`fbia.core.paper.compare_draws`,
   the rule ``DRAWS_RULE``): a published number agrees when it lies inside fbia's range.
 
-The draws as a whole are ``completed`` when at least :data:`MIN_JUDGED` draws gave a result
-that is a success and not flagged unreliable, and at most :data:`MAX_LOST` of the draws did
-not (leaving out many failed draws would bias the range); otherwise ``unreliable``, which
-agrees with nothing.
+The draws as a whole are ``completed`` when there are at least :data:`MIN_DRAWS` of them and
+at most :data:`MAX_LOST` of them gave no result that is a success and not flagged unreliable
+(the range is taken over the others; leaving out many would bias it); otherwise
+``unreliable``, which agrees with nothing.
 
 >>> draw_seed(7, 0), draw_seed(7, 1) == draw_seed(7, 1), draw_seed(7, 1) == draw_seed(7, 2)
 (7, True, False)
@@ -42,7 +42,7 @@ from .study import Study
 
 __all__ = [
     "MAX_LOST",
-    "MIN_JUDGED",
+    "MIN_DRAWS",
     "DrawRecord",
     "DrawsResult",
     "draw_seed",
@@ -51,8 +51,8 @@ __all__ = [
     "run_draws",
 ]
 
-#: the fewest draws with a result for a 95 % range (below: ``unreliable``)
-MIN_JUDGED = 20
+#: the fewest draws for a 95 % range (below: ``unreliable``)
+MIN_DRAWS = 20
 #: the largest share of draws without a result that may be left out of the range
 MAX_LOST = 0.1
 #: the folder of the draws in the study's output folder
@@ -199,18 +199,15 @@ def run_draws(
 
 
 def collect(records: Sequence[DrawRecord], iterator: str) -> DrawsResult:
-    """The :class:`DrawsResult` of the draws ``records`` (status by ``MIN_JUDGED``,
+    """The :class:`DrawsResult` of the draws ``records`` (status by ``MIN_DRAWS``,
     ``MAX_LOST``)."""
     judged = [d for d in records if d.judged]
     lost = len(records) - len(judged)
     if not judged:
         status, message = "no_result", f"none of the {len(records)} draws gave a result"
-    elif len(judged) < MIN_JUDGED:
+    elif len(records) < MIN_DRAWS:
         status = "unreliable"
-        message = (
-            f"{len(judged)} of {len(records)} draws gave a result: a 95 % range needs "
-            f"at least {MIN_JUDGED}"
-        )
+        message = f"{len(records)} draws: a 95 % range needs at least {MIN_DRAWS}"
     elif lost > MAX_LOST * len(records):
         status = "unreliable"
         message = (

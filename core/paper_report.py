@@ -29,6 +29,7 @@ import json
 import math
 import os
 import re
+import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -283,8 +284,10 @@ def _rel(path: Path, start: Path) -> str:
 def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Path, int]:
     """Collect every ``paper.json`` below ``folders`` into the markdown page ``target``.
 
-    Returns the page and the number of studies on it; a folder without any is an error (a
-    summary of nothing would hide that the examples were not run).
+    Returns the page and the number of studies on it.  Study files with a ``[paper]`` table
+    below ``folders`` that have no ``paper.json`` are listed as not run, records whose study
+    file has no ``[paper]`` table any more are left out (and listed); no record at all is an
+    error (a summary of nothing would hide that the examples were not run).
     """
     target = Path(target)
     records: list[tuple[Path, PaperRecord]] = []
@@ -292,13 +295,14 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
         folder = Path(folder)
         if not folder.is_dir():
             raise ConfigError("not a folder", str(folder))
-        found = sorted(folder.rglob(RECORD_NAME))
-        if not found:
-            raise ConfigError(
-                f"no {RECORD_NAME} below it: run the examples first (make reproduce)",
-                str(folder),
-            )
-        records += [(p, PaperRecord.read(p)) for p in found]
+        records += [(p, PaperRecord.read(p)) for p in sorted(folder.rglob(RECORD_NAME))]
+    if not records:
+        raise ConfigError(
+            f"no {RECORD_NAME} below them: run the examples first (make reproduce)",
+            ", ".join(str(f) for f in folders),
+        )
+    records, left_out = _current(records)
+    not_run = _not_run(folders, records)
     lines = [
         "# Reproductions of the papers' examples",
         "",
@@ -327,6 +331,24 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
             f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
             f"{rec.nfev} ({rec.forward_time:.0f} s) |"
         )
+    good_all = sum(verdict(rec.rows)[0] for _, rec in records)
+    judged_all = sum(verdict(rec.rows)[1] for _, rec in records)
+    if judged_all:
+        lines += [
+            "",
+            f"In all: {good_all} of {judged_all} judged published numbers agree "
+            f"({100 * good_all / judged_all:.0f} %).",
+        ]
+    if not_run:
+        lines += ["", "Studies with a `[paper]` table that have no `paper.json` (not run yet):", ""]
+        lines += [f"- `{_rel_or_abs(f, root)}`" for f in not_run]
+    if left_out:
+        lines += [
+            "",
+            "Left out: `paper.json` files whose study file has no `[paper]` table (any more):",
+            "",
+        ]
+        lines += [f"- `{_rel_or_abs(f, root)}`" for f in left_out]
     lines += _measured_times([path for path, _ in records], [Path(f) for f in folders], root)
     for path, rec in records:
         study_file = _rel_or_abs(Path(rec.study_file), root)
@@ -351,6 +373,32 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return target, len(records)
+
+
+def _has_paper(study_file: Path) -> bool:
+    """Whether a study file (still) has a ``[paper]`` table."""
+    try:
+        return "paper" in tomllib.loads(study_file.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+
+
+def _current(
+    records: list[tuple[Path, PaperRecord]],
+) -> tuple[list[tuple[Path, PaperRecord]], list[Path]]:
+    """The records whose study file still has a ``[paper]`` table, and the others' paths."""
+    keep: list[tuple[Path, PaperRecord]] = []
+    left_out: list[tuple[Path, PaperRecord]] = []
+    for path, rec in records:
+        (keep if _has_paper(Path(rec.study_file)) else left_out).append((path, rec))
+    return keep, [path for path, _ in left_out]
+
+
+def _not_run(folders: Sequence[str | Path], records: list[tuple[Path, PaperRecord]]) -> list[Path]:
+    """Study files with a ``[paper]`` table below ``folders`` that no record comes from."""
+    done = {Path(rec.study_file).resolve() for _, rec in records}
+    files = sorted({f.resolve() for d in folders for f in Path(d).rglob("study*.toml")})
+    return [f for f in files if f not in done and _has_paper(f)]
 
 
 def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path) -> list[str]:

@@ -196,7 +196,7 @@ def _run_draws(
             report_md = write_paper_report(
                 study, result, out, wall, rows=rows, forward_time=result.forward_time
             )
-            echo(f"comparison with {study.paper.source} over the draws: {report_md}")
+            echo(f"comparison with {study.paper.source}: {report_md}")
     return result
 
 

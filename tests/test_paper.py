@@ -430,7 +430,7 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     capsys.readouterr()
     assert main(["reproductions", "s.md", "data"]) == 2
     assert one_error_line(capsys) == (
-        "data: no paper.json below it: run the examples first (make reproduce)"
+        "data: no paper.json below them: run the examples first (make reproduce)"
     )
 
 
@@ -508,6 +508,7 @@ def test_a_paper_json_of_the_per_row_rules_is_listed_stale(tmp_path):
         "rows": [old_row],
         "reused": 0,
     }
+    (tmp_path / "study.toml").write_text('[paper]\nsource = "Paper A, Table 2"\n')
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "paper.json").write_text(json.dumps(record))
     rec = PaperRecord.read(tmp_path / "out" / "paper.json")
@@ -529,3 +530,47 @@ def test_the_paper_examples_tables_read_under_the_kinds(path):
 
 def test_there_are_paper_examples_to_check():
     assert len(PAPER_STUDIES) >= 22  # Paper A: 13, Paper B: 9 when the kinds came
+
+
+def test_the_summary_counts_all_rows_and_lists_studies_not_run_and_records_left_out(tmp_path):
+    """The page totals the verdicts; a study file with [paper] but no paper.json is listed as
+    not run; a paper.json whose study file lost its [paper] table is left out (and listed)."""
+    spec = read_paper(
+        {
+            "source": "S",
+            "values": [
+                {"quantity": "x.E", "kind": "modulus", "paper": 400.0},
+                {"quantity": "x.nu", "kind": "ratio", "paper": 0.5},
+            ],
+        },
+        "a.toml",
+    )
+    rows = tuple(compare(spec, {"x.E": 401.0, "x.nu": 0.3}))
+
+    def record(name: str) -> dict:
+        rec = PaperRecord(
+            name,
+            str(tmp_path / f"{name}.toml"),
+            "S",
+            "",
+            "converged_gradient",
+            1.0,
+            1.0,
+            3,
+            "now",
+            rows,
+        )
+        return rec.to_dict()
+
+    for name, table in (("a", True), ("b", False)):
+        text = '[paper]\nsource = "S"\n' if table else '[study]\nname = "b"\n'
+        (tmp_path / f"{name}.toml").write_text(text)
+        (tmp_path / f"out_{name}").mkdir()
+        (tmp_path / f"out_{name}" / "paper.json").write_text(json.dumps(record(name)))
+    (tmp_path / "study_c.toml").write_text('[paper]\nsource = "S"\n')  # never run
+    page, n = write_summary(tmp_path / "s.md", [tmp_path])
+    text = page.read_text()
+    assert n == 1 and "| [a](#a) | S | 1 / 2 |" in text and "## b" not in text
+    assert "In all: 1 of 2 judged published numbers agree (50 %)." in text
+    assert "have no `paper.json` (not run yet):\n\n- `study_c.toml`" in text
+    assert "has no `[paper]` table (any more):\n\n- `out_b/paper.json`" in text

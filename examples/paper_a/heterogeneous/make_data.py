@@ -18,12 +18,12 @@ import fbia
 
 HERE = Path(__file__).parent
 TRUTH = {"E_1": 500.0, "nu_1": 0.2, "E_2": 200.0, "nu_2": 0.1, "E_3": 1000.0, "nu_3": 0.3}
-#: Paper A Fig. 9 as layers of the mound (height 0.48 mm; Paper B's split at 15 % and 50 %
-#: of the height): solid_1 the top (y > 0.24 mm), solid_2 the middle, the rest (solid_3) the
-#: footing layer (y < 0.072 mm) -- the study files give the same polygons.
+#: Paper A Fig. 9 as layers of the mound (height 0.5036 mm; Paper B's split at 15 % and 50 %
+#: of the height): solid_1 the top (y > 0.2518 mm), solid_2 the middle, the rest (solid_3) the
+#: footing layer (y < 0.0755 mm) -- the study files give the same polygons.
 LAYERS = [
-    [(0.0, 0.24), (2.0, 0.24), (2.0, 1.0), (0.0, 1.0)],
-    [(0.0, 0.072), (2.0, 0.072), (2.0, 0.24), (0.0, 0.24)],
+    [(0.0, 0.2518), (2.0, 0.2518), (2.0, 1.0), (0.0, 1.0)],
+    [(0.0, 0.0755), (2.0, 0.0755), (2.0, 0.2518), (0.0, 0.2518)],
 ]
 
 
