@@ -43,13 +43,14 @@ pytest: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/pytest -m slow
 
-# The papers' examples (examples/paper_*/<example>/study*.toml, each with a [paper] table):
-# long (see each example's README for its measured time); every study runs on its own
-# [executor], so `kind = "dask"` spreads it over a cluster. Then docs/reproductions.md.
-REPRODUCE ?= $(sort $(wildcard examples/paper_*/*/study*.toml))
+# The papers' examples (examples/paper_*/<example>/study*.toml and Paper A's growth example
+# examples/growth/study*.toml): long (see each example's README for its measured time);
+# every study runs on its own [executor], so `kind = "dask"` spreads it over a cluster. Then
+# docs/reproductions.md.
+REPRODUCE ?= $(sort $(wildcard examples/paper_*/*/study*.toml examples/growth/study*.toml))
 reproduce: $(STAMP)
 	@for f in $(REPRODUCE); do echo "== $$f"; $(BIN)/fbia run $$f || exit 1; done
-	$(BIN)/fbia reproductions docs/reproductions.md $(sort $(wildcard examples/paper_*))
+	$(BIN)/fbia reproductions docs/reproductions.md $(sort $(wildcard examples/paper_*)) examples/growth
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

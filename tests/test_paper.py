@@ -20,7 +20,9 @@ from fbia.iterators.surrogate_convergence_result import ConvergenceRow, Surrogat
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PAPER_STUDIES = sorted(
-    p for p in EXAMPLES.glob("paper_*/*/*.toml") if "paper" in tomllib.loads(p.read_text())
+    p
+    for p in [*EXAMPLES.glob("paper_*/*/*.toml"), *EXAMPLES.glob("growth/*.toml")]
+    if "paper" in tomllib.loads(p.read_text())
 )
 
 PAPER = """
@@ -529,7 +531,7 @@ def test_the_paper_examples_tables_read_under_the_kinds(path):
 
 
 def test_there_are_paper_examples_to_check():
-    assert len(PAPER_STUDIES) >= 22  # Paper A: 13, Paper B: 9 when the kinds came
+    assert len(PAPER_STUDIES) >= 27  # Paper A: 16 and growth 2, Paper B: 9
 
 
 def test_the_summary_counts_all_rows_and_lists_studies_not_run_and_records_left_out(tmp_path):
