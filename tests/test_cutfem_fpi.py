@@ -11,6 +11,7 @@ import pytest
 
 pytest.importorskip("xfem")
 
+import fbia  # noqa: E402
 from fbia.core.errors import ConfigError, ForwardModelError  # noqa: E402
 from fbia.plugins.cutfem_fpi import CutFemFpiForwardModel  # noqa: E402
 
@@ -31,6 +32,28 @@ def test_zero_inflow_gives_zero_deformation(run) -> None:  # type: ignore[no-unt
     assert np.array_equal(sol.interface(LEVELS[1]).vertices, ref)
     assert sol.diagnostics["max_displacement"][1] == 0.0
     assert sol.diagnostics["porosity_range"][1] == pytest.approx([0.25, 0.25], abs=1e-12)
+
+
+def test_undeformed_is_the_reference_and_points_go_where_it_moved(run) -> None:  # type: ignore[no-untyped-def]
+    """undeformed(): point for point the zero-inflow interface; with it, synthetic points can
+    be placed where the interface moved (Paper A Fig. 16: where it moves most)."""
+    model, sol = run
+    rest = model.undeformed()
+    assert np.array_equal(rest.vertices, sol.interface(LEVELS[1]).vertices) and model.dim == 2
+    moved = sol.interface(LEVELS[0]).vertices - rest.vertices
+    u_n = np.abs(np.sum(moved * sol.interface(LEVELS[0]).vertex_normals, axis=1))
+    (obs,) = fbia.synthetic_observations(
+        model,
+        {"E": 300.0, "nu": 0.3, "phi0": 0.25, "K": 1e-4},
+        LEVELS[:1],
+        0.0,
+        1,
+        points=6,
+        placement="displacement",
+    )
+    pts = obs.measurement_points.points
+    nearest = np.argmin(np.linalg.norm(rest.vertices[None] - pts[:, None], axis=2), axis=1)
+    assert len(pts) == 6 and np.all(u_n[nearest] >= 0.4 * u_n.max())  # 0.5: the edges' own
 
 
 def test_biofilm_bends_downstream_more_with_more_flow(run) -> None:  # type: ignore[no-untyped-def]

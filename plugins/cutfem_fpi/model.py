@@ -424,6 +424,11 @@ class CutFemFpiForwardModel(Configurable):
         """The underlying :class:`~fbia.plugins.cutfem_fpi.coupled.PoroFsiSolver`."""
         return self._get_solver()
 
+    def undeformed(self) -> Interface:
+        """The reference interface, point for point the one :meth:`solve` returns deformed
+        (what ``[synthetic] placement = "displacement"`` measures the motion against)."""
+        return Interface.polyline(self._get_solver().sampler.reference)
+
 
 def _check_outline(
     p: np.ndarray, origin: tuple[float, float], length: float, height: float, where: str
