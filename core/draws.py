@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from .options import plugin_options
 from .paper import Comparison, PaperSpec, compare_draws
 from .problem import Result
 from .study import Study
@@ -47,6 +48,7 @@ __all__ = [
     "DrawsResult",
     "draw_seed",
     "draw_study",
+    "fresh_model",
     "judge_draws",
     "run_draws",
 ]
@@ -68,12 +70,15 @@ def draw_seed(seed: int, k: int) -> int:
 
 def draw_study(study: Study, k: int, output: Path, store: Path) -> Study:
     """The study of draw ``k``: its own noise seed and output folder, the shared ``store``,
-    one draw, no ``[paper]`` (the draws are judged together), no plots."""
+    one draw, no ``[paper]`` (the draws are judged together), no plots, and a model object of
+    its own (:func:`fresh_model`), so that neither its data nor its fit depend on the state
+    an earlier draw left in the model (warm starts)."""
     spec = study.synthetic
     assert spec is not None and spec.draws > 1
     width = len(str(spec.draws - 1))
     return replace(
         study,
+        model=fresh_model(study.model),
         name=f"{study.name} draw {k}",
         synthetic=replace(spec, seed=draw_seed(spec.seed, k), draws=1),
         output=output / DRAWS_FOLDER / f"{k:0{width}d}",
@@ -81,6 +86,17 @@ def draw_study(study: Study, k: int, output: Path, store: Path) -> Study:
         paper=None,
         figures=False,
     )
+
+
+def fresh_model(model: Any) -> Any:
+    """A new model object with the options of ``model`` (no state of earlier runs: a model
+    that warm-starts from its last solution gives, within its solver's tolerance, other
+    numbers after other runs, which on an ill-conditioned fit moves the optimum); ``model``
+    itself when its class cannot be built from its options."""
+    try:
+        return type(model)(**plugin_options(model, exclude_defaults=True))
+    except Exception:  # a third-party model without an options constructor: shared
+        return model
 
 
 @dataclass(frozen=True)

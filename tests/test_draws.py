@@ -13,7 +13,7 @@ from _studies import one_error_line
 
 import fbia
 from fbia.core.cli import main
-from fbia.core.draws import MIN_DRAWS, DrawRecord, collect, draw_seed
+from fbia.core.draws import MIN_DRAWS, DrawRecord, collect, draw_seed, draw_study
 from fbia.core.paper import compare_draws, read_paper
 
 TRUTH_E = 400.0
@@ -184,3 +184,16 @@ def test_draws_of_exact_data_are_refused(tmp_path, monkeypatch, capsys):
     assert one_error_line(capsys) == (
         "study.toml: [synthetic] draws: draws > 1 needs noise_std > 0: exact data draw alike"
     )
+
+
+def test_every_draw_gets_a_model_of_its_own(tmp_path):
+    """A model that warm-starts carries state from run to run; each draw builds its own
+    model object with the study's options, so its data and fit do not depend on the draws
+    before it (measured: at sigma = 1e-2 mm on ale_fsi, sharing one model changed which draws
+    reached the nu bound between a fresh and a resumed run)."""
+    path = tmp_path / "study.toml"
+    path.write_text(STUDY.format(draws=3))
+    study = fbia.load_study(path)
+    models = [draw_study(study, k, tmp_path, tmp_path / "s.sqlite").model for k in range(3)]
+    assert len({id(m) for m in [study.model, *models]}) == 4
+    assert all(m.options == study.model.options for m in models)
