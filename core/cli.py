@@ -5,17 +5,22 @@
     fbia validate study.toml                  check everything that needs no forward run
     fbia forward study.toml --set E=400 --set nu=0.3 [--output DIR]
     fbia run study.toml [--workers N] [--output DIR] [--fresh] [--retry-failed]
-                        [--address tcp://HOST:PORT]
+                        [--reuse-changed-code] [--address tcp://HOST:PORT]
     fbia plugins [--json]
     fbia reproductions OUT.md DIR [DIR ...]   the summary of the paper.json files below DIRs
     fbia --version
 
 ``fbia run`` on an output folder that holds a study store resumes the study: every stored run
 of the same problem is reused, none is run again; ``--fresh`` starts over, ``--retry-failed``
-runs stored failures again, ``--address`` sends the runs to a running Dask scheduler.
+runs stored failures again, ``--address`` sends the runs to a running Dask scheduler.  A store
+whose runs were made by other code of the model plugin (its source files changed) is refused
+unless ``--reuse-changed-code`` says the change leaves the results as they were.
 
-Exit status: 0 done (``fbia run``: the result, converged or not, is written; its status is in
-the report); 1 a forward run failed (``fbia forward``, or ``fbia run`` without an iterator),
+Exit status: 0 done (``fbia run``: the result is a success and not flagged ``unreliable`` or
+``unchecked``); 3 ``fbia run`` wrote a result that is not trustworthy (not converged, flagged
+``unreliable`` or ``unchecked``: its report says why); 4 ``fbia run`` wrote no result (every
+forward run failed, no start or noise draw gave an estimate); 1 a forward run failed
+(``fbia forward``, or ``fbia run`` without an iterator),
 a file could not be written, or the study store could not be read or written (a full disk, a
 read-only or damaged store: one line naming the file and what to do); 2 bad input (study
 file, data files, plugin names, options, arguments; a store made for a different problem):
@@ -33,11 +38,27 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from .errors import ConfigError, Terminated
 
+if TYPE_CHECKING:
+    from .problem import Result
+
 PROG = "fbia"
+
+#: exit statuses of the command line (the module docstring says when each is given)
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_BAD_INPUT = 2
+EXIT_UNTRUSTED = 3
+EXIT_NO_RESULT = 4
+EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
+#: result statuses that a success may still carry but that make it untrustworthy
+UNTRUSTED_STATUSES = frozenset({"unreliable", "unchecked"})
+#: result statuses that mean "no estimate at all"
+NO_RESULT_STATUSES = frozenset({"all_failed", "no_result"})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -99,6 +120,12 @@ def _parser() -> argparse.ArgumentParser:
         "--retry-failed",
         action="store_true",
         help="run the stored failed runs again instead of reusing their failure",
+    )
+    r.add_argument(
+        "--reuse-changed-code",
+        action="store_true",
+        help="reuse the stored runs although the model plugin's source changed since they "
+        "were made (only when the change leaves the results as they were)",
     )
     r.add_argument(
         "--address",
@@ -234,10 +261,36 @@ def _run(args: argparse.Namespace) -> int:
         fresh=args.fresh,
         retry_failed=args.retry_failed,
         address=args.address,
+        reuse_changed_code=args.reuse_changed_code,
     )
     if study.iterator is None and not result.success:
         return _fail(result.message, 1)
-    return 0
+    status = run_exit_status(result)
+    if status == EXIT_UNTRUSTED:
+        print(
+            f"{PROG}: the result is not trustworthy (status {result.status}): "
+            f"{' '.join(result.message.split())} (exit status {status})",
+            file=sys.stderr,
+        )
+    elif status == EXIT_NO_RESULT:
+        print(
+            f"{PROG}: no result (status {result.status}): {' '.join(result.message.split())} "
+            f"(exit status {status})",
+            file=sys.stderr,
+        )
+    return status
+
+
+def run_exit_status(result: Result) -> int:
+    """The exit status of ``fbia run`` for its result: :data:`EXIT_OK` only for a result that
+    is a success and not flagged ``unreliable`` or ``unchecked``; :data:`EXIT_NO_RESULT` when
+    there is no estimate (every run failed, no start or draw gave one); :data:`EXIT_UNTRUSTED`
+    for the rest (a result that ran but did not converge or is flagged)."""
+    if result.success and result.status not in UNTRUSTED_STATUSES:
+        return EXIT_OK
+    if result.status in NO_RESULT_STATUSES or (result.x is None and not result.success):
+        return EXIT_NO_RESULT
+    return EXIT_UNTRUSTED
 
 
 def _reproductions(args: argparse.Namespace) -> int:

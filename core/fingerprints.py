@@ -38,6 +38,9 @@ from .problem import InverseProblem, jsonable
 
 __all__ = [
     "canonical",
+    "code_digest",
+    "default_options",
+    "without_defaults",
     "comparison_key",
     "comparison_part",
     "coordinates_of",
@@ -73,8 +76,10 @@ def _class_version(obj: Any) -> dict[str, str]:
 
 
 def _options(obj: Any) -> dict[str, Any]:
-    """A plugin's options; a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
-    out = dict(jsonable(plugin_options(obj)))  # inf and nan as strings, as canonical() does
+    """A plugin's options that differ from their defaults (adding an option with a default to
+    a plugin keeps every key); a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
+    # inf and nan as strings, as canonical() does
+    out = dict(jsonable(plugin_options(obj, exclude_defaults=True)))
     opts = getattr(obj, "options", None)
     for key in out:
         value = getattr(opts, key, None)
@@ -108,6 +113,59 @@ def _digest(*arrays: Any) -> str | None:
 def interface_digest(gamma: Interface) -> str:
     """SHA-256 of an interface's vertices and cells (an observation's part of a fingerprint)."""
     return str(_digest(gamma.vertices, gamma.cells))
+
+
+def default_options(obj: Any) -> dict[str, Any]:
+    """The options of plugin ``obj`` that are at their defaults, with those values, as they
+    appear in a fingerprint (what :func:`_options` leaves out)."""
+    given = plugin_options(obj, exclude_defaults=True)
+    return {k: v for k, v in jsonable(plugin_options(obj)).items() if k not in given}
+
+
+def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -> dict[str, Any]:
+    """A stored model or comparison part (:func:`model_part`, :func:`comparison_part`) with
+    the options of its ``plugin`` ("model" or "measure") left out that are at ``obj``'s
+    defaults now: the part a store written before options were keyed by their difference from
+    the defaults (or before a defaulted option existed) would have today."""
+    defaults = default_options(obj)
+    out = json.loads(canonical(part))
+    options = out[plugin].get("options", {})
+    out[plugin]["options"] = {
+        k: v for k, v in options.items() if not (k in defaults and v == defaults[k])
+    }
+    return out
+
+
+def code_digest(obj: Any) -> dict[str, str]:
+    """The source of plugin ``obj``'s code: the class, the files it comes from and their
+    SHA-256.  The files are every ``.py`` file of the package the class's module belongs to
+    (``fbia.plugins.ale_fsi`` -> ``ale_fsi/``, a third party's ``fbia_mysolver`` -> its
+    folder), or the module alone when it is a top-level module or one of ``fbia.plugins``'
+    single-file plugins.  Code the plugin imports from elsewhere (fbia.core, numpy, NGSolve)
+    is not included: their versions are in the run's provenance."""
+    cls = type(obj)
+    module = sys.modules.get(cls.__module__)
+    source = getattr(module, "__file__", None)
+    name = f"{cls.__module__}.{cls.__qualname__}"
+    if source is None:
+        return {"class": name, "files": "", "sha256": ""}
+    path = Path(source).resolve()
+    parent = cls.__module__.rpartition(".")[0]
+    if path.name == "__init__.py" or parent not in ("", "fbia", "fbia.plugins"):
+        root = path.parent
+        files = sorted(root.rglob("*.py"))
+    else:
+        root, files = path.parent, [path]
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.relative_to(root).as_posix().encode() + b"\0")
+        try:
+            h.update(f.read_bytes())
+        except OSError:
+            h.update(b"(unreadable)")
+        h.update(b"\0")
+    shown = str(root) if len(files) > 1 else str(path)
+    return {"class": name, "files": shown, "sha256": h.hexdigest()}
 
 
 # -- fingerprints --------------------------------------------------------------------------------
@@ -183,12 +241,19 @@ def model_key(model: Mapping[str, Any]) -> str:
     return _sha(canonical(model))
 
 
+#: an option a fingerprint leaves out: at its default
+_DEFAULT = object()
+
+
 # -- explaining a change -------------------------------------------------------------------------
 def describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
     """What differs between two fingerprints, in words (at most a few items per part)."""
 
     def values(a: Any, b: Any) -> str:
-        text = f"{json.dumps(a)} -> {json.dumps(b)}"
+        def shown(v: Any) -> str:
+            return "default" if v is _DEFAULT else json.dumps(v)
+
+        text = f"{shown(a)} -> {shown(b)}"
         return text if len(text) <= 60 else text[:57] + "..."
 
     changes: list[str] = []
@@ -202,9 +267,11 @@ def describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]
         if a.get("version") != b.get("version"):
             changes.append(f"{part} version {values(a.get('version'), b.get('version'))}")
         oa, ob = a.get("options", {}), b.get("options", {})
-        keys = sorted(k for k in {*oa, *ob} if oa.get(k) != ob.get(k))
+        keys = sorted(k for k in {*oa, *ob} if oa.get(k, _DEFAULT) != ob.get(k, _DEFAULT))
         if keys:
-            shown = ", ".join(f"{k}: {values(oa.get(k), ob.get(k))}" for k in keys[:3])
+            shown = ", ".join(
+                f"{k}: {values(oa.get(k, _DEFAULT), ob.get(k, _DEFAULT))}" for k in keys[:3]
+            )
             more = f" and {len(keys) - 3} more" if len(keys) > 3 else ""
             changes.append(f"{part} options ({shown}{more})")
     oa, ob = old.get("observations", []), new.get("observations", [])

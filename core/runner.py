@@ -111,6 +111,7 @@ def run_study(
     fresh: bool = False,
     retry_failed: bool = False,
     address: str | None = None,
+    reuse_changed_code: bool = False,
 ) -> Result:
     """Run a study and write its output folder (default: the study's ``output``).
 
@@ -129,6 +130,9 @@ def run_study(
         Delete the store (and the run folders) first and start over.
     retry_failed
         Run stored failed runs again (once) instead of reusing their failure.
+    reuse_changed_code
+        Reuse the stored runs although the model plugin's source changed since they were
+        made (without it such a store is refused: :meth:`StudyStore.bind`).
     address
         Send the runs to the Dask scheduler at this address.
 
@@ -151,7 +155,11 @@ def run_study(
     if study.synthetic is not None and study.synthetic.draws > 1:  # fbia.core.draws
 
         def run_one(sub: Study, k: int) -> Result:
-            again = {"fresh": fresh and k == 0, "retry_failed": retry_failed}
+            again = {
+                "fresh": fresh and k == 0,
+                "retry_failed": retry_failed,
+                "reuse_changed_code": reuse_changed_code,
+            }
             return run_study(sub, sub.output, workers, echo, address=address, **again)
 
         return _run_draws(study, out, store_path, run_one, echo, started)
@@ -160,7 +168,7 @@ def run_study(
     with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh) as store:
         if fresh:
             clear_runs(out / "runs")
-        store.bind(problem)
+        store.bind(problem, reuse_changed_code=reuse_changed_code)
         with log_to_file(out / "fbia.log") as logger:
 
             def say(line: str) -> None:

@@ -59,21 +59,22 @@ import numpy as np
 from .errors import ConfigError, MeasureError, StoreError
 from .fingerprints import (
     canonical,
+    code_digest,
     comparison_key,
     comparison_part,
     coordinates_of,
-    describe_change,
     model_key,
     model_part,
     problem_fingerprint,
     run_key,
+    without_defaults,
 )
 from .interface import Interface
 from .observation import CoordinateKey, Solution, coordinate_key
 from .output_folder import LockHeld, is_fbia_store, lock_file, this_process
 from .problem import Evaluation, InverseProblem
 from .store_db import connect
-from .store_migration import migrate
+from .store_migration import code_change, comparison_rekey, migrate, model_change, rekey
 
 __all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
 
@@ -277,12 +278,15 @@ class StudyStore:
         row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
         return None if row is None else str(row[0])
 
-    def bind(self, problem: InverseProblem) -> str:
+    def bind(self, problem: InverseProblem, reuse_changed_code: bool = False) -> str:
         """Tie the store to ``problem``: the first time, record its model; later, check it.
 
         Returns the model key.  Raises :class:`StoreMismatchError` (a ConfigError) naming
-        what changed when the store holds runs of another model.  The measure, the
-        observations and the likelihood may differ from earlier sessions.
+        what changed when the store holds runs of another model, or runs made by other code
+        of the model plugin (its source files changed, :func:`code_digest`) unless
+        ``reuse_changed_code``.  A store whose model part differs only by options that are at
+        their defaults now (written before a defaulted option existed) is re-keyed.  The
+        measure, the observations and the likelihood may differ from earlier sessions.
         """
         if self._binding is not None and self._binding.problem is problem:
             assert self.hash is not None
@@ -290,24 +294,20 @@ class StudyStore:
         fingerprint = problem_fingerprint(problem)
         model = model_part(fingerprint)
         key = model_key(model)
+        code = code_digest(problem.model)
         if self.hash is None:
             with self._transaction() as db:
                 db.execute("INSERT INTO meta VALUES ('model_key', ?)", (key,))
                 db.execute("INSERT INTO meta VALUES ('model', ?)", (canonical(model),))
             self.hash = key
         elif key != self.hash:
-            old = json.loads(self._meta("problem") or "{}")
-            n = len(self)
-            raise StoreMismatchError(
-                f"the store holds {n} run{'s' if n != 1 else ''} of a different model "
-                f"(changed: {'; '.join(describe_change(old, fingerprint))}); they cannot be "
-                "reused: run with --fresh to start over, or write to another --output",
-                str(self.path),
-            )
+            self._rekey_or_refuse(fingerprint, model, problem)
+        self._check_code(code, reuse_changed_code)
         with self._transaction() as db:
             db.execute(
                 "INSERT OR REPLACE INTO meta VALUES ('problem', ?)", (canonical(fingerprint),)
             )
+            db.execute("INSERT OR REPLACE INTO meta VALUES ('code', ?)", (canonical(code),))
         self._binding = _Binding(
             problem=problem,
             model=model,
@@ -316,6 +316,24 @@ class StudyStore:
             uncertain=list(problem.uncertain_names),
         )
         return key
+
+    def _rekey_or_refuse(
+        self, fingerprint: dict[str, Any], model: dict[str, Any], problem: InverseProblem
+    ) -> None:
+        stored = json.loads(self._meta("model") or "{}")
+        old = json.loads(self._meta("problem") or "{}")
+        if not stored or model_key(without_defaults(stored, problem.model)) != model_key(model):
+            raise StoreMismatchError(model_change(old, fingerprint, len(self)), str(self.path))
+        pair = comparison_rekey(old, fingerprint, problem.measure)
+        with self._transaction() as db:
+            rekey(db, stored, coordinates_of(old), model, pair)
+        self.hash = model_key(model)
+
+    def _check_code(self, code: dict[str, str], reuse: bool) -> None:
+        text = self._meta("code")
+        message = None if text is None or reuse else code_change(json.loads(text), code, len(self))
+        if message is not None:
+            raise StoreMismatchError(message, str(self.path))
 
     @property
     def fingerprint(self) -> dict[str, Any] | None:

@@ -209,6 +209,53 @@ def test_run_writes_result_json_with_provenance(study_file, capsys):
     assert (folder / "plots" / "evaluations.png").is_file()
 
 
+@pytest.mark.parametrize(
+    ("case", "old", "new", "status", "says"),
+    [
+        # one step cannot reach the optimum: a result, but not converged
+        (
+            "not-converged",
+            "max_iter = 30",
+            "max_iter = 1",
+            3,
+            "fbia: the result is not trustworthy (status iteration_limit): ",
+        ),
+        # every run fails: no estimate at all
+        (
+            "all-failed",
+            "n_points = 41 }",
+            "n_points = 41, failure_region = { E = [0.0, 1000.0] } }",
+            4,
+            "fbia: no result (status ",
+        ),
+    ],
+    ids=["not-converged", "all-failed"],
+)
+def test_run_exit_status_says_whether_the_result_can_be_trusted(
+    study_file, capsys, case, old, new, status, says
+):
+    study_file.write_text(edit(old, new))
+    assert main(["run", "study.toml"]) == status
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(says) and err[0].endswith(f"(exit status {status})")
+    result = json.loads((study_file.parent / "out" / "result.json").read_text())
+    assert not result["success"]  # the result is written all the same
+    assert (result["x"] is None) == (status == 4)
+
+
+def test_an_unreliable_success_is_not_trusted():
+    from fbia.core.cli import EXIT_NO_RESULT, EXIT_OK, EXIT_UNTRUSTED, run_exit_status
+    from fbia.core.problem import Result
+
+    assert run_exit_status(Result("completed", True, "", x={"E": 1.0})) == EXIT_OK
+    assert run_exit_status(Result("completed", True, "")) == EXIT_OK  # Sobol: no x
+    for status in ("unreliable", "unchecked"):
+        assert run_exit_status(Result(status, True, "", x={"E": 1.0})) == EXIT_UNTRUSTED
+    assert run_exit_status(Result("unreliable", False, "", x={"E": 1.0})) == EXIT_UNTRUSTED
+    assert run_exit_status(Result("damping_limit", False, "")) == EXIT_NO_RESULT
+    assert run_exit_status(Result("no_result", False, "")) == EXIT_NO_RESULT
+
+
 def test_run_without_iterator_does_a_forward_run_and_says_so(study_file, capsys):
     study_file.write_text(
         STUDY.split("[iterator]")[0] + "[executor]" + STUDY.split("[executor]")[1]

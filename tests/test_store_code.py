@@ -1,0 +1,144 @@
+"""A store never gives back runs of edited model code silently, and keeps its runs when a
+plugin gains an option with a default (issue 29 item 2).
+
+The plugin is a module written into the test's folder (a subclass of the toy model of
+tests/_models.py) and imported again after every edit, as a plugin author would edit theirs.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sqlite3
+import sys
+
+import pytest
+from _models import toy_problem
+
+import fbia
+from fbia.core.fingerprints import (
+    canonical,
+    code_digest,
+    coordinates_of,
+    model_part,
+    problem_fingerprint,
+)
+from fbia.core.options import plugin_options
+from fbia.core.store import StudyStore
+from fbia.core.store_migration import rekey
+
+POINTS = [{"E": 200.0, "nu": 0.1}, {"E": 400.0, "nu": 0.3}, {"E": 700.0, "nu": 0.2}]
+
+PLUGIN = """\
+from pydantic import Field
+
+from _models import ToyMoundForwardModel
+
+
+class Edited(ToyMoundForwardModel):
+    class Options(ToyMoundForwardModel.Options):
+{options}
+
+    def solve(self, parameters, coordinates, workdir):
+{body}
+        return super().solve(parameters, coordinates, workdir)
+"""
+
+
+@pytest.fixture
+def plugin(tmp_path, monkeypatch):
+    """``plugin(options, body)``: write the module ``edited_plugin`` and import it afresh."""
+    monkeypatch.syspath_prepend(str(tmp_path))
+
+    def write(options: str = "        pass", body: str = "        pass"):
+        (tmp_path / "edited_plugin.py").write_text(PLUGIN.format(options=options, body=body))
+        sys.modules.pop("edited_plugin", None)
+        importlib.invalidate_caches()
+        return importlib.import_module("edited_plugin").Edited
+
+    yield write
+    sys.modules.pop("edited_plugin", None)
+
+
+def _problem(model_class):
+    base = toy_problem()
+    return fbia.InverseProblem(
+        model=model_class(),
+        measure=base.measure,
+        observations=base.observations,
+        parameters=base.parameters,
+    )
+
+
+def _evaluate(path, problem, **bind):
+    with StudyStore(path) as store:
+        store.bind(problem, **bind)
+        with fbia.SerialEvaluator(store=store) as ev:
+            ev.evaluate(problem, POINTS)
+            return set(ev.reused), len(store)
+
+
+def test_an_edited_plugin_is_refused_until_the_user_says_the_results_stay(tmp_path, plugin):
+    path = tmp_path / "s.sqlite"
+    assert _evaluate(path, _problem(plugin())) == (set(), 3)
+    # the same code, imported again: every run reused
+    assert _evaluate(path, _problem(plugin())) == ({0, 1, 2}, 3)
+    # the author edits the model: the store refuses, naming the plugin and the way out
+    edited = plugin(body="        parameters = dict(parameters)")
+    with pytest.raises(fbia.ConfigError) as info:
+        _evaluate(path, _problem(edited))
+    message = str(info.value)
+    assert message.startswith(f"{path}: the store holds 3 runs made by other code of the model ")
+    assert "plugin edited_plugin.Edited (its source changed since: " in message
+    assert "edited_plugin.py)" in message
+    assert "--fresh" in message and "--reuse-changed-code" in message
+    # the user says the change keeps the results: reused, and the new code is recorded
+    assert _evaluate(path, _problem(edited), reuse_changed_code=True) == ({0, 1, 2}, 3)
+    assert _evaluate(path, _problem(edited)) == ({0, 1, 2}, 3)
+    # another edit is refused again
+    with pytest.raises(fbia.ConfigError, match="made by other code"):
+        _evaluate(path, _problem(plugin(body="        parameters = {**parameters}")))
+
+
+def test_a_new_option_with_a_default_keeps_every_run(tmp_path, plugin):
+    path = tmp_path / "s.sqlite"
+    assert _evaluate(path, _problem(plugin())) == (set(), 3)
+    grown = plugin(options='        scale: float = Field(1.0, description="a new option [-]")')
+    # the key is unchanged (options at their defaults are not keyed): only the code changed
+    assert _evaluate(path, _problem(grown), reuse_changed_code=True) == ({0, 1, 2}, 3)
+    # the new option set to another value is another model
+    with pytest.raises(fbia.ConfigError, match=r"model options \(scale: default -> 2.0\)"):
+        _evaluate(path, _problem(lambda: grown(scale=2.0)))
+
+
+def test_a_store_keyed_with_every_option_is_rekeyed_and_reused(tmp_path):
+    """Stores written before options were keyed by their difference from the defaults (every
+    option in the key) keep their runs: the first bind re-keys them."""
+    path = tmp_path / "s.sqlite"
+    problem = toy_problem(fail_above=650.0)
+    assert _evaluate(path, problem) == (set(), 3)
+    fingerprint = problem_fingerprint(problem)
+    new = json.loads(canonical(model_part(fingerprint)))
+    old = json.loads(canonical(model_part(fingerprint)))
+    old["model"]["options"] = json.loads(canonical(plugin_options(problem.model)))  # all
+    assert old != new
+    db = sqlite3.connect(path, isolation_level=None)
+    db.execute("BEGIN")
+    assert rekey(db, new, coordinates_of(fingerprint), old) == 3
+    db.execute("COMMIT")
+    db.close()
+    assert _evaluate(path, toy_problem(fail_above=650.0)) == ({0, 1, 2}, 3)
+    with sqlite3.connect(path) as db:
+        (model,) = db.execute("SELECT value FROM meta WHERE key = 'model'").fetchone()
+    assert model == canonical(new)
+
+
+def test_the_code_digest_covers_a_plugin_package_and_only_it():
+    from fbia.plugins.ale_fsi.model import AleFsiForwardModel
+
+    digest = code_digest(AleFsiForwardModel())
+    assert digest["class"] == "fbia.plugins.ale_fsi.model.AleFsiForwardModel"
+    assert digest["files"].endswith("ale_fsi") and len(digest["sha256"]) == 64
+    assert code_digest(fbia.forward_model("analytic_mound_2d"))["files"].endswith("analytic")
+    single = code_digest(toy_problem().model)  # a top-level module: that file alone
+    assert single["files"].endswith("_models.py")
