@@ -95,6 +95,7 @@ from .gp_surrogate import GpSurrogate
 from .gp_uncertainty import marginalise_surrogate_uncertainty
 from .posterior import summarise
 from .smc import SequentialMonteCarlo, SmcResult, SmcState
+from .smc_table import table_note, table_points
 
 FloatArray = NDArray[np.float64]
 
@@ -199,7 +200,7 @@ class GpSmcIterator(IteratorBase):
                 gp,
                 run.sampled_priors,
                 np.random.default_rng([opts.seed, 5]),
-                smc_options=self._smc_settings(),
+                smc_options=self._smc_settings(len(run.sampled_priors)),
             )
             if wanted:
                 posterior_particles = expected
@@ -212,6 +213,8 @@ class GpSmcIterator(IteratorBase):
             (lambda z: target(z) + log_prior(run.sampled, z)) if laplace else None,
         )
         status = run_status(opts.mode, check, uncertainty)
+        tabled, coarse = table_note(post.table, opts.smc_table_tol)
+        status = "unreliable" if coarse else status
         return GpSmcResult(
             status=status,
             success=status == "completed",
@@ -226,6 +229,7 @@ class GpSmcIterator(IteratorBase):
                 + ("" if gp is None else feasibility_note(gp.feasibility))
                 + ("" if uncertainty is None or not wanted else "; " + uncertainty.note())
                 + ("" if uncertainty is None else uncertainty.reliability_note())
+                + tabled
                 + (
                     "; the surrogate was not checked at posterior draws (n_check = 0): "
                     "nothing says whether this posterior is right"
@@ -258,6 +262,7 @@ class GpSmcIterator(IteratorBase):
                 final_ess=float(post.final_ess),
                 rejuvenate=opts.rejuvenate,
                 steps_with_moves=sum(h["moved"] for h in post.history),
+                table=post.table,
             ),
             seconds=time.perf_counter() - run.t_start,
         )
@@ -405,10 +410,11 @@ class GpSmcIterator(IteratorBase):
         )
         return fit
 
-    def _smc_settings(self) -> dict[str, Any]:
+    def _smc_settings(self, dim: int) -> dict[str, Any]:
         """The sampler's settings from the options (the final SMC and its tempered twin)."""
         opts = self.options
         return {
+            "table_points": table_points(opts.smc_table, opts.rejuvenate, dim),
             "n_particles": opts.n_particles,
             "zeta": opts.zeta,
             "n_rejuvenation": opts.n_rejuvenation,
@@ -431,7 +437,7 @@ class GpSmcIterator(IteratorBase):
             rng=np.random.default_rng([self.options.seed, 1]),
             names=run.sampled_names,
             training_range=training_range,
-            **self._smc_settings(),
+            **self._smc_settings(len(run.sampled_priors)),
         )
         gen = sampler.steps()
         while True:

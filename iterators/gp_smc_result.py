@@ -251,6 +251,8 @@ class SmcSummary:
     final_ess: float
     rejuvenate: str
     steps_with_moves: int
+    #: the tabulated L's size and error at the final particles (fbia.iterators.smc_table)
+    table: dict[str, Any] | None = None
 
 
 @dataclass

@@ -27,7 +27,9 @@ Which to use: one resampling cycle takes log(ess_min) / log(zeta) steps (346 at 
 and an informative posterior in a few dimensions needs ten to forty cycles, i.e. thousands of
 steps. ``"every_step"`` costs N n_rej likelihood calls in each of them: 10 000 particles and 30
 MH steps on a 2000-point 7-D GP mean are about 0.5 s per step, half an hour per run at zeta =
-0.998. Use it only where the run has few steps (zeta <= 0.95: tens to hundreds).
+0.998, unless L and the log-priors are tabulated (``table_points``, at most three inputs
+with bounded priors: :mod:`fbia.iterators.smc_table`), which makes a step a few hundredths of
+a second. Otherwise use it only where the run has few steps (zeta <= 0.95).
 ``"after_resampling"`` moves once per cycle: the same settings finish in about ten seconds
 (``benchmarks/bench_smc_paper_settings.py``). The default step limit (``max_steps=None``) is
 100 halvings of the ESS, ceil(100 log 0.5 / log zeta) steps (at least 1000), about three
@@ -56,6 +58,7 @@ from ..core.errors import ConfigError
 from ..core.iteration import drain
 from ..core.parameters import Prior
 from .smc_diagnostics import stall_message
+from .smc_table import LogTables, tabulable
 from .smc_tempering import (
     EssTempering,
     default_max_steps,
@@ -129,6 +132,10 @@ class SmcResult:
         Parameter names (default ``x0, x1, ...``).
     history
         One dict per step: gamma, ess, resampled, moved, acceptance, scale, nfev, seconds.
+    table
+        With tabulated log-densities (``table_points``): the table's size, build time and
+        its error against the real L at the final particles (:mod:`fbia.iterators.smc_table`);
+        or ``{"note": why no table was used}``; None without ``table_points``.
     """
 
     particles: NDArray[np.float64]
@@ -143,6 +150,7 @@ class SmcResult:
     nfev: int
     names: list[str]
     history: list[dict[str, Any]] = field(default_factory=list)
+    table: dict[str, Any] | None = None
 
     @property
     def log_posterior(self) -> NDArray[np.float64]:
@@ -222,6 +230,11 @@ class SequentialMonteCarlo:
     training_range
         (min, max) of the log-likelihood values a surrogate was trained on: the error of a
         stalled run then says whether the particles sit far above them (extrapolation).
+    table_points
+        Tabulate L on a grid of this many points per input and the log-priors on fine 1-D
+        grids, and run the moves in one compiled kernel (:mod:`fbia.iterators.smc_table`):
+        for at most three inputs with bounded priors; the result's ``table`` gives the table's
+        error against L at the final particles. None: L is called directly.
     """
 
     def __init__(
@@ -238,6 +251,7 @@ class SequentialMonteCarlo:
         max_steps: int | None = None,
         rejuvenate: str = "every_step",
         training_range: tuple[float, float] | None = None,
+        table_points: int | None = None,
     ) -> None:
         if not callable(log_likelihood):
             raise ConfigError("log_likelihood must be callable: (N, d) array -> (N,) array", "smc")
@@ -273,6 +287,10 @@ class SequentialMonteCarlo:
         if training_range is not None and not training_range[0] <= training_range[1]:
             raise ConfigError(f"training_range must be (min, max), got {training_range}", "smc")
         self.training_range = training_range
+        if table_points is not None and int(table_points) < 4:
+            raise ConfigError(f"table_points must be >= 4 or None, got {table_points}", "smc")
+        self.table_points = None if table_points is None else int(table_points)
+        self.tables: LogTables | None = None
         self.nfev = 0
         self.n_nonfinite = 0
         #: One dict per tempering step so far (the result's ``history``; readable while
@@ -286,6 +304,8 @@ class SequentialMonteCarlo:
     # -- densities ------------------------------------------------------------------------
     def log_prior(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """log p(x) = sum_j log p_j(x_j) for an array (M, d)."""
+        if self.tables is not None:
+            return self.tables.log_prior(x)
         out = np.zeros(len(x))
         for j, prior in enumerate(self.priors):
             if prior.kind == "uniform":  # scipy's numbers without its ~0.3 ms per call
@@ -299,7 +319,8 @@ class SequentialMonteCarlo:
     def _loglik(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         if len(x) == 0:
             return np.zeros(0)
-        values = np.asarray(self.log_likelihood(x), dtype=float)
+        f = self.log_likelihood if self.tables is None else self.tables.log_likelihood
+        values = np.asarray(f(x), dtype=float)
         if values.shape != (len(x),):
             raise ConfigError(
                 f"log_likelihood returned shape {values.shape} for {len(x)} points; "
@@ -338,6 +359,7 @@ class SequentialMonteCarlo:
     def steps(self) -> Generator[SmcState, None, SmcResult]:
         """Run Algorithm 1; yield after each tempering step, return the :class:`SmcResult`."""
         rng, n = self.rng, self.n_particles
+        table_note = self._build_tables()
         x = np.column_stack([p.rvs(n, rng) for p in self.priors]).astype(float)
         log_prior = self.log_prior(x)
         loglik = self._loglik(x)
@@ -427,6 +449,7 @@ class SequentialMonteCarlo:
             )
             yield SmcState(step, gamma, current_ess, resampled, acceptance, log_evidence, self.nfev)
         weights = np.exp(log_w - logsumexp(log_w))
+        table = self._check_tables(x, weights, table_note)
         return SmcResult(
             particles=x,
             weights=weights,
@@ -440,7 +463,33 @@ class SequentialMonteCarlo:
             nfev=self.nfev,
             names=self.names,
             history=history,
+            table=table,
         )
+
+    def _build_tables(self) -> str | None:
+        """Tabulate L and the log-priors when ``table_points`` asks for it and the problem
+        allows it; returns why not (None: built, or not asked for)."""
+        self.tables = None
+        if self.table_points is None:
+            return None
+        why = tabulable(self.priors)
+        if why is None:
+            try:
+                self.tables = LogTables.build(self.log_likelihood, self.priors, self.table_points)
+            except ValueError as exc:
+                why = str(exc)
+        return why
+
+    def _check_tables(
+        self, x: NDArray[np.float64], weights: NDArray[np.float64], note: str | None
+    ) -> dict[str, Any] | None:
+        """The table's error against the real L at up to 2000 distinct final particles."""
+        if self.tables is None:
+            return None if note is None else {"note": f"no table: {note}"}
+        idx = np.unique(systematic_resample(weights, np.random.default_rng(0)))
+        if len(idx) > 2000:
+            idx = np.random.default_rng(1).choice(idx, 2000, replace=False)
+        return {**self.tables.describe(), **self.tables.check(self.log_likelihood, x[idx])}
 
     def run(self) -> SmcResult:
         """Run Algorithm 1 to gamma = 1 and return the :class:`SmcResult`."""
@@ -475,6 +524,9 @@ class SequentialMonteCarlo:
         rng = self.rng
         factor = self._proposal_factor(x, log_w, scale)
         n, d = x.shape
+        if self.tables is not None:
+            self.nfev += n * self.n_rejuvenation
+            return self.tables.move(x, loglik, log_prior, factor, gamma, self.n_rejuvenation, rng)
         accepted = 0
         for _ in range(self.n_rejuvenation):
             proposal = x + rng.standard_normal((n, d)) @ factor.T
@@ -509,6 +561,7 @@ def smc(
     max_steps: int | None = None,
     rejuvenate: str = "every_step",
     training_range: tuple[float, float] | None = None,
+    table_points: int | None = None,
 ) -> SmcResult:
     """Sample exp(L(x)) p(x) with adaptive tempered SMC (Paper B, Algorithm 1).
 
@@ -528,5 +581,6 @@ def smc(
         max_steps=max_steps,
         rejuvenate=rejuvenate,
         training_range=training_range,
+        table_points=table_points,
     )
     return sampler.run()
