@@ -6,7 +6,7 @@
     fbia forward study.toml --set E=400 --set nu=0.3 [--output DIR]
     fbia run study.toml [--workers N] [--output DIR] [--fresh] [--retry-failed]
                         [--reuse-changed-code] [--address tcp://HOST:PORT]
-    fbia plugins [--json]
+    fbia plugins [--json] [--options NAME]   NAME's options: default, unit, description
     fbia reproductions OUT.md DIR [DIR ...]   the summary of the paper.json files below DIRs
     fbia --version
 
@@ -142,6 +142,11 @@ def _parser() -> argparse.ArgumentParser:
 
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    pl.add_argument(
+        "--options",
+        metavar="NAME",
+        help="every option of the plugin NAME: default, unit and description",
+    )
     return p
 
 
@@ -304,6 +309,8 @@ def _reproductions(args: argparse.Namespace) -> int:
 def _plugins(args: argparse.Namespace) -> int:
     from .registry import list_plugins
 
+    if args.options is not None:
+        return _plugin_options(args.options, args.json)
     rows = [e.describe() for e in list_plugins()]
     if args.json:
         print(json.dumps(rows, indent=1))
@@ -311,6 +318,39 @@ def _plugins(args: argparse.Namespace) -> int:
     from .tables import format_table
 
     print(format_table(rows, ["name", "kind", "distribution", "version", "class"]))
+    return 0
+
+
+def _plugin_options(name: str, as_json: bool) -> int:
+    """``fbia plugins --options NAME``: the options of every plugin called NAME."""
+    import difflib
+
+    from .registry import list_plugins
+    from .tables import format_table
+
+    entries = [e for e in list_plugins() if e.name == name]
+    if not entries:
+        names = sorted({e.name for e in list_plugins()})
+        close = difflib.get_close_matches(name, names, n=3)
+        hint = (
+            f"; did you mean {', '.join(close)}?" if close else f"; installed: {', '.join(names)}"
+        )
+        raise ConfigError(f"no plugin named {name!r}{hint}", "--options")
+    described = {}
+    for e in entries:
+        options = getattr(e.factory, "Options", None)
+        described[e.kind] = options.describe() if options is not None else {}
+    if as_json:
+        print(json.dumps(described, indent=1, default=str))
+        return 0
+    for kind, options in described.items():
+        print(f"{kind} {name}: {len(options)} option{'s' if len(options) != 1 else ''}")
+        rows = [
+            {**v, "option": k, "default": json.dumps(v["default"], default=str)}
+            for k, v in options.items()
+        ]
+        if rows:
+            print(format_table(rows, ["option", "default", "unit", "description"]))
     return 0
 
 

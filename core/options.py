@@ -13,6 +13,7 @@ fbia.core.errors.ConfigError: model.options: unknown option 'mesh_sise'; valid o
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from typing import Any, Self
 
@@ -20,6 +21,9 @@ import pydantic
 from pydantic import BaseModel, ConfigDict
 
 from .errors import ConfigError
+
+#: a unit in brackets inside an option's description: short, no comma, no nested brackets
+_UNIT = re.compile(r"\[([^\[\],]{1,20})\]")
 
 
 class PluginOptions(BaseModel):
@@ -51,11 +55,26 @@ class PluginOptions(BaseModel):
 
     @classmethod
     def describe(cls) -> dict[str, dict[str, Any]]:
-        """Name -> {default, description} of every option, for ``fbia plugins --options``."""
-        return {
-            name: {"default": f.default, "description": f.description or ""}
-            for name, f in cls.model_fields.items()
-        }
+        """Name -> {default, unit, description} of every option, for ``fbia plugins
+        --options``: the unit is the description's closing ``[...]`` (``[-]``:
+        dimensionless), the default ``"(required)"`` for an option without one."""
+        out: dict[str, dict[str, Any]] = {}
+        for name, f in cls.model_fields.items():
+            text = (f.description or "").strip()
+            unit = ""
+            if text.endswith("]") and "[" in text:
+                head, _, tail = text.rpartition("[")
+                text, unit = head.rstrip(), tail[:-1]
+            else:  # a unit inside the text: "width of the kernel [mm]; Paper B: ..."
+                found = _UNIT.search(text)
+                unit = found.group(1) if found else ""
+            default: Any = (
+                "(required)" if f.is_required() else f.get_default(call_default_factory=True)
+            )
+            if isinstance(default, BaseModel):
+                default = default.model_dump(mode="json")
+            out[name] = {"default": default, "unit": unit, "description": text}
+        return out
 
 
 class Configurable:

@@ -337,3 +337,28 @@ def test_a_real_ctrl_c_exits_130_and_saves_the_finished_runs(tmp_path):
     result = json.loads((tmp_path / "output" / "result.json").read_text())
     assert (result["status"], result["nfev"]) == ("interrupted", 6)
     assert result["x"]["E"] in (100.0, 450.0)
+
+
+def test_plugins_options_lists_every_option_with_default_and_unit(capsys):
+    assert main(["plugins", "--options", "ale_fsi"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    from fbia.plugins.ale_fsi.options import AleFsiOptions
+
+    assert out[0] == f"forward_model ale_fsi: {len(AleFsiOptions.model_fields)} options"
+    rows = {line.split()[0]: line for line in out[3:]}
+    assert set(rows) == set(AleFsiOptions.model_fields)
+    assert rows["E"].split()[1:3] == ["400.0", "Pa"]
+    assert rows["inflow_rate"].split()[1:3] == ["100.0", "mm^2/s"]
+    assert main(["plugins", "--options", "ale_fsi", "--json"]) == 0
+    described = json.loads(capsys.readouterr().out)["forward_model"]
+    assert all(v["unit"] for v in described.values())  # every ale_fsi option has its unit
+    assert described["nu"] == {
+        "default": 0.3,
+        "unit": "-",
+        "description": "Poisson's ratio of the biofilm",
+    }
+
+
+def test_plugins_options_of_an_unknown_name_suggests_the_close_ones(capsys):
+    assert main(["plugins", "--options", "ale_fs"]) == 2
+    assert one_error_line(capsys) == "--options: no plugin named 'ale_fs'; did you mean ale_fsi?"
