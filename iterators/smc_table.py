@@ -35,7 +35,7 @@ from typing import Any
 
 import numba
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import spline_filter
 
 from ..core.parameters import Prior
@@ -124,7 +124,7 @@ class LogTables:
     @classmethod
     def build(
         cls,
-        log_likelihood: Callable[[FloatArray], FloatArray],
+        log_likelihood: Callable[[FloatArray], ArrayLike],
         priors: Sequence[Prior],
         points: int,
         chunk: int = 65536,
@@ -209,7 +209,7 @@ class LogTables:
         return x, loglik, log_prior, float(accepted.sum()) / (n * max(n_moves, 1))
 
     def check(
-        self, log_likelihood: Callable[[FloatArray], FloatArray], x: FloatArray
+        self, log_likelihood: Callable[[FloatArray], ArrayLike], x: FloatArray
     ) -> dict[str, float]:
         """The table against the real L at the rows of ``x``: largest and RMS error."""
         if len(x) == 0:
