@@ -206,6 +206,17 @@ class LaplaceApproximation:
     negative_definite: bool
 
 
+def principal_angle(a: FloatArray, b: FloatArray, width: FloatArray) -> float:
+    """The angle [degrees, 0-90] between the principal axes (largest variance) of the 2-D
+    covariances ``a`` and ``b``, in coordinates scaled by ``width`` (the design box: the axes
+    of Paper B Fig. 9a), e.g. the Laplace approximation's against the particles' ("almost
+    orthogonal" in the paper)."""
+    scale = np.diag(1.0 / np.asarray(width, dtype=float))
+    axes = [np.linalg.eigh(scale @ c @ scale)[1][:, -1] for c in (a, b)]
+    cosine = min(1.0, abs(float(axes[0] @ axes[1])))
+    return float(np.degrees(np.arccos(cosine)))
+
+
 @dataclass(frozen=True)
 class ParticlePosterior:
     """The weighted particles of the last SMC step and their summaries (stage 5)."""
@@ -331,7 +342,9 @@ class GpSmcResult(Result):
         (95 % interval), ``mode.<name>`` (peak of the 1-D marginal: :func:`marginal_mode`);
         ``log_evidence``; ``check.rmse`` (the surrogate's error in L at the posterior draws);
         ``design.n_failed`` and per input ``design.failed_min.<name>``,
-        ``design.failed_max.<name>``: where the design's failed runs lie (NaN if none failed)."""
+        ``design.failed_max.<name>``: where the design's failed runs lie (NaN if none failed);
+        ``laplace.angle`` (two inputs): the angle between the principal axes of the Laplace
+        approximation and of the particles in the design box's scale (:func:`principal_angle`)."""
         out = super().quantities()
         if self.check is not None:
             out["check.rmse"] = float(self.check.rmse)
@@ -355,6 +368,10 @@ class GpSmcResult(Result):
             out[f"q2.5.{name}"], out[f"q97.5.{name}"] = float(lo), float(hi)
             out[f"mode.{name}"] = marginal_mode(post.particles[:, j], post.weights)
         out["log_evidence"] = float(post.log_evidence)
+        lap = post.laplace
+        if lap is not None and lap.cov is not None and len(post.mean) == 2 and self.design:
+            width = np.ptp(self.design.points[:, :2], axis=0)
+            out["laplace.angle"] = principal_angle(lap.cov, post.cov, width)
         return out
 
     def to_dict(self) -> dict[str, Any]:

@@ -406,3 +406,17 @@ def test_surrogate_uncertainty_option_widens_a_starved_posterior():
         fbia.iterator("gp_smc", mode="direct", surrogate_uncertainty="expected_posterior").run(
             problem
         )
+
+
+def test_the_laplace_angle_is_measured_in_the_design_box_scale():
+    from fbia.iterators.gp_smc_result import principal_angle
+
+    # rank-one covariances: their principal axes are exactly (100 Pa, +-0.2)
+    band = np.outer([100.0, 0.2], [100.0, 0.2])
+    across = np.outer([100.0, -0.2], [100.0, -0.2])
+    box = np.array([700.0, 1.3])
+    assert principal_angle(band, band, box) == pytest.approx(0.0, abs=1e-6)
+    # in the box's scale the axes make atan((0.2 / 1.3) / (100 / 700)) with the E axis each
+    each = np.degrees(np.arctan2(0.2 / 1.3, 100.0 / 700.0))
+    assert principal_angle(band, across, box) == pytest.approx(min(2 * each, 180 - 2 * each))
+    assert principal_angle(np.diag([1.0, 0.0]), np.diag([0.0, 1.0]), box) == pytest.approx(90.0)
