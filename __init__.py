@@ -34,6 +34,7 @@ _LAZY = {
     "DaskEvaluator": "fbia.core.dask_executor:DaskEvaluator",
     "StudyStore": "fbia.core.store:StudyStore",
     "segment_oct": "fbia.core.oct:segment_oct",
+    "load_result": "fbia.core.result_io:load_result",
 }
 
 __all__ = [*_core_all, *_LAZY, "__version__"]

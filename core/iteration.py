@@ -12,6 +12,7 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
 from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterator
+from pathlib import Path
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from .evaluator import Evaluator
@@ -46,6 +47,12 @@ class InverseIterator(Protocol):
 
     def steps(self, problem: InverseProblem, evaluator: Evaluator) -> Iterator[Any]: ...
 
+    def write_files(self, result: Result, folder: Path) -> list[Path]:
+        """Files of ``result`` beside its ``result.json`` that other tools read (``fbia run``
+        calls it; ``gp_smc``: the posterior as npz + JSON and as an ArviZ netCDF file);
+        returns the paths written (none by default)."""
+        return []
+
     def run(self, problem: InverseProblem, evaluator: Evaluator | None = None) -> Result: ...
 
 
@@ -54,6 +61,9 @@ class IteratorBase(Configurable):
 
     #: The result of the last completed :meth:`steps` generator (also returned by :meth:`run`).
     result: Result | None = None
+    #: The class of its results: :func:`fbia.load_result` reads a ``result.json`` of this
+    #: iterator back as it (a dataclass subclass of :class:`Result`).
+    result_type: type[Result] = Result
 
     def steps(self, problem: InverseProblem, evaluator: Evaluator) -> Generator[Any, None, Result]:
         raise NotImplementedError

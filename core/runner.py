@@ -534,6 +534,10 @@ def _finish(
     )
     result.info.setdefault("problem", problem.describe())
     result.save(out / "result.json")
+    write_files = getattr(study.iterator, "write_files", None)
+    if callable(write_files):
+        for path in write_files(result, out):
+            echo(f"wrote {path}")
     truth = study.synthetic.truth if study.synthetic is not None else None
     text = report.result_report(study.name, result, out, truth)
     for folder in (out / "run", out / "best", out / "runs"):  # left empty: not worth a folder

@@ -93,7 +93,7 @@ from .gp_smc_result import (
 from .gp_smc_run import GpSmcState, SmcRun, log_prior, run_status
 from .gp_surrogate import GpSurrogate
 from .gp_uncertainty import marginalise_surrogate_uncertainty
-from .posterior import summarise
+from .posterior import summarise, write_posterior_files
 from .smc import SequentialMonteCarlo, SmcResult, SmcState
 from .smc_table import table_note, table_points
 
@@ -105,6 +105,9 @@ class GpSmcIterator(IteratorBase):
 
     See the module docstring for the stages; the options are below.
     """
+
+    #: the class of its results (fbia.load_result reads them back as it)
+    result_type = GpSmcResult
 
     Options = GpSmcOptions
 
@@ -266,6 +269,10 @@ class GpSmcIterator(IteratorBase):
             ),
             seconds=time.perf_counter() - run.t_start,
         )
+
+    def write_files(self, result: Result, folder: Path) -> list[Path]:
+        """The posterior's files (:func:`~fbia.iterators.posterior.write_posterior_files`)."""
+        return write_posterior_files(result, folder, self.options.seed)
 
     def _inputs(self, problem: InverseProblem) -> list[Parameter]:
         """x then theta; each needs a prior, and x finite bounds for the box design."""

@@ -91,6 +91,9 @@ class LevenbergMarquardtIterator(IteratorBase):
     ``paper`` and ``robust`` modes.
     """
 
+    #: the class of its results (fbia.load_result reads them back as it)
+    result_type = LMResult
+
     Options = LMOptions
 
     options: LMOptions

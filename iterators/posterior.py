@@ -37,6 +37,7 @@ __all__ = [
     "save_posterior",
     "summarise",
     "to_inference_data",
+    "write_posterior_files",
 ]
 
 #: Version tag of the posterior files written by :func:`save_posterior`.
@@ -254,8 +255,11 @@ def load_posterior(folder: str | Path) -> dict[str, Any]:
 
 
 def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, seed: int = 0):
-    """An ``arviz.InferenceData`` of equally weighted draws (systematic resampling) of a
-    :func:`load_posterior` result, with log_likelihood and log_prior groups."""
+    """An ``arviz.InferenceData`` of equally weighted draws (systematic resampling with the
+    generator of ``seed``) of a :func:`load_posterior` result: groups ``posterior`` (one
+    variable per input, x then theta), ``log_likelihood`` (``L``, the surrogate's or the
+    model's log-likelihood of eq. 5) and ``sample_stats`` (``lp``: log-posterior L + log p up
+    to a constant; ``log_prior``)."""
     try:
         with warnings.catch_warnings():  # arviz 0.2x announces its refactor on import
             warnings.simplefilter("ignore", FutureWarning)
@@ -270,8 +274,28 @@ def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, 
     if n_draws is not None:
         idx = idx[rng.permutation(len(idx))[:n_draws]]
     parts = np.asarray(posterior["particles"])[idx]
-    return arviz.from_dict(
-        posterior={n: parts[None, :, j] for j, n in enumerate(posterior["names"])},
-        log_likelihood={"L": np.asarray(posterior["log_likelihood"])[idx][None]},
-        prior={"log_prior": np.asarray(posterior["log_prior"])[idx][None]},
-    )
+    loglik = np.asarray(posterior["log_likelihood"])[idx][None]
+    log_prior = np.asarray(posterior["log_prior"])[idx][None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        return arviz.from_dict(
+            posterior={n: parts[None, :, j] for j, n in enumerate(posterior["names"])},
+            log_likelihood={"L": loglik},
+            sample_stats={"lp": loglik + log_prior, "log_prior": log_prior},
+        )
+
+
+def write_posterior_files(result: Any, folder: str | Path, seed: int = 0) -> list[Path]:
+    """What ``fbia run`` writes of a ``gp_smc`` posterior: ``posterior.npz`` +
+    ``posterior.json`` (:func:`save_posterior`) and, with arviz installed, ``posterior.nc``:
+    the :func:`to_inference_data` of its particles, which ``arviz.from_netcdf`` reads."""
+    if not isinstance(result, GpSmcResult) or result.posterior is None:
+        return []
+    folder = Path(folder)
+    paths = list(save_posterior(result, folder))
+    try:
+        data = to_inference_data(load_posterior(folder), seed=seed)
+    except ConfigError:  # arviz is not installed
+        return paths
+    data.to_netcdf(str(folder / "posterior.nc"))
+    return [*paths, folder / "posterior.nc"]

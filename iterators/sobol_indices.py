@@ -171,6 +171,9 @@ class SobolState:
 class SobolIndicesIterator(IteratorBase):
     """Sobol' indices of L or D on a GP surrogate (see the module docstring)."""
 
+    #: the class of its results (fbia.load_result reads them back as it)
+    result_type = SobolIndicesResult
+
     class Options(PluginOptions):
         quantity: Literal["log_likelihood", "distance"] = Field(
             "log_likelihood",

@@ -65,6 +65,9 @@ class SurrogateConvergenceIterator(IteratorBase):
     """The GP surrogate of L on growing prefixes of one Sobol design (see the module
     docstring)."""
 
+    #: the class of its results (fbia.load_result reads them back as it)
+    result_type = SurrogateConvergenceResult
+
     class Options(PluginOptions):
         n_train: list[int] = Field(
             [10, 20, 50, 100, 200, 500],

@@ -257,6 +257,8 @@ def test_arviz_reads_the_posterior(runs, tmp_path):
     idata = to_inference_data(load_posterior(tmp_path))
     assert isinstance(idata, arviz.InferenceData)
     assert set(idata.posterior.data_vars) == {"E", "nu", "inflow_rate"}
+    assert set(idata.sample_stats.data_vars) == {"lp", "log_prior"}
+    assert set(idata.log_likelihood.data_vars) == {"L"}
     # Equally weighted draws from the particles keep the weighted mean.
     assert float(idata.posterior["E"].mean()) == pytest.approx(result.posterior.mean[0], rel=0.02)
 
