@@ -334,10 +334,23 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     good_all = sum(verdict(rec.rows)[0] for _, rec in records)
     judged_all = sum(verdict(rec.rows)[1] for _, rec in records)
     if judged_all:
+        by_paper: dict[str, list[int]] = {}
+        for _, rec in records:  # "Paper A, Table 2, ..." -> "Paper A"
+            paper = rec.source.split(",")[0].strip() or "other"
+            good, judged = verdict(rec.rows)
+            tally = by_paper.setdefault(paper, [0, 0])
+            tally[0] += good
+            tally[1] += judged
+        parts = [
+            f"{paper}: {g} of {j} ({100 * g / j:.0f} %)"
+            for paper, (g, j) in sorted(by_paper.items())
+            if j
+        ]
         lines += [
             "",
             f"In all: {good_all} of {judged_all} judged published numbers agree "
-            f"({100 * good_all / judged_all:.0f} %).",
+            f"({100 * good_all / judged_all:.0f} %)"
+            + (f"; {'; '.join(parts)}." if len(parts) > 1 else "."),
         ]
     if not_run:
         lines += ["", "Studies with a `[paper]` table that have no `paper.json` (not run yet):", ""]
