@@ -14,8 +14,8 @@ Which class: the registered iterator named in the file's ``iterator`` declares i
 not installed, or that declares none, loads as the base :class:`Result`.  The conversion is
 generic: every dataclass field found in the file is converted to its declared type (nested
 dataclasses, numpy arrays, ``"nan"``/``"inf"`` strings back to floats); what the file does not
-hold (a forward run's :class:`Solution`, residual vectors longer than the JSON limit) stays at
-its default.
+hold (a forward run's :class:`Solution`, residual vectors longer than the JSON limit, a
+live object such as a surrogate's GP) stays at its default, or None where it has none.
 """
 
 from __future__ import annotations
@@ -52,7 +52,11 @@ def load_result(source: str | Path) -> Result:
         raise ConfigError(f"not a readable result file ({exc})", str(path)) from None
     if not isinstance(data, dict) or "status" not in data:
         raise ConfigError("not an fbia result (no 'status')", str(path))
-    return from_dict(result_type(data), data)
+    cls = result_type(data)
+    try:
+        return from_dict(cls, data)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ConfigError(f"cannot be read as a {cls.__name__} ({exc})", str(path)) from None
 
 
 def result_type(data: Mapping[str, Any]) -> type[Result]:
@@ -81,10 +85,14 @@ def from_dict(cls: type[Any], data: Mapping[str, Any]) -> Any:
     hints = typing.get_type_hints(cls)
     info = data.get("info")
     merged = {**info, **data} if isinstance(info, Mapping) else dict(data)
-    kwargs = {}
+    kwargs: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
-        if f.init and f.name in merged:
+        if not f.init:
+            continue
+        if f.name in merged:
             kwargs[f.name] = _convert(hints.get(f.name, Any), merged[f.name], f.name)
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            kwargs[f.name] = None  # a required field the file does not hold (a live object)
     return cls(**kwargs)
 
 

@@ -76,3 +76,21 @@ def test_what_is_not_a_result_is_one_line(tmp_path):
     (tmp_path / "result.json").write_text("{")
     with pytest.raises(fbia.ConfigError, match="not a readable result file"):
         fbia.load_result(tmp_path / "result.json")
+
+
+def test_a_field_the_file_does_not_hold_is_none_and_a_wrong_type_is_one_line(tmp_path):
+    from dataclasses import dataclass
+
+    from fbia.core.result_io import from_dict
+
+    @dataclass
+    class Row:
+        n: int
+        state: dict  # a live object the JSON leaves out
+
+    assert from_dict(Row, {"n": 3}) == Row(3, None)
+    (tmp_path / "result.json").write_text(
+        json.dumps({"status": "completed", "success": True, "message": "", "nfev": "many"})
+    )
+    with pytest.raises(fbia.ConfigError, match=r"cannot be read as a Result \(invalid literal"):
+        fbia.load_result(tmp_path)
