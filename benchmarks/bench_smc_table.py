@@ -15,6 +15,10 @@ particles, and for the direct path (the GP mean at every move) the time of its f
 extrapolated to the run.  The target (under 60 s on 2 cores) is checked here, not in a test.
 
     .venv/bin/python benchmarks/bench_smc_table.py            # full size (about 1 min)
+
+Measured (2 cores, load 1.3): 160 tempering steps in 5.3 s (33 ms per step, table built in
+1.0 s), mean within 0.015 posterior sd of the quadrature, sd ratio 1.009, table error 5.5e-5
+in L at the final particles; the GP mean itself 0.22 s per step (35 s for the run, 7x).
     .venv/bin/python benchmarks/bench_smc_table.py --quick    # smoke run
 """
 

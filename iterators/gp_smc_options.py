@@ -140,8 +140,8 @@ class GpSmcOptions(PluginOptions):
     smc_table: int | Literal["auto", "off"] = Field(
         "auto",
         description="tabulate L and the log-priors for the SMC moves (fbia.iterators."
-        "smc_table: Algorithm 1 at 10 000 particles, 30 moves and zeta = 0.998 in about a "
-        "minute): 'auto' does so with rejuvenate = 'every_step' for at most 3 sampled inputs "
+        "smc_table: Algorithm 1 at 10 000 particles, 30 moves and zeta = 0.998 in seconds "
+        "in 2-D): 'auto' does so with rejuvenate = 'every_step' for at most 3 sampled inputs "
         "with bounded priors (1025 points per input in 2-D, 101 in 3-D), a number gives the "
         "points per input, 'off' never [-]",
     )

@@ -23,13 +23,14 @@ and in the last one (resample-move, Chopin 2002): the same weighted approximatio
 pi_gamma, since each move leaves pi_gamma invariant, at a fraction of the likelihood
 evaluations when zeta is close to 1.
 
-Which to use: one resampling cycle takes log(ess_min) / log(zeta) steps (346 at zeta = 0.998)
-and an informative posterior in a few dimensions needs ten to forty cycles, i.e. thousands of
-steps. ``"every_step"`` costs N n_rej likelihood calls in each of them: 10 000 particles and 30
-MH steps on a 2000-point 7-D GP mean are about 0.5 s per step, half an hour per run at zeta =
-0.998, unless L and the log-priors are tabulated (``table_points``, at most three inputs
-with bounded priors: :mod:`fbia.iterators.smc_table`), which makes a step a few hundredths of
-a second. Otherwise use it only where the run has few steps (zeta <= 0.95).
+Which to use: ``"every_step"`` is Algorithm 1 as printed and costs N n_rej likelihood calls in
+every tempering step; since the moves keep the particles on each tempered density, the ESS
+falls slowly and a run needs few steps (Paper B's example 7 on the default flow cell: 129
+steps at zeta = 0.998). On a GP mean of 1024 points in 2-D a step costs about 0.2 s, so 160
+steps about 35 s; with L and the log-priors tabulated (``table_points``, at most three inputs
+with bounded priors: :mod:`fbia.iterators.smc_table`) 33 ms (5.3 s in all,
+``benchmarks/bench_smc_table.py``). Without a table in more dimensions a step on a 2000-point
+7-D GP mean costs about 0.5 s.
 ``"after_resampling"`` moves once per cycle: the same settings finish in about ten seconds
 (``benchmarks/bench_smc_paper_settings.py``). The default step limit (``max_steps=None``) is
 100 halvings of the ESS, ceil(100 log 0.5 / log zeta) steps (at least 1000), about three
