@@ -260,6 +260,16 @@ class Study:
                 "--set",
             )
         x: dict[str, float] = {}
+        for p in [*self.parameters, *self.uncertain]:  # as the study file's own values
+            if p.name in values and p.bounds is not None:
+                lo, hi = p.bounds
+                if not lo <= float(values[p.name]) <= hi:
+                    unit = f" {p.unit}" if p.unit and p.unit != "-" else ""
+                    raise ConfigError(
+                        f"{p.name} = {values[p.name]:g}{unit} lies outside its bounds "
+                        f"[{lo:g}, {hi:g}]{unit}",
+                        "--set",
+                    )
         for p in self.parameters:
             if p.name in values:
                 x[p.name] = float(values.pop(p.name))

@@ -57,6 +57,14 @@ def test_run_and_forward_report_the_same_mistakes(study_file, capsys, command, c
             "--set: unknown name(s) 'G'; valid: E, nu",
         ),
         (["run", "study.toml", "--workers", "0"], "--workers must be at least 1, got 0"),
+        (
+            ["forward", "study.toml", "--set", "E=5000"],
+            "--set: E = 5000 Pa lies outside its bounds [100, 800] Pa",
+        ),
+        (
+            ["forward", "study.toml", "--set", "nu=-1.5"],
+            "--set: nu = -1.5 lies outside its bounds [-0.8, 0.45]",
+        ),
     ],
 )
 def test_bad_arguments_give_status_2_and_one_line(study_file, capsys, argv, message):
