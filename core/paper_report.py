@@ -76,15 +76,56 @@ class PaperRecord:
     def read(cls, path: Path) -> PaperRecord:
         """The record in ``path``; one written under the per-row rules before ``KINDS``
         comes back stale, without its rows (their verdicts were lenient)."""
+        if not path.is_file():  # a FIFO or a device would block the reader
+            raise ConfigError("not a regular file", str(path))
+        if path.stat().st_size > MAX_RECORD_BYTES:
+            raise ConfigError(f"larger than {MAX_RECORD_BYTES} bytes: not a paper.json", str(path))
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
+            if not isinstance(data, dict):
+                raise TypeError("not a JSON object")
             raw_rows = data.pop("rows")
+            _check_types(data)
             if any("rule" in r["value"] for r in raw_rows):
                 return cls(**data, rows=(), stale=STALE)
             rows = tuple(Comparison.from_dict(r) for r in raw_rows)
             return cls(**data, rows=rows)
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"not UTF-8 (byte {exc.start})", str(path)) from None
+        except RecursionError:
+            raise ConfigError("nested too deeply: not a paper.json", str(path)) from None
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ConfigError(f"not a paper.json of fbia: {exc}", str(path)) from None
+
+
+#: the largest paper.json read (a record is a few kB)
+MAX_RECORD_BYTES = 10_000_000
+#: the types of a record's fields (the dataclass' annotations are strings)
+_FIELD_TYPES: dict[str, tuple[type, ...]] = {
+    "study": (str,),
+    "study_file": (str,),
+    "source": (str,),
+    "note": (str,),
+    "status": (str,),
+    "wall_time": (int, float),
+    "forward_time": (int, float),
+    "nfev": (int,),
+    "finished": (str,),
+    "reused": (int,),
+}
+
+
+def _check_types(data: dict[str, Any]) -> None:
+    """TypeError naming the first field of a record with the wrong type (or a non-finite
+    time), before anything formats it."""
+    for name, value in data.items():
+        kinds = _FIELD_TYPES.get(name)
+        if kinds is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, kinds):
+            raise TypeError(f"{name} is {value!r}, not {' or '.join(k.__name__ for k in kinds)}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise TypeError(f"{name} is {value!r}, not a finite number")
 
 
 #: what the summary says of a paper.json written before the rules by kind
@@ -452,7 +493,11 @@ def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path
 def _section(readme: Path, heading: str) -> list[str]:
     """The body of the ``## heading`` section of a markdown file (empty if it has none)."""
     body: list[str] | None = None
-    for line in readme.read_text(encoding="utf-8").splitlines():
+    try:
+        text = readme.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 (byte {exc.start})", str(readme)) from None
+    for line in text.splitlines():
         if body is not None and line.startswith("## "):
             break
         if body is not None:
