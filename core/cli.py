@@ -222,8 +222,17 @@ def _load(args: argparse.Namespace, build: bool = True) -> Any:
 def _validate(args: argparse.Namespace) -> int:
     study = _load(args, build=False)
     print(study.summary())
+    _warn_units(study)
     print("ok")
     return 0
+
+
+def _warn_units(study: Any) -> None:
+    """The study's unit suspicions (:mod:`fbia.core.sanity`), one ``warning:`` line each."""
+    from .sanity import unit_warnings
+
+    for line in unit_warnings(study):
+        print(f"{PROG}: warning: {study.file}: {line}", file=sys.stderr)
 
 
 def _parse_values(items: Sequence[str]) -> dict[str, float]:
@@ -257,6 +266,7 @@ def _forward(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     study = _load(args)
+    _warn_units(study)
     from .runner import run_study
 
     result = run_study(

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict
 from .errors import ConfigError
 
 #: a unit in brackets inside an option's description: short, no comma, no nested brackets
-_UNIT = re.compile(r"\[([^\[\],]{1,20})\]")
+_UNIT = re.compile(r"\[([^\[\],]{1,24})\]")
 
 
 class PluginOptions(BaseModel):

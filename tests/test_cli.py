@@ -370,3 +370,61 @@ def test_plugins_options_lists_every_option_with_default_and_unit(capsys):
 def test_plugins_options_of_an_unknown_name_suggests_the_close_ones(capsys):
     assert main(["plugins", "--options", "ale_fs"]) == 2
     assert one_error_line(capsys) == "--options: no plugin named 'ale_fs'; did you mean ale_fsi?"
+
+
+def test_validate_warns_of_units_that_look_wrong_and_still_says_ok(study_file, capsys):
+    """Data in µm, noise in µm, E in kPa: valid to the schema, so warnings, not errors."""
+    data = study_file.parent / "data"
+    for name in ("observed_100.csv", "points_100.csv"):
+        rows = (data / name).read_text().splitlines()
+        scaled = [rows[0]]
+        for row in rows[1:]:
+            v = [float(c) for c in row.split(",")]
+            k = 2 if len(v) >= 4 else len(v)  # points: x, y scaled, directions not
+            scaled.append(",".join(str(c * 1000 if i < k else c) for i, c in enumerate(v)))
+        (data / f"um_{name}").write_text("\n".join(scaled) + "\n")
+    text = (
+        STUDY.replace("data/observed_100.csv", "data/um_observed_100.csv")
+        .replace("data/points_100.csv", "data/um_points_100.csv")
+        .replace('unit = "Pa"\nbounds = [100.0, 800.0]\ninitial = 300.0',
+                 'unit = "kPa"\nbounds = [0.1, 0.8]\ninitial = 0.3')
+        .replace("x0 = { E = 350.0, nu = 0.25 }", "x0 = { E = 0.35, nu = 0.25 }")
+    )  # fmt: skip
+    study_file.write_text(text)
+    assert main(["validate", "study.toml"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.rstrip().endswith("ok")
+    warnings = [
+        line.removeprefix("fbia: warning: study.toml: ") for line in captured.err.splitlines()
+    ]
+    assert len(warnings) == 2, warnings
+    assert warnings[0].startswith("observation 1: the interface spans ")
+    assert "are the data in another unit (µm, m)? fbia's unit is mm" in warnings[0]
+    assert warnings[1] == (
+        "parameter E: the study says kPa, analytic_mound_2d takes Pa: values are passed as "
+        "they are, not converted"
+    )
+    # kPa values under the unit Pa: the bounds give it away
+    study_file.write_text(
+        STUDY.replace("bounds = [100.0, 800.0]\ninitial = 300.0", "bounds = [0.1, 0.8]").replace(
+            "x0 = { E = 350.0, nu = 0.25 }", "x0 = { E = 0.35, nu = 0.25 }"
+        )
+    )
+    assert main(["validate", "study.toml"]) == 0
+    assert capsys.readouterr().err == (
+        "fbia: warning: study.toml: parameter E: bounds [0.1, 0.8] Pa lie outside 1-1e+07 Pa, "
+        "where biofilm moduli are reported: in kPa or MPa? fbia's unit is Pa\n"
+    )
+    # noise in µm on data in mm
+    study_file.write_text(
+        STUDY.replace("noise_std = 0.0005\n\n[measure]", "noise_std = 2.0\n\n[measure]")
+    )
+    assert main(["validate", "study.toml"]) == 0
+    err = capsys.readouterr().err
+    assert err == (
+        "fbia: warning: study.toml: observation 1: noise_std = 2 mm is 250 % of the observed "
+        "interfaces' extent (0.8 mm): in µm? fbia's unit is mm\n"
+    )
+    study_file.write_text(STUDY)
+    assert main(["validate", "study.toml"]) == 0
+    assert capsys.readouterr().err == ""  # the study of the tests is right

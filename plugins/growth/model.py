@@ -89,8 +89,15 @@ class GrowthOptions(AleFsiOptions):
     K2R: float = Field(3e-12, gt=0, description="Monod half saturation (eq. 6) [mol/mm^3]")
     phi_in: float = Field(2.5e-11, ge=0, description="nutrient at the inflow [mol/mm^3]")
     K1g: float = Field(6e4, description="growth by nutrient flux (eq. 9) [mm^3/mol]")
-    K2g: float = Field(5e-2, description="erosion by normal traction (eq. 9) [mm^2 s/g]")
-    K3g: float = Field(8e-2, description="erosion by shear traction (eq. 9) [mm^2 s/g]")
+    K2g: float = Field(
+        5e-2,
+        description="erosion by normal traction (eq. 9): s/g with traction_measure = "
+        "'nodal_force' (the default), mm^2 s/g with 'density' [s/g or mm^2 s/g]",
+    )
+    K3g: float = Field(
+        8e-2,
+        description="erosion by shear traction (eq. 9), units as K2g [s/g or mm^2 s/g]",
+    )
     growth_period: float = Field(86400.0, gt=0, description="growth period, Paper A: 1 day [s]")
     growth_steps: int = Field(1, ge=1, le=1000, description="growth steps per growth period [-]")
     traction_measure: Literal["nodal_force", "density"] = Field(
