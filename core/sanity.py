@@ -44,8 +44,7 @@ _MODULUS = re.compile(r"E(_\w+)?$")
 def unit_warnings(study: Any) -> list[str]:
     """One line per unit suspicion of ``study`` (a :class:`fbia.core.study.Study`)."""
     out: list[str] = []
-    extents = [_extent(obs) for obs in study.observations]
-    extents = [e for e in extents if e is not None and e > 0]
+    extents = [e for e in map(_extent, study.observations) if e is not None and e > 0]
     channel = _channel(study.model)
     for k, extent in enumerate(extents, start=1):
         if channel is None:
