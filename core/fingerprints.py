@@ -63,16 +63,27 @@ def _sha(text: str) -> str:
 
 # -- plugins and data ----------------------------------------------------------------------------
 def _class_version(obj: Any) -> dict[str, str]:
-    """Class path and version of a plugin object: the version of the distribution named like
-    its top-level package (``fbia``, ``fbia_mysolver``), else the module's ``__version__``."""
+    """Class path and version of a plugin object.  The version is the plugin's declared
+    ``numerics_version`` (``"numerics 1"``) when its class has one -- it changes only when the
+    plugin's numbers do, so upgrading the package keeps the stores -- else the version of the
+    distribution named like its top-level package (``fbia``, ``fbia_mysolver``), else the
+    module's ``__version__``."""
+    cls = type(obj)
+    declared = getattr(cls, "numerics_version", None)
+    version = f"numerics {declared}" if declared is not None else _package_version(obj)
+    return {"class": f"{cls.__module__}.{cls.__qualname__}", "version": version}
+
+
+def _package_version(obj: Any) -> str:
+    """The version of the distribution of ``obj``'s top-level package (what stores keyed
+    before plugins declared a numerics version)."""
     cls = type(obj)
     top = cls.__module__.split(".")[0]
     try:
-        version = importlib.metadata.version(top.replace("_", "-"))
+        return importlib.metadata.version(top.replace("_", "-"))
     except importlib.metadata.PackageNotFoundError:
         mod = sys.modules.get(cls.__module__)
-        version = str(getattr(mod, "__version__", "unversioned"))
-    return {"class": f"{cls.__module__}.{cls.__qualname__}", "version": version}
+        return str(getattr(mod, "__version__", "unversioned"))
 
 
 def _options(obj: Any) -> dict[str, Any]:
@@ -125,10 +136,14 @@ def default_options(obj: Any) -> dict[str, Any]:
 def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -> dict[str, Any]:
     """A stored model or comparison part (:func:`model_part`, :func:`comparison_part`) with
     the options of its ``plugin`` ("model" or "measure") left out that are at ``obj``'s
-    defaults now: the part a store written before options were keyed by their difference from
-    the defaults (or before a defaulted option existed) would have today."""
+    defaults now, and the package version it was keyed by replaced by ``obj``'s declared
+    numerics version: the part a store written before options were keyed by their difference
+    from the defaults (or before a defaulted option existed, or before the plugin declared its
+    numerics version) would have today."""
     defaults = default_options(obj)
     out = json.loads(canonical(part))
+    if out[plugin].get("version") == _package_version(obj):  # keyed by the package's version
+        out[plugin]["version"] = _class_version(obj)["version"]
     options = out[plugin].get("options", {})
     out[plugin]["options"] = {
         k: v for k, v in options.items() if not (k in defaults and v == defaults[k])

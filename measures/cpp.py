@@ -45,6 +45,10 @@ class CppMeasure(Configurable):
     vertices lie inside it, which a least-squares iterator needs to stay constant.
     """
 
+    #: bumped when a change alters its numbers (the store keys runs by it, not by the
+    #: package version: fbia.core.fingerprints)
+    numerics_version = "1"
+
     class Options(PluginOptions):
         region: list[tuple[float, float]] | None = Field(
             None,

@@ -71,6 +71,10 @@ class RayMeasure(Configurable):
     Residuals: the ``n_mp`` signed distances [mm]; distance: their 2-norm [mm].
     """
 
+    #: bumped when a change alters its numbers (the store keys runs by it, not by the
+    #: package version: fbia.core.fingerprints)
+    numerics_version = "1"
+
     class Options(PluginOptions):
         max_distance: float | None = Field(
             None,

@@ -219,6 +219,10 @@ class RkhsMeasure(Configurable):
     of the same resolution.
     """
 
+    #: bumped when a change alters its numbers (the store keys runs by it, not by the
+    #: package version: fbia.core.fingerprints)
+    numerics_version = "1"
+
     class Options(PluginOptions):
         sigma_w: float = Field(
             0.005,

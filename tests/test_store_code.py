@@ -36,6 +36,7 @@ from _models import ToyMoundForwardModel
 
 
 class Edited(ToyMoundForwardModel):
+{attrs}
     class Options(ToyMoundForwardModel.Options):
 {options}
 
@@ -50,8 +51,9 @@ def plugin(tmp_path, monkeypatch):
     """``plugin(options, body)``: write the module ``edited_plugin`` and import it afresh."""
     monkeypatch.syspath_prepend(str(tmp_path))
 
-    def write(options: str = "        pass", body: str = "        pass"):
-        (tmp_path / "edited_plugin.py").write_text(PLUGIN.format(options=options, body=body))
+    def write(options: str = "        pass", body: str = "        pass", attrs: str = ""):
+        text = PLUGIN.format(options=options, body=body, attrs=attrs)
+        (tmp_path / "edited_plugin.py").write_text(text)
         sys.modules.pop("edited_plugin", None)
         importlib.invalidate_caches()
         return importlib.import_module("edited_plugin").Edited
@@ -142,3 +144,25 @@ def test_the_code_digest_covers_a_plugin_package_and_only_it():
     assert code_digest(fbia.forward_model("analytic_mound_2d"))["files"].endswith("analytic")
     single = code_digest(toy_problem().model)  # a top-level module: that file alone
     assert single["files"].endswith("_models.py")
+
+
+def test_a_package_upgrade_keeps_the_runs_of_a_plugin_with_a_numerics_version(
+    tmp_path, plugin, monkeypatch
+):
+    from fbia.core import fingerprints
+
+    path = tmp_path / "s.sqlite"
+    declared = plugin(attrs='    numerics_version = "1"')
+    assert _evaluate(path, _problem(declared)) == (set(), 3)
+    monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "9.9.9")  # an upgrade
+    assert _evaluate(path, _problem(declared)) == ({0, 1, 2}, 3)
+
+
+def test_a_store_keyed_by_the_package_version_is_rekeyed_to_the_numerics_version(tmp_path, plugin):
+    path = tmp_path / "s.sqlite"
+    assert _evaluate(path, _problem(plugin())) == (set(), 3)  # keyed by "unversioned"
+    declared = plugin(attrs='    numerics_version = "1"')  # the author declares it
+    assert _evaluate(path, _problem(declared), reuse_changed_code=True) == ({0, 1, 2}, 3)
+    with sqlite3.connect(path) as db:
+        (model,) = db.execute("SELECT value FROM meta WHERE key = 'model'").fetchone()
+    assert '"version":"numerics 1"' in model

@@ -83,6 +83,10 @@ class AleFsiForwardModel(Configurable):
     or ``invalid_parameter``.
     """
 
+    #: bumped when a change alters its numbers (the store keys runs by it, not by the
+    #: package version: fbia.core.fingerprints)
+    numerics_version = "1"
+
     Options = AleFsiOptions
 
     options: AleFsiOptions

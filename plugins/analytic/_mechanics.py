@@ -259,6 +259,10 @@ class MoundModel(Configurable):
     ``field_suffix`` (the file type of written interfaces).
     """
 
+    #: bumped when a change alters its numbers (the store keys runs by it, not by the
+    #: package version: fbia.core.fingerprints)
+    numerics_version = "1"
+
     field_suffix = ".vtu"
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:

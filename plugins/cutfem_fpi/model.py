@@ -62,6 +62,10 @@ class CutFemFpiForwardModel(Configurable):
     porosity in (0, 1) and J > 0) raise :class:`fbia.ForwardModelError` with a ``reason``.
     """
 
+    #: bumped when a change alters its numbers (the store keys runs by it, not by the
+    #: package version: fbia.core.fingerprints)
+    numerics_version = "1"
+
     dim = 2
 
     class Options(PluginOptions):
