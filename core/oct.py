@@ -69,6 +69,8 @@ from .options import PluginOptions
 __all__ = ["HeightAxis", "OctOptions", "OctSegmentation", "in_model_axes", "segment_oct"]
 
 Crop = tuple[tuple[int, int] | None, tuple[int, int] | None, tuple[int, int] | None]
+#: the largest intensity a scan may have, in float32's resolvable range
+INTENSITY_RANGE = (1e-30, 1e30)
 CropMm = tuple[tuple[float, float] | None, tuple[float, float] | None, tuple[float, float] | None]
 #: the forward model's axis along the height above the substratum (:func:`in_model_axes`)
 HeightAxis = Literal["z", "y"]
@@ -142,6 +144,24 @@ class OctOptions(PluginOptions):
         if isinstance(value, bool) or not (math.isfinite(mu) and mu >= 0.0):
             raise ValueError("must be a finite number >= 0 [1/mm] or 'auto'")
         return mu
+
+    @field_validator("crop_mm")
+    @classmethod
+    def _check_crop_mm(cls, value: CropMm | None) -> CropMm | None:
+        for pair in value or ():
+            if pair is not None and not (
+                math.isfinite(pair[0]) and math.isfinite(pair[1]) and pair[0] < pair[1]
+            ):
+                raise ValueError(f"each [low, high] must be finite with low < high, got {pair}")
+        return value
+
+    @field_validator("crop")
+    @classmethod
+    def _check_crop(cls, value: Crop | None) -> Crop | None:
+        for pair in value or ():
+            if pair is not None and not 0 <= pair[0] < pair[1]:
+                raise ValueError(f"each [start, stop) must have 0 <= start < stop, got {pair}")
+        return value
 
     @field_validator("threshold")
     @classmethod
@@ -243,6 +263,13 @@ def segment_oct(
         raise ConfigError("OCT intensities must be >= 0 (linear, not log or dB)", where)
     if float(volume.max()) <= float(volume.min()):
         raise ConfigError("volume is constant: nothing to segment", where)
+    if not INTENSITY_RANGE[0] <= float(volume.max()) <= INTENSITY_RANGE[1]:
+        raise ConfigError(
+            f"intensities up to {float(volume.max()):.3g}: outside {INTENSITY_RANGE[0]:g}-"
+            f"{INTENSITY_RANGE[1]:g}, which the single-precision processing cannot resolve; "
+            "scale the scan (e.g. to 0-1 or 0-65535)",
+            where,
+        )
     dz = spacing[0]
     # 1. substratum: first row under its surface, in the cropped volume
     ks = _substratum_row(volume, origin[0], opts.substratum_depth, dz, where)
@@ -266,6 +293,14 @@ def segment_oct(
         )
     above *= np.exp(mu * depth).astype(np.float32)[:, None, None]
     # 4. threshold
+    if opts.threshold is not None:
+        lo, hi = float(above.min()), float(above.max())
+        if not lo < float(opts.threshold) < hi:
+            raise ConfigError(
+                f"threshold {opts.threshold:g} lies outside the processed intensities "
+                f"({lo:.4g} to {hi:.4g}): give one between them, or none (Otsu's)",
+                where,
+            )
     t = float(opts.threshold) if opts.threshold is not None else _otsu(above)
     mask = above > t
     if not mask.any():

@@ -58,6 +58,10 @@ from .oct import HeightAxis, OctOptions, OctSegmentation, in_model_axes, segment
 __all__ = ["OctScan", "OctScanOptions", "read_oct_scan", "write_oct_record"]
 
 
+#: the voxel sizes an OCT scan can have [mm]: 10 nm to 1 mm
+VOXEL_MM = (1e-5, 1.0)
+
+
 class OctScanOptions(OctOptions):
     """``[[observations]] oct``: the scan, its voxels and axes, and how to segment it."""
 
@@ -82,6 +86,11 @@ class OctScanOptions(OctOptions):
         )
         if value is not None and not ok:
             raise ValueError("must be three positive numbers [dz, dy, dx] in mm")
+        if value is not None and not all(VOXEL_MM[0] <= v <= VOXEL_MM[1] for v in value):
+            raise ValueError(
+                f"{list(value)} mm lies outside {VOXEL_MM[0]:g}-{VOXEL_MM[1]:g} mm, where OCT "
+                "voxels are (micrometres to a tenth of a millimetre): give it in mm"
+            )
         return value
 
 
@@ -150,6 +159,8 @@ def _voxel_size_beside(path: Path, name: str, where: str) -> tuple[float, float,
         raise ConfigError(f"no voxel size: {hint}, or voxel_size_mm in {meta.name}", where)
     try:
         size = json.loads(meta.read_text(encoding="utf-8"))["voxel_size_mm"]
+    except RecursionError:
+        raise ConfigError(f"{meta.name}: nested too deeply; {hint}", where) from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         message = f"{meta.name}: no voxel_size_mm ({type(exc).__name__}: {exc}); {hint}"
         raise ConfigError(message, where) from None

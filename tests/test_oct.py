@@ -180,7 +180,17 @@ def bad_cases(small, tmp_path):
             "crop (indices) or crop_mm (mm), not both",
         ),
         (lambda: segment_oct(v, size, crop=(None, (5, 6), None)), "axis y has 1 voxel"),
-        (lambda: segment_oct(v, size, threshold=1e6), "no biofilm found: no voxel above"),
+        (lambda: segment_oct(v, size, threshold=1e6), "threshold 1e+06 lies outside the"),
+        (lambda: segment_oct(v, size, threshold=-1.0), "threshold -1 lies outside the processed"),
+        (lambda: segment_oct(v * 1e-40, size), "outside 1e-30-1e+30, which the single-precision"),
+        (
+            lambda: segment_oct(v, size, crop_mm=((0.0, float("nan")), None, None)),
+            "option 'crop_mm': Value error, each [low, high] must be finite",
+        ),
+        (
+            lambda: segment_oct(v, size, crop=((9, 3), None, None)),
+            "option 'crop': Value error, each [start, stop) must have 0 <= start < stop",
+        ),
         (lambda: segment_oct(v * 0.0 + 1.0, size), "volume is constant"),
         (lambda: segment_oct(v - 1.0, size), "intensities must be >= 0"),
         (lambda: segment_oct(v, size, substratum_depth=5.0), "substratum at row 501"),

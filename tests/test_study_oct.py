@@ -117,6 +117,12 @@ def test_a_file_name_alone_takes_the_voxel_size_from_the_json_beside_it(folder: 
     np.testing.assert_array_equal(by_name.interface.vertices, by_table.interface.vertices)
 
 
+def test_a_deeply_nested_voxel_json_is_one_line(folder: Path) -> None:
+    (folder / "data" / "scan.json").write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(fbia.ConfigError, match=r"scan.json: nested too deeply; give oct = "):
+        fbia.load_study(write(folder, 'oct = "data/scan.npy"'))
+
+
 def test_height_axis_y_swaps_the_axes_and_keeps_the_normals_in_the_fluid(folder: Path) -> None:
     surface = segment_oct(folder / "data" / "scan.npy", VOXEL).interface
     swapped = in_model_axes(surface, "y")
@@ -196,8 +202,23 @@ def test_a_changed_option_gives_the_result_of_a_fresh_run_and_the_same_one_reuse
             OCT.replace(" }", ', height_axis = "x" }'),
             "study.toml: [[observations]] #1 oct: option 'height_axis': Input should be 'z' or 'y'",
         ),
+        (
+            OCT.replace("0.01, 0.02, 0.02", "1e6, 0.02, 0.02"),
+            "study.toml: [[observations]] #1 oct: option 'voxel_size': Value error, [1000000.0, "
+            "0.02, 0.02] mm lies outside 1e-05-1 mm, where OCT voxels are (micrometres to a "
+            "tenth of a millimetre): give it in mm",
+        ),
     ],
-    ids=["typo", "missing-file", "voxel-size-length", "nan", "no-voxel-size", "both", "axis"],
+    ids=[
+        "typo",
+        "missing-file",
+        "voxel-size-length",
+        "nan",
+        "no-voxel-size",
+        "both",
+        "axis",
+        "voxel-size-1e6",
+    ],
 )
 def test_bad_oct_input_is_status_2_and_one_line_naming_file_and_key(
     folder: Path, capsys: pytest.CaptureFixture[str], observation: str, message: str
