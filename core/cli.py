@@ -7,6 +7,7 @@
     fbia run study.toml [--workers N] [--output DIR] [--fresh] [--retry-failed]
                         [--reuse-changed-code] [--address tcp://HOST:PORT]
     fbia plugins [--json] [--options NAME]   NAME's options: default, unit, description
+    fbia schema                               the JSON Schema of a study file (for editors)
     fbia reproductions OUT.md DIR [DIR ...]   the summary of the paper.json files below DIRs
     fbia --version
 
@@ -140,6 +141,8 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("summary", metavar="OUT", help="the markdown page to write")
     rp.add_argument("folders", metavar="DIR", nargs="+", help="folders to search")
 
+    sc = sub.add_parser("schema", help="print the JSON Schema of a study file (for editors)")
+    sc.set_defaults()
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pl.add_argument(
@@ -168,6 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "run": _run,
             "plugins": _plugins,
             "reproductions": _reproductions,
+            "schema": _schema,
         }[args.command]
         return command(args)
     except _UsageError as exc:
@@ -313,6 +317,14 @@ def _reproductions(args: argparse.Namespace) -> int:
 
     path, n = write_summary(args.summary, args.folders)
     print(f"{path}: {n} studies")
+    return 0
+
+
+def _schema(args: argparse.Namespace) -> int:
+    from .study_file import SECTIONS
+    from .study_schema import study_json_schema
+
+    print(json.dumps(study_json_schema(SECTIONS), indent=1, default=str))
     return 0
 
 

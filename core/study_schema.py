@@ -344,3 +344,42 @@ def checked(check: Callable[[Any], _T], value: Any, where: str) -> _T:
 def is_path_type(annotation: Any) -> bool:
     """Whether an option's type is ``Path`` or a union with it (``Path | None``)."""
     return annotation is Path or Path in typing.get_args(annotation)
+
+
+def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
+    """A JSON Schema (draft 2020-12) of a study file, for editors that check TOML against
+    one (Taplo, Even Better TOML): every section's keys, types, bounds and descriptions from
+    the models above; a plugin's ``options`` is an open table (``fbia plugins --options NAME``
+    lists them); ``sections`` names the top-level tables (``study_file.SECTIONS``)."""
+    tables: dict[str, type[Section]] = {
+        "study": StudySection,
+        "model": PluginSection,
+        "measure": PluginSection,
+        "iterator": PluginSection,
+        "likelihood": LikelihoodSection,
+        "synthetic": SyntheticSection,
+        "executor": ExecutorSection,
+        "paper": PaperSection,
+    }
+    arrays: dict[str, type[Section]] = {
+        "parameters": ParameterSection,
+        "uncertain": UncertainSection,
+        "observations": ObservationSection,
+    }
+    properties: dict[str, Any] = {}
+    for name, text in sections.items():
+        if name in tables:
+            schema = tables[name].model_json_schema()
+        elif name in arrays:
+            schema = {"type": "array", "items": arrays[name].model_json_schema()}
+        else:  # fixed: name = value
+            schema = {"type": "object", "additionalProperties": {"type": "number"}}
+        properties[name] = {**schema, "description": text}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": "fbia study file",
+        "type": "object",
+        "properties": properties,
+        "required": ["model"],
+        "additionalProperties": False,
+    }

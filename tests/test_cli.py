@@ -428,3 +428,28 @@ def test_validate_warns_of_units_that_look_wrong_and_still_says_ok(study_file, c
     study_file.write_text(STUDY)
     assert main(["validate", "study.toml"]) == 0
     assert capsys.readouterr().err == ""  # the study of the tests is right
+
+
+def test_the_json_schema_accepts_every_example_and_refuses_a_typo(capsys):
+    jsonschema = pytest.importorskip("jsonschema")
+    import tomllib
+
+    assert main(["schema"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    validator = jsonschema.Draft202012Validator(schema)
+    root = Path(__file__).resolve().parents[1] / "examples"
+    studies = [
+        f
+        for f in sorted(root.rglob("*.toml"))
+        if "output" not in f.parts[-2] and "model" in tomllib.loads(f.read_text())
+    ]
+    assert len(studies) > 30
+    for f in studies:
+        errors = list(validator.iter_errors(tomllib.loads(f.read_text())))
+        assert not errors, f"{f}: {errors[0].message}"
+    assert not list(validator.iter_errors(tomllib.loads(STUDY)))
+    typo = tomllib.loads(STUDY.replace("[executor]", "[executer]"))
+    assert any("executer" in e.message for e in validator.iter_errors(typo))
+    wrong = tomllib.loads(STUDY.replace("seed = 3", 'seed = "three"'))
+    assert list(validator.iter_errors(wrong))
