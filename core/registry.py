@@ -9,6 +9,7 @@ RkhsMeasure(sigma_w=0.05, ...)
 
 from __future__ import annotations
 
+import difflib
 import functools
 import sys
 from collections.abc import Iterable, Mapping
@@ -145,7 +146,9 @@ class Registry:
         except (KeyError, TypeError):
             valid = ", ".join(self.names(kind)) or "(none installed)"
             label = kind.replace("_", " ")
-            raise PluginError(f"unknown {label} {name!r}; valid: {valid}", where) from None
+            close = difflib.get_close_matches(str(name), self.names(kind), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise PluginError(f"unknown {label} {name!r}{hint}; valid: {valid}", where) from None
 
     def create(
         self,

@@ -149,12 +149,13 @@ BAD_CASES = [
     (
         "unknown-model",
         edit('name = "analytic_mound_2d"', 'name = "ale_fsi2"'),
-        "study.toml: [model] name: unknown forward model 'ale_fsi2'; valid: ",
+        "study.toml: [model] name: unknown forward model 'ale_fsi2' (did you mean 'ale_fsi'?); "
+        "valid: ",
     ),
     (
         "unknown-measure",
         edit('name = "cpp"', 'name = "cpq"'),
-        "study.toml: [measure] name: unknown measure 'cpq'; valid: ",
+        "study.toml: [measure] name: unknown measure 'cpq' (did you mean 'cpp'?); valid: ",
     ),
     (
         "unknown-model-option",
