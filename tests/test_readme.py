@@ -127,6 +127,7 @@ def test_cli_lines_run(tmp_path, monkeypatch, capsys):
         "run",
         "plugins",
         "reproductions",
+        "schema",
     }
     for args in commands:
         for arg in args[2:]:
