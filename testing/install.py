@@ -8,10 +8,12 @@ import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import pytest
+from typing import TYPE_CHECKING
 
 from ..core.registry import Registry, default_registry
+
+if TYPE_CHECKING:  # the fixture that makes a PluginInstaller passes pytest's monkeypatch
+    import pytest
 
 
 def write_dist_info(

@@ -484,3 +484,21 @@ def test_checks_are_importable_without_pytest_running_them(tmp_path):
     assert ft.__name__ == "fbia.testing"
     assert ft.check_forward_model.__module__ == "fbia.testing.models"
     assert ft.check_forward_model(GoodModel(), *GOOD_RUN, tmp_path).covers(GOOD_RUN[1])
+
+
+def test_fbia_testing_imports_and_checks_without_pytest():
+    """A plugin author can run the conformance checks in a plain script (issue 29 item 8)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; sys.modules['pytest'] = None\n"
+        "import fbia, fbia.testing as ft\n"
+        "import tempfile\n"
+        "ft.check_forward_model(fbia.forward_model('analytic_mound_2d'), {'E': 400.0, "
+        "'nu': 0.3}, [{'inflow_rate': 100.0}], tempfile.mkdtemp())\n"
+        "print('ok')\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().endswith("ok")
