@@ -214,7 +214,7 @@ def _surrogate_fields(gp, r, inputs, labels, folder) -> Path:
     mean, var = gp.predict(pts)
     fields = [
         (mean, "GP mean of log-likelihood L (Fig. 6)", "viridis"),
-        (np.exp(mean - mean.max()), "likelihood exp(L - max L) (Fig. 5)", "jet"),
+        (np.exp(mean - mean.max()), "likelihood exp(L - max L) (Fig. 5)", "viridis"),
         (np.sqrt(var), "GP standard deviation of L (Fig. 7)", "magma"),
     ]
     fig = Figure(figsize=(16, 4.6))
@@ -267,7 +267,7 @@ def _gp_convergence(r, inputs, labels, folder, refits) -> Path:
         if gp is not None:
             mean = gp.predict_mean(pts)
             ax.contourf(
-                mesh_a, mesh_b, np.exp(mean - mean.max()).reshape(mesh_a.shape), 30, cmap="jet"
+                mesh_a, mesh_b, np.exp(mean - mean.max()).reshape(mesh_a.shape), 30, cmap="viridis"
             )
         first = np.arange(len(design)) < n
         ax.scatter(

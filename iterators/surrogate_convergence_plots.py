@@ -87,7 +87,8 @@ def _fields(r: SurrogateConvergenceResult, inputs: Sequence[Parameter], folder: 
         pts = np.tile(ml, (mesh_a.size, 1))
         pts[:, 0], pts[:, 1] = mesh_a.ravel(), mesh_b.ravel()
         mean = gp.predict_mean(pts)
-        ax.contourf(mesh_a, mesh_b, np.exp(mean - mean.max()).reshape(mesh_a.shape), 30, cmap="jet")
+        field = np.exp(mean - mean.max()).reshape(mesh_a.shape)
+        ax.contourf(mesh_a, mesh_b, field, 30, cmap="viridis")
         first = index < row.n_train
         ax.scatter(*r.points[first & ok, :2].T, s=8, facecolors="none", edgecolors="k", lw=0.5)
         ax.scatter(*r.points[first & ~ok, :2].T, s=12, marker="x", c="0.55")
