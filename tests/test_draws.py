@@ -197,3 +197,15 @@ def test_every_draw_gets_a_model_of_its_own(tmp_path):
     models = [draw_study(study, k, tmp_path, tmp_path / "s.sqlite").model for k in range(3)]
     assert len({id(m) for m in [study.model, *models]}) == 4
     assert all(m.options == study.model.options for m in models)
+
+
+def test_a_draws_result_loads_back_as_it_was(ran):
+    from fbia.core.draws import DrawsResult
+
+    folder, result = ran
+    loaded = fbia.load_result(folder / "out")
+    assert isinstance(loaded, DrawsResult)
+    assert loaded.draws == result.draws
+    got, want = loaded.quantities(), result.quantities()
+    assert got.keys() == want.keys() and all(got[k] == want[k] for k in want)
+    assert loaded.summary() == result.summary()
