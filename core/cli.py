@@ -141,8 +141,7 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("summary", metavar="OUT", help="the markdown page to write")
     rp.add_argument("folders", metavar="DIR", nargs="+", help="folders to search")
 
-    sc = sub.add_parser("schema", help="print the JSON Schema of a study file (for editors)")
-    sc.set_defaults()
+    sub.add_parser("schema", help="print the JSON Schema of a study file (for editors)")
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pl.add_argument(
@@ -285,16 +284,11 @@ def _run(args: argparse.Namespace) -> int:
     if study.iterator is None and not result.success:
         return _fail(result.message, 1)
     status = run_exit_status(result)
-    if status == EXIT_UNTRUSTED:
+    what = {EXIT_UNTRUSTED: "the result is not trustworthy", EXIT_NO_RESULT: "no result"}
+    if status in what:
         print(
-            f"{PROG}: the result is not trustworthy (status {result.status}): "
+            f"{PROG}: {what[status]} (status {result.status}): "
             f"{' '.join(result.message.split())} (exit status {status})",
-            file=sys.stderr,
-        )
-    elif status == EXIT_NO_RESULT:
-        print(
-            f"{PROG}: no result (status {result.status}): {' '.join(result.message.split())} "
-            f"(exit status {status})",
             file=sys.stderr,
         )
     return status
@@ -345,18 +339,14 @@ def _plugins(args: argparse.Namespace) -> int:
 
 def _plugin_options(name: str, as_json: bool) -> int:
     """``fbia plugins --options NAME``: the options of every plugin called NAME."""
-    import difflib
-
-    from .registry import list_plugins
+    from .registry import close_name, list_plugins
     from .tables import format_table
 
     entries = [e for e in list_plugins() if e.name == name]
     if not entries:
         names = sorted({e.name for e in list_plugins()})
-        close = difflib.get_close_matches(name, names, n=3)
-        hint = (
-            f"; did you mean {', '.join(close)}?" if close else f"; installed: {', '.join(names)}"
-        )
+        close = close_name(name, names)
+        hint = f"; did you mean {close}?" if close else f"; installed: {', '.join(names)}"
         raise ConfigError(f"no plugin named {name!r}{hint}", "--options")
     described = {}
     for e in entries:

@@ -30,6 +30,7 @@ import math
 import os
 import re
 import tomllib
+import typing
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -100,28 +101,17 @@ class PaperRecord:
 
 #: the largest paper.json read (a record is a few kB)
 MAX_RECORD_BYTES = 10_000_000
-#: the types of a record's fields (the dataclass' annotations are strings)
-_FIELD_TYPES: dict[str, tuple[type, ...]] = {
-    "study": (str,),
-    "study_file": (str,),
-    "source": (str,),
-    "note": (str,),
-    "status": (str,),
-    "wall_time": (int, float),
-    "forward_time": (int, float),
-    "nfev": (int,),
-    "finished": (str,),
-    "reused": (int,),
-}
 
 
 def _check_types(data: dict[str, Any]) -> None:
     """TypeError naming the first field of a record with the wrong type (or a non-finite
     time), before anything formats it."""
+    hints = typing.get_type_hints(PaperRecord)
     for name, value in data.items():
-        kinds = _FIELD_TYPES.get(name)
-        if kinds is None:
+        hint = hints.get(name)
+        if hint not in (str, int, float):
             continue
+        kinds: tuple[type, ...] = (int, float) if hint is float else (hint,)
         if isinstance(value, bool) or not isinstance(value, kinds):
             raise TypeError(f"{name} is {value!r}, not {' or '.join(k.__name__ for k in kinds)}")
         if isinstance(value, float) and not math.isfinite(value):

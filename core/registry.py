@@ -146,8 +146,8 @@ class Registry:
         except (KeyError, TypeError):
             valid = ", ".join(self.names(kind)) or "(none installed)"
             label = kind.replace("_", " ")
-            close = difflib.get_close_matches(str(name), self.names(kind), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            close = close_name(str(name), self.names(kind))
+            hint = f" (did you mean {close!r}?)" if close else ""
             raise PluginError(f"unknown {label} {name!r}{hint}; valid: {valid}", where) from None
 
     def create(
@@ -190,6 +190,13 @@ def measure(name: str, **options: Any) -> Any:
 def iterator(name: str, **options: Any) -> Any:
     """An iterator by registry name, e.g. ``fbia.iterator("levenberg_marquardt", x0=...)``."""
     return default_registry().create("iterator", name, options)
+
+
+def close_name(name: str, names: Iterable[str]) -> str | None:
+    """The installed name closest to a mistyped ``name`` (difflib's ratio >= 0.6), or None:
+    what "did you mean" suggests."""
+    close = difflib.get_close_matches(name, list(names), n=1)
+    return close[0] if close else None
 
 
 def list_plugins(kind: str | None = None) -> list[PluginEntry]:

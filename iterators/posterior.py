@@ -293,8 +293,16 @@ def write_posterior_files(result: Any, folder: str | Path, seed: int = 0) -> lis
         return []
     folder = Path(folder)
     paths = list(save_posterior(result, folder))
+    post = result.posterior
+    arrays = {  # what load_posterior would read back from the files just written
+        "names": post.names,
+        "particles": post.particles,
+        "weights": post.weights,
+        "log_likelihood": post.log_likelihood,
+        "log_prior": post.log_prior,
+    }
     try:
-        data = to_inference_data(load_posterior(folder), seed=seed)
+        data = to_inference_data(arrays, seed=seed)
     except ConfigError:  # arviz is not installed
         return paths
     data.to_netcdf(str(folder / "posterior.nc"))

@@ -115,8 +115,7 @@ class LogTables:
     grid_lower: FloatArray  # (d,) the first grid point (the box less _PAD cells)
     inv_step: FloatArray  # (d,) 1 / grid spacing
     coeffs: FloatArray  # the spline coefficients, shape (n_1, ..., n_d)
-    prior_lower: FloatArray  # (d,)
-    prior_inv_step: FloatArray  # (d,)
+    prior_inv_step: FloatArray  # (d,) 1 / spacing of the log-prior grids, which start at lower
     prior_values: FloatArray  # (d, _PRIOR_POINTS) log p_j on its grid (-inf outside)
     points: int
     seconds_build: float
@@ -158,7 +157,6 @@ class LogTables:
             grid_lower=grid_lower,
             inv_step=1.0 / step,
             coeffs=np.ascontiguousarray(coeffs, dtype=float),
-            prior_lower=lower,
             prior_inv_step=1.0 / p_step,
             prior_values=prior_values,
             points=int(points),
@@ -181,7 +179,7 @@ class LogTables:
         """The tabulated log p at the rows of ``x`` (-inf outside the support)."""
         x = np.ascontiguousarray(x, dtype=float)
         out = np.empty(len(x))
-        _prior_many(self.prior_values, self.prior_lower, self.prior_inv_step, x, out)
+        _prior_many(self.prior_values, self.lower, self.prior_inv_step, x, out)
         return out
 
     def move(
@@ -203,9 +201,9 @@ class LogTables:
         x, loglik, log_prior = x.copy(), loglik.copy(), log_prior.copy()
         accepted = np.zeros(n, dtype=np.int64)
         _moves(self.coeffs.reshape(-1), self._shape(), self.grid_lower, self.inv_step,
-               self.lower, self.upper, self.prior_values, self.prior_lower,
-               self.prior_inv_step, np.ascontiguousarray(factor, dtype=float), z, e,
-               float(gamma), x, loglik, log_prior, accepted)  # fmt: skip
+               self.lower, self.upper, self.prior_values, self.prior_inv_step,
+               np.ascontiguousarray(factor, dtype=float), z, e, float(gamma), x, loglik,
+               log_prior, accepted)  # fmt: skip
         return x, loglik, log_prior, float(accepted.sum()) / (n * max(n_moves, 1))
 
     def check(
@@ -319,8 +317,8 @@ def _prior_many(values, lower, inv_step, x, out) -> None:
 
 @numba.njit(cache=True, parallel=True)
 def _moves(
-    coeffs, shape, grid_lower, inv_step, lower, upper, prior_values, prior_lower,
-    prior_inv_step, factor, z, e, gamma, x, loglik, log_prior, accepted,
+    coeffs, shape, grid_lower, inv_step, lower, upper, prior_values, prior_inv_step, factor,
+    z, e, gamma, x, loglik, log_prior, accepted,
 ) -> None:  # fmt: skip
     n, m, d = z.shape
     for i in numba.prange(n):
@@ -337,7 +335,7 @@ def _moves(
                 for c in range(d):
                     s += factor[r, c] * z[i, k, c]
                 prop[r] = s
-            lpn = _prior(prior_values, prior_lower, prior_inv_step, prop)
+            lpn = _prior(prior_values, lower, prior_inv_step, prop)
             if lpn == -np.inf:
                 continue
             if gamma == 0.0:
