@@ -99,14 +99,59 @@ def _options(obj: Any) -> dict[str, Any]:
     return out
 
 
+# Mesh and surface formats keyed by their parsed content (points, cells, tags): meshio writes
+# a timestamp into a PLY header, so regenerating the same surface changes its bytes.
+_PARSED_SUFFIXES = frozenset({".msh", ".vtu", ".vtk", ".ply", ".stl", ".obj", ".off", ".xdmf"})
+
+
 def _file_digest(path: Path) -> dict[str, Any]:
-    """File name and SHA-256 of its bytes: moving a study folder keeps a store valid, editing
-    the mesh file it names does not."""
+    """File name and SHA-256 of its content: of what meshio parses from a mesh or surface
+    file (points, cell blocks, cell and point data, field data), else of its bytes.  Moving a
+    study folder keeps a store valid, editing the mesh file it names does not, rewriting the
+    same mesh with another header does not either."""
     try:
         data = path.read_bytes()
     except OSError:
         return {"file": str(path), "sha256": None}
+    parsed = _parsed_digest(path)
+    if parsed is not None:
+        return {"file": path.name, "content": parsed}
     return {"file": path.name, "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def _parsed_digest(path: Path) -> str | None:
+    """SHA-256 of a mesh file's parsed content (None: not a format meshio reads, or unreadable:
+    the bytes key it)."""
+    if path.suffix.lower() not in _PARSED_SUFFIXES:
+        return None
+    try:
+        import meshio
+
+        mesh = meshio.read(path)
+    except Exception:  # noqa: BLE001 - any reader error: key the bytes (validation reports it)
+        return None
+    h = hashlib.sha256(str(_digest(np.asarray(mesh.points, dtype=float))).encode())
+    for block in mesh.cells:
+        h.update(f"{block.type}:{_digest(np.asarray(block.data, dtype=np.int64))}".encode())
+    for group, values in (("cell", mesh.cell_data), ("point", mesh.point_data)):
+        for name in sorted(values):
+            arrays = values[name] if group == "cell" else [values[name]]
+            h.update(f"{group}:{name}".encode())
+            for a in arrays:
+                h.update(str(_digest(np.asarray(a))).encode())
+    h.update(
+        canonical(
+            jsonable({k: np.asarray(v).tolist() for k, v in mesh.field_data.items()})
+        ).encode()
+    )
+    return h.hexdigest()
+
+
+def _bytes_digest(path: Path) -> str | None:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def _digest(*arrays: Any) -> str | None:
@@ -139,12 +184,19 @@ def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -
     defaults now, and the package version it was keyed by replaced by ``obj``'s declared
     numerics version: the part a store written before options were keyed by their difference
     from the defaults (or before a defaulted option existed, or before the plugin declared its
-    numerics version) would have today."""
+    numerics version, or before a mesh file was keyed by its parsed content) would have
+    today."""
     defaults = default_options(obj)
     out = json.loads(canonical(part))
     if out[plugin].get("version") == _package_version(obj):  # keyed by the package's version
         out[plugin]["version"] = _class_version(obj)["version"]
     options = out[plugin].get("options", {})
+    current = getattr(obj, "options", None)
+    for k, v in options.items():  # a file keyed by its bytes before fbia parsed it: same bytes
+        path = getattr(current, k, None)
+        if isinstance(v, dict) and isinstance(path, Path) and "sha256" in v:
+            if v["sha256"] is not None and v["sha256"] == _bytes_digest(path):
+                options[k] = _file_digest(path)
     out[plugin]["options"] = {
         k: v for k, v in options.items() if not (k in defaults and v == defaults[k])
     }

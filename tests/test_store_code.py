@@ -30,6 +30,8 @@ from fbia.core.store_migration import rekey
 POINTS = [{"E": 200.0, "nu": 0.1}, {"E": 400.0, "nu": 0.3}, {"E": 700.0, "nu": 0.2}]
 
 PLUGIN = """\
+from pathlib import Path
+
 from pydantic import Field
 
 from _models import ToyMoundForwardModel
@@ -166,3 +168,71 @@ def test_a_store_keyed_by_the_package_version_is_rekeyed_to_the_numerics_version
     with sqlite3.connect(path) as db:
         (model,) = db.execute("SELECT value FROM meta WHERE key = 'model'").fetchone()
     assert '"version":"numerics 1"' in model
+
+
+def _ply(path, comment, z=0.0):
+    """An ASCII PLY triangle written with a header ``comment`` (meshio writes a timestamp)."""
+    path.write_text(
+        "ply\nformat ascii 1.0\n"
+        f"comment {comment}\n"
+        "element vertex 3\nproperty double x\nproperty double y\nproperty double z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        f"0 0 0\n1 0 0\n0 1 {z}\n3 0 1 2\n"
+    )
+    return path
+
+
+SURFACE_OPTION = '        surface: Path | None = Field(None, description="a surface file")'
+
+
+def _surface_plugin(plugin):
+    return plugin(options=SURFACE_OPTION)
+
+
+def test_a_mesh_file_is_keyed_by_its_content_not_its_header(tmp_path, plugin):
+    """Rewriting the same surface (another header comment) reuses every run; moving one of
+    its vertices is another model (issue 29 item 2: file options keyed on parsed content)."""
+    path = tmp_path / "s.sqlite"
+    model = _surface_plugin(plugin)
+    surface = _ply(tmp_path / "surface.ply", "written 2026-11-27 10:00")
+    assert _evaluate(path, _problem(lambda: model(surface=surface))) == (set(), 3)
+    _ply(surface, "written 2026-11-28 12:34:56 by another run")
+    assert _evaluate(path, _problem(lambda: model(surface=surface))) == ({0, 1, 2}, 3)
+    _ply(surface, "written again", z=0.5)
+    with pytest.raises(fbia.ConfigError, match="different model"):
+        _evaluate(path, _problem(lambda: model(surface=surface)))
+
+
+def test_a_store_keyed_by_a_mesh_files_bytes_is_rekeyed_when_the_bytes_are_the_same(
+    tmp_path, plugin
+):
+    from fbia.core import fingerprints
+
+    path = tmp_path / "s.sqlite"
+    model = _surface_plugin(plugin)
+    surface = _ply(tmp_path / "surface.ply", "one header")
+    problem = _problem(lambda: model(surface=surface))
+    fingerprint = problem_fingerprint(problem)
+    new = json.loads(canonical(model_part(fingerprint)))
+    assert set(new["model"]["options"]["surface"]) == {"file", "content"}
+    old = json.loads(canonical(model_part(fingerprint)))  # the key of an earlier fbia
+    old["model"]["options"]["surface"] = {
+        "file": "surface.ply",
+        "sha256": fingerprints._bytes_digest(surface),
+    }
+    assert _evaluate(path, problem) == (set(), 3)
+    db = sqlite3.connect(path, isolation_level=None)
+    db.execute("BEGIN")
+    assert rekey(db, new, coordinates_of(fingerprint), old) == 3
+    db.execute("COMMIT")
+    db.close()
+    assert _evaluate(path, _problem(lambda: model(surface=surface))) == ({0, 1, 2}, 3)
+    # with other bytes the old key is not carried over: another model
+    rewritten = _problem(lambda: model(surface=_ply(surface, "another header")))
+    db = sqlite3.connect(path, isolation_level=None)
+    db.execute("BEGIN")
+    assert rekey(db, new, coordinates_of(fingerprint), old) == 3
+    db.execute("COMMIT")
+    db.close()
+    with pytest.raises(fbia.ConfigError, match="different model"):
+        _evaluate(path, rewritten)
