@@ -16,6 +16,7 @@ The package maps the repository folders ``core/``, ``plugins/``, ``measures/`` a
 from __future__ import annotations
 
 import importlib
+import logging
 from typing import Any
 
 from .core import *  # noqa: F403  (the public core types)
@@ -38,6 +39,10 @@ _LAZY = {
 }
 
 __all__ = [*_core_all, *_LAZY, "__version__"]
+
+# A library configures no handlers: its modules log to ``fbia.<module>`` (progress at INFO);
+# ``logging.basicConfig(level=logging.INFO)`` shows it, ``fbia run`` writes it to fbia.log.
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 
 def __getattr__(name: str) -> Any:

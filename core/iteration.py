@@ -11,6 +11,7 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Generator, Iterator
 from pathlib import Path
 from typing import Any, Protocol, TypeVar, runtime_checkable
@@ -20,20 +21,30 @@ from .local_executors import SerialEvaluator
 from .options import Configurable
 from .problem import InverseProblem, Result
 
+logger = logging.getLogger(__name__)
+
 S = TypeVar("S")
 R = TypeVar("R")
 
 
-def drain(gen: Generator[S, None, R], on_state: Callable[[S], None] | None = None) -> R:
+def drain(
+    gen: Generator[S, None, R], on_state: Callable[[S], None] | None = None, name: str = ""
+) -> R:
     """Run a ``steps()`` generator to its end and return what it returns; ``on_state`` sees
-    every state it yields.  The generator is closed if anything raises on the way."""
+    every state it yields, and the logger ``fbia.core.iteration`` gets it at INFO (prefixed
+    by the iterator's ``name``): the progress of an iterator run from Python, shown with
+    ``logging.basicConfig(level=logging.INFO)``.  The generator is closed if anything raises
+    on the way."""
+    prefix = f"{name}: " if name else ""
     try:
         while True:
             try:
                 state = next(gen)
             except StopIteration as stop:
                 result: R = stop.value
+                logger.info("%sdone", prefix)
                 return result
+            logger.info("%s%s", prefix, state)
             if on_state is not None:
                 on_state(state)
     finally:
@@ -73,7 +84,7 @@ class IteratorBase(Configurable):
         own = evaluator is None
         ev: Evaluator = SerialEvaluator() if evaluator is None else evaluator
         try:
-            self.result = drain(self.steps(problem, ev))
+            self.result = drain(self.steps(problem, ev), name=type(self).__name__)
             return self.result
         finally:
             if own:

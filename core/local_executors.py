@@ -17,6 +17,7 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -43,6 +44,7 @@ __all__ = [
     "ProcessPoolEvaluator",
     "SerialEvaluator",
     "SerialExecutor",
+    "limit_threads",
     "workers_ignore_sigint",
 ]
 
@@ -85,14 +87,42 @@ class SerialExecutor:
 _WORKER_PROBLEM: Evaluable | None = None
 
 
-def _init_worker(problem: Evaluable, parent: int, direct: bool) -> None:
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def limit_threads(workers: int) -> int:
+    """Share this machine's cores among ``workers`` processes: in the calling process, BLAS and
+    OpenMP (through threadpoolctl, also in libraries loaded already) and numba get
+    ``cpu_count // workers`` threads (at least 1), and so do the processes it starts (the
+    environment variables).  ``OMP_NUM_THREADS`` set by the user wins.  Returns the count."""
+    given = os.environ.get("OMP_NUM_THREADS", "")
+    n = (
+        int(given)
+        if given.isdigit() and int(given) > 0
+        else max(1, (os.cpu_count() or 1) // workers)
+    )
+    for name in (*_THREAD_VARIABLES, "NUMBA_NUM_THREADS"):
+        os.environ[name] = str(n)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=n)  # kept for the process's life (not used as a context)
+    numba = sys.modules.get("numba")
+    if numba is not None:  # imported already (unpickling the problem): its pool is sized
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    return n
+
+
+def _init_worker(problem: Evaluable, parent: int, direct: bool, workers: int = 1) -> None:
     """Set up a pool worker.  ``parent`` is the study's process id, read by the study itself:
     a worker that read it with ``os.getppid()`` after its study was killed during the pool's
     start-up would watch the wrong process and never end.  ``direct``: the study is the
-    worker's parent (``spawn``, ``fork``), not the ``forkserver`` process."""
+    worker's parent (``spawn``, ``fork``), not the ``forkserver`` process.  The pool's
+    ``workers`` share the cores (:func:`limit_threads`): two workers of a GP or an FEM solve
+    with every core's threads each would oversubscribe the machine."""
     global _WORKER_PROBLEM
     if not _parent_alive(parent, direct):  # the study is gone already: end now
         os._exit(1)
+    limit_threads(workers)
     _WORKER_PROBLEM = problem
 
     def watch() -> None:  # a worker whose study was killed (SIGKILL) ends itself
@@ -205,7 +235,12 @@ class PoolExecutor:
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context(self.start_method),
                 initializer=_init_worker,
-                initargs=(run_view(problem), os.getpid(), self.start_method != "forkserver"),
+                initargs=(
+                    run_view(problem),
+                    os.getpid(),
+                    self.start_method != "forkserver",
+                    self.workers,
+                ),
             )
             self._pool_problem = problem
         return self._pool

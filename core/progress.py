@@ -77,7 +77,7 @@ class RunProgress:
         self.echo = echo
         self.tty = sys.stderr.isatty() if tty is None else tty
         self.interval = interval
-        self.logger = logging.getLogger("fbia")
+        self.logger = logging.getLogger(__name__)
         self.batch = 0
         self.totals = {"runs": 0, "reused": 0, "failed": 0}
         self._bar: Any = None

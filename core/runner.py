@@ -441,7 +441,7 @@ def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Pr
     steps = getattr(iterator, "steps", None)
     if not callable(steps):
         return iterator.run(problem, evaluator)
-    return drain(steps(problem, evaluator), progress)
+    return drain(steps(problem, evaluator), progress, type(iterator).__name__)
 
 
 class _Progress:

@@ -275,3 +275,46 @@ def test_a_worker_that_dies_while_the_batch_is_submitted_costs_only_its_own_run(
     assert records[1].message.startswith("the worker process died during this run")
     monkeypatch.undo()
     assert [r.status for r in pool.evaluate(PROBLEM, POINTS[:2])] == ["ok", "ok"]
+
+
+def _threads_here() -> tuple[dict[str, str], list[int]]:
+    import os
+
+    from threadpoolctl import threadpool_info
+
+    names = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+    return {k: os.environ.get(k, "") for k in names}, [i["num_threads"] for i in threadpool_info()]
+
+
+def test_pool_workers_share_the_cores(monkeypatch):
+    """Every worker of a pool of n gets cpu_count // n BLAS, OpenMP and numba threads (issue
+    29 item 7): two workers each using every core would oversubscribe the machine."""
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    import numpy  # noqa: F401  (a BLAS loaded before the limit, as unpickling a problem does)
+
+    from fbia.core.local_executors import limit_threads
+
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    workers = os.cpu_count() or 1
+    with ProcessPoolExecutor(
+        max_workers=1,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=limit_threads,
+        initargs=(workers,),
+    ) as pool:
+        env, blas = pool.submit(_threads_here).result()
+    assert set(env.values()) == {"1"}
+    assert blas and set(blas) == {1}
+    # the user's OMP_NUM_THREADS wins
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    with ProcessPoolExecutor(
+        max_workers=1,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=limit_threads,
+        initargs=(workers,),
+    ) as pool:
+        env, blas = pool.submit(_threads_here).result()
+    assert set(env.values()) == {"3"} and max(blas) <= 3  # a BLAS may cap it at its own size

@@ -262,3 +262,22 @@ def test_plots_of_a_calibration(tmp_path):
     files = it.write_plots(result, problem, tmp_path)
     assert {f.name for f in files} == {"lm_errors.png", "lm_search_paths.png"}
     assert all(f.stat().st_size > 10_000 for f in files)
+
+
+def test_an_iterator_run_from_python_logs_its_steps(caplog):
+    """Progress from the API goes through logging (issue 29 item 7): every step's state at
+    INFO on ``fbia.core.iteration``, nothing printed, no handler configured by fbia."""
+    import logging
+
+    from _models import toy_problem
+
+    it = fbia.iterator("levenberg_marquardt", x0={"E": 300.0, "nu": 0.2})
+    with caplog.at_level(logging.INFO, logger="fbia"):
+        result = it.run(toy_problem())
+    records = [r for r in caplog.records if r.name == "fbia.core.iteration"]
+    assert result.success
+    assert len(records) >= 3
+    assert records[0].getMessage().startswith("LevenbergMarquardtIterator: round 1, ")
+    assert "err_res" in records[0].getMessage()
+    assert records[-1].getMessage() == "LevenbergMarquardtIterator: done"
+    assert [type(h) for h in logging.getLogger("fbia").handlers] == [logging.NullHandler]
