@@ -142,6 +142,14 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("folders", metavar="DIR", nargs="+", help="folders to search")
 
     sub.add_parser("schema", help="print the JSON Schema of a study file (for editors)")
+    it = sub.add_parser("init", help="write a commented template study for a model")
+    it.add_argument("study", metavar="FILE", nargs="?", default="study.toml", help="to write")
+    it.add_argument("--model", required=True, metavar="NAME", help="forward model plugin")
+    it.add_argument(
+        "--iterator", default="levenberg_marquardt", metavar="NAME", help="iterator plugin"
+    )
+    it.add_argument("--measure", default="ray", metavar="NAME", help="measure plugin")
+    it.add_argument("--force", action="store_true", help="overwrite an existing FILE")
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pl.add_argument(
@@ -171,6 +179,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "plugins": _plugins,
             "reproductions": _reproductions,
             "schema": _schema,
+            "init": _init,
         }[args.command]
         return command(args)
     except _UsageError as exc:
@@ -319,6 +328,21 @@ def _schema(args: argparse.Namespace) -> int:
     from .study_schema import study_json_schema
 
     print(json.dumps(study_json_schema(SECTIONS), indent=1, default=str))
+    return 0
+
+
+def _init(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .study_template import study_template
+
+    path = Path(args.study)
+    if path.exists() and not args.force:
+        raise ConfigError("exists already; give another FILE or --force to overwrite", str(path))
+    name = "".join(c if c.isalnum() or c in "_-" else "_" for c in path.stem) or "my_study"
+    text = study_template(args.model, args.iterator, args.measure, name=name)
+    path.write_text(text, encoding="utf-8")
+    print(f"wrote {path}; next: {PROG} validate {path}, then {PROG} run {path}")
     return 0
 
 
