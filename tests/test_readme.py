@@ -128,8 +128,14 @@ def test_cli_lines_run(tmp_path, monkeypatch, capsys):
         "plugins",
         "reproductions",
         "schema",
+        "init",
     }
     for args in commands:
+        if args[1] == "init":  # writes its FILE: into the test's folder, then validates it
+            args = [tmp_path / a if a.endswith(".toml") else a for a in args]
+            assert fbia_main([str(a) for a in args[1:]]) == 0, capsys.readouterr().err
+            assert fbia_main(["validate", str(args[-1])]) == 0, capsys.readouterr().err
+            continue
         for arg in args[2:]:
             if arg.endswith(".toml"):
                 assert (ROOT / arg).is_file(), f"README names a missing file {arg}"
