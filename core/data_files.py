@@ -29,11 +29,15 @@ fbia.core.errors.ConfigError: doctest_points.csv: line 2: 'l.0' is not a number
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import math
 import re
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -220,3 +224,30 @@ def _layouts_text(layouts: Sequence[Sequence[str]]) -> str:
 def _or(widths: Sequence[int]) -> str:
     words = [str(w) for w in widths]
     return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
+
+
+def read_meshio(path: Path, what: str = "mesh") -> Any:
+    """``meshio.read(path)``, every failure a one-line :class:`ConfigError` naming the file:
+    meshio raises many types for unreadable files, and for an extension several formats
+    share (.msh: ansys, gmsh; .ply after a failed PLY parse) prints "Couldn't read file ..."
+    and calls ``sys.exit(1)``.  What meshio prints is kept out of the terminal and put into
+    the message."""
+    import meshio
+
+    where = str(path)
+    if not path.is_file():
+        raise ConfigError(f"{what} file not found", where)
+    said = io.StringIO()
+    try:
+        with (
+            contextlib.redirect_stdout(said),
+            contextlib.redirect_stderr(said),
+            warnings.catch_warnings(),
+        ):
+            # meshio tells binary from ASCII STL by the file size in int32 arithmetic, which
+            # overflows for an ASCII file's triangle count; the reader is right either way
+            warnings.filterwarnings("ignore", "overflow encountered", RuntimeWarning)
+            return meshio.read(path)
+    except (Exception, SystemExit) as exc:
+        reason = " ".join(said.getvalue().split()) or str(exc) or type(exc).__name__
+        raise ConfigError(f"meshio cannot read the {what}: {reason}", where) from None

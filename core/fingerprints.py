@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from .data_files import read_meshio
+from .errors import ConfigError
 from .interface import Interface
 from .observation import coordinate_key
 from .options import plugin_options
@@ -125,10 +127,8 @@ def _parsed_digest(path: Path) -> str | None:
     if path.suffix.lower() not in _PARSED_SUFFIXES:
         return None
     try:
-        import meshio
-
-        mesh = meshio.read(path)
-    except Exception:  # noqa: BLE001 - any reader error: key the bytes (validation reports it)
+        mesh = read_meshio(path)
+    except ConfigError:  # unreadable: key the bytes (validation reports it)
         return None
     h = hashlib.sha256(str(_digest(np.asarray(mesh.points, dtype=float))).encode())
     for block in mesh.cells:

@@ -16,7 +16,6 @@ that their right-hand normal points into the fluid.
 from __future__ import annotations
 
 import csv
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .data_files import check_coordinates, read_csv_table
+from .data_files import check_coordinates, read_csv_table, read_meshio
 from .errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -324,31 +323,27 @@ class Interface:
 
     @classmethod
     def _read_surface(cls, path: Path) -> Interface:
+        """A triangle surface read by meshio, else by trimesh (formats meshio lacks)."""
         try:
-            import meshio
-
-            with warnings.catch_warnings():
-                # meshio tells binary from ASCII STL by the file size in int32 arithmetic, which
-                # overflows for an ASCII file's triangle count; the reader is right either way
-                warnings.filterwarnings("ignore", "overflow encountered", RuntimeWarning)
-                mesh = meshio.read(path)
-            tris = [b.data for b in mesh.cells if b.type == "triangle"]
-            if not tris:
-                raise ConfigError("mesh file has no triangle cells", str(path))
-            points = np.asarray(mesh.points, dtype=float)
-            check_coordinates(points, "vertex coordinates", str(path))
-            return cls.surface(points[:, :3], np.vstack(tris))
-        except ConfigError:
-            raise
-        except Exception:
+            mesh = read_meshio(path, "surface")
+        except ConfigError as meshio_error:
             import trimesh
 
             try:
                 tm: Any = trimesh.load(path, force="mesh", process=False)
-            except Exception as exc:
-                raise ConfigError(f"cannot read surface: {exc}", str(path)) from None
-            check_coordinates(np.asarray(tm.vertices, dtype=float), "vertex coordinates", str(path))
-            return cls.surface(tm.vertices, tm.faces)
+                vertices, faces = np.asarray(tm.vertices, dtype=float), np.asarray(tm.faces)
+            except Exception:  # noqa: BLE001 - trimesh raises many types: meshio's reason
+                raise meshio_error from None
+            if len(faces) == 0:  # trimesh reads garbage as an empty mesh: meshio's reason
+                raise meshio_error from None
+            check_coordinates(vertices, "vertex coordinates", str(path))
+            return cls.surface(vertices, faces)
+        tris = [b.data for b in mesh.cells if b.type == "triangle"]
+        if not tris:
+            raise ConfigError("mesh file has no triangle cells", str(path))
+        points = np.asarray(mesh.points, dtype=float)
+        check_coordinates(points, "vertex coordinates", str(path))
+        return cls.surface(points[:, :3], np.vstack(tris))
 
     def write(self, path: str | Path) -> Path:
         """Write as CSV (2-D: x, y, curve) or any meshio format chosen by suffix (2-D or 3-D)."""

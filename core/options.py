@@ -48,7 +48,10 @@ class PluginOptions(BaseModel):
             return cls(**values)
         except pydantic.ValidationError as exc:
             err = exc.errors()[0]
-            loc = ".".join(str(p) for p in err["loc"]) or "options"
+            if not err["loc"]:  # a check of several options (a model validator): its message
+                message = str(err["msg"]).removeprefix("Value error, ")
+                raise ConfigError(message, where) from None
+            loc = ".".join(str(p) for p in err["loc"])
             raise ConfigError(
                 f"option {loc!r}: {err['msg']} (got {err.get('input')!r})", where
             ) from None

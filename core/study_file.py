@@ -1,9 +1,7 @@
 """Study files: one TOML file describes an inverse analysis; :func:`load_study` reads it.
 
->>> import fbia
 >>> study = fbia.load_study("examples/flow_cell/study.toml")      # doctest: +SKIP
->>> result = fbia.run_study(study)                                  # doctest: +SKIP
->>> print(result.summary())                                         # doctest: +SKIP
+>>> print(fbia.run_study(study).summary())                          # doctest: +SKIP
 
 The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and one of
 ``[[observations]]``/``[synthetic]`` is optional)::
@@ -361,6 +359,8 @@ class _Reader:
         self.model_name, model = self.plugin("forward_model", "model")
         try:
             self.model_names = [str(n) for n in model.parameter_names()]
+        except ConfigError as exc:  # a file the model reads to know them (a mesh's regions)
+            raise ConfigError(str(exc), self.where("[model.options]")) from None
         except Exception as exc:  # a plugin bug, reported where it shows
             raise ConfigError(
                 f"forward model {self.model_name!r} failed to list its parameters: "

@@ -57,6 +57,7 @@ __all__ = [
     "ColonyHeightField",
     "build_colony_cell",
     "colony_from_oct",
+    "colony_field",
     "colony_height_field",
     "colony_solid",
 ]
@@ -68,6 +69,9 @@ MAX_HEIGHT_FRACTION = 0.9
 MAX_FILLED = 0.02
 #: Smallest part of the colony kept, as a fraction of the largest part's volume.
 MIN_PART = 0.01
+#: Most nodes of a colony's height field (4e6: 2000 x 2000, 0.5 mm at 0.25 um; a surface in um
+#: read as mm would ask for 1e6 times more).
+MAX_GRID_NODES = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -154,6 +158,13 @@ def colony_height_field(
     pad = 3.0 * resolution + 3.0 * smoothing if margin is None else margin
     nx = int(np.ceil((hi[0] - lo[0] + 2 * pad) / resolution)) + 1
     nz = int(np.ceil((hi[2] - lo[2] + 2 * pad) / resolution)) + 1
+    if nx * nz > MAX_GRID_NODES:
+        raise ConfigError(
+            f"the colony spans {hi[0] - lo[0]:.4g} x {hi[2] - lo[2]:.4g} mm: its height field "
+            f"at colony_resolution {resolution} mm would have {nx * nz:.3g} nodes (at most "
+            f"{MAX_GRID_NODES:.0e}); is the surface in mm (fbia's unit)?",
+            where,
+        )
     x = lo[0] - pad + resolution * np.arange(nx)
     z = lo[2] - pad + resolution * np.arange(nz)
     if within is not None:
@@ -268,18 +279,7 @@ def build_colony_cell(
         raise ConfigError(f"duct size must be positive, got {length} x {height} x {width}", where)
     if not (mesh_size > 0 and interface_mesh_size > 0):
         raise ConfigError("mesh sizes must be positive", where)
-    shape = surface if isinstance(surface, Interface) else read_colony_surface(surface)
-    shape = shape.translated(np.asarray(offset, dtype=float))
-    field = colony_height_field(
-        shape, resolution, smoothing, within=(0.0, length, 0.0, width), where=where
-    )
-    top = float(field.height.max())
-    if top >= MAX_HEIGHT_FRACTION * height:
-        raise ConfigError(
-            f"the colony ({top:.4g} mm high) touches the ceiling: it must stay below "
-            f"{MAX_HEIGHT_FRACTION:g} x the duct height {height} mm",
-            where,
-        )
+    field = colony_field(surface, length, height, width, offset, resolution, smoothing)
     box = Box(Pnt(0, 0, 0), Pnt(length, height, width))
     box.faces.name = "walls"
     box.faces.Min(X).name = "inflow"
@@ -299,6 +299,35 @@ def build_colony_cell(
     except Exception as exc:  # netgen raises bare Exception/NgException subclasses
         raise ConfigError(f"netgen could not mesh the colony cell: {exc}", where) from None
     return _with_named_regions(ngmesh, where)
+
+
+def colony_field(
+    surface: str | Path | Interface,
+    length: float,
+    height: float,
+    width: float,
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    resolution: float = 0.02,
+    smoothing: float = 0.02,
+) -> ColonyHeightField:
+    """The colony's height field in the duct: every check of :func:`build_colony_cell` short
+    of meshing (``fbia validate`` runs it): the file reads as a 3-D triangle surface with
+    finite vertices, moved by ``offset`` it samples as a height field on the duct's floor,
+    away from its walls, not overhanging, below the ceiling."""
+    where = str(surface) if isinstance(surface, str | Path) else "colony surface"
+    shape = surface if isinstance(surface, Interface) else read_colony_surface(surface)
+    shape = shape.translated(np.asarray(offset, dtype=float))
+    field = colony_height_field(
+        shape, resolution, smoothing, within=(0.0, length, 0.0, width), where=where
+    )
+    top = float(field.height.max())
+    if top >= MAX_HEIGHT_FRACTION * height:
+        raise ConfigError(
+            f"the colony ({top:.4g} mm high) touches the ceiling: it must stay below "
+            f"{MAX_HEIGHT_FRACTION:g} x the duct height {height} mm",
+            where,
+        )
+    return field
 
 
 def colony_solid(field: ColonyHeightField, duct: Any, where: str = "colony surface") -> Any:
@@ -326,7 +355,7 @@ def colony_solid(field: ColonyHeightField, duct: Any, where: str = "colony surfa
 
 def _with_named_regions(ngmesh: Any, where: str) -> ngsolve.Mesh:
     """The netgen mesh as an NGSolve mesh on the module's names, locked tetrahedra split."""
-    pts = np.asarray(ngmesh.Coordinates(), dtype=float)
+    pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
     e3, e2 = ngmesh.Elements3D().NumPy(), ngmesh.Elements2D().NumPy()
     regions = _named(e3, ngmesh.GetRegionNames(dim=3), 4)
     boundaries = _named(e2, ngmesh.GetRegionNames(dim=2), 3)

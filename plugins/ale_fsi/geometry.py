@@ -26,8 +26,6 @@ NGSolve is imported inside the functions, so importing this module is cheap.
 
 from __future__ import annotations
 
-import contextlib
-import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ...core.data_files import read_meshio
 from ...core.errors import ConfigError, ForwardModelError
 from .outlines import DEFAULT_OUTLINE
 
@@ -289,21 +288,8 @@ def read_mesh_names(path: str | Path) -> list[str]:
 
 def read_with_meshio(path: Path) -> Any:
     """``meshio.read(path)``, every failure a one-line ConfigError naming the file (2-D and 3-D
-    mesh files alike)."""
-    import meshio
-
-    where = str(path)
-    if not path.is_file():
-        raise ConfigError("mesh file not found", where)
-    said = io.StringIO()
-    try:
-        # For an extension shared by several formats (.msh: ansys, gmsh) meshio prints
-        # "Couldn't read file ..." and calls sys.exit(1) when none of them reads it.
-        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-            return meshio.read(path)
-    except (Exception, SystemExit) as exc:  # meshio raises many types for unreadable files
-        reason = " ".join(said.getvalue().split()) or str(exc)
-        raise ConfigError(f"meshio cannot read the mesh: {reason}", where) from None
+    mesh files alike: :func:`fbia.core.data_files.read_meshio`)."""
+    return read_meshio(path, "mesh")
 
 
 def _read_named_cells(
@@ -386,7 +372,7 @@ def mesh_arrays(
 ) -> tuple[NDArray[np.float64], dict[str, NDArray[np.int64]], dict[str, NDArray[np.int64]]]:
     """Vertex coordinates and named triangle/segment connectivities (0-based) of a mesh."""
     ngmesh = mesh.ngmesh
-    pts = np.asarray(ngmesh.Coordinates(), dtype=float)[:, :2]
+    pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)[:, :2]
     e2 = ngmesh.Elements2D().NumPy()
     e1 = ngmesh.Elements1D().NumPy()
     names2 = ngmesh.GetRegionNames(dim=2)

@@ -111,7 +111,7 @@ def build_dome_cell(
         ngmesh = OCCGeometry(Glue([fluid, dome])).GenerateMesh(maxh=mesh_size, grading=grading)
     except Exception as exc:  # netgen raises bare Exception/NgException subclasses
         raise ConfigError(f"netgen could not mesh the dome cell: {exc}", where) from None
-    pts = np.asarray(ngmesh.Coordinates(), dtype=float)
+    pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
     e3, e2 = ngmesh.Elements3D().NumPy(), ngmesh.Elements2D().NumPy()
     regions = _named(e3, ngmesh.GetRegionNames(dim=3), 4)
     boundaries = _named(e2, ngmesh.GetRegionNames(dim=2), 3)

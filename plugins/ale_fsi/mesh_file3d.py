@@ -71,15 +71,18 @@ def read_mesh_3d(path: str | Path) -> ngsolve.Mesh:
 
 
 def read_mesh_names_3d(path: str | Path) -> list[str]:
-    """Names of the regions and boundaries of a 3-D mesh file."""
+    """Names of the regions and boundaries of a 3-D mesh file, after the checks that need no
+    NGSolve mesh (``fbia validate``): finite coordinates, tetrahedra of positive volume, the
+    named regions and boundaries of the module docstring."""
     _, regions, boundaries = _read(Path(path))
+    _check_names(regions, boundaries, str(path))
     return [*regions, *boundaries]
 
 
 def write_mesh_3d(mesh: ngsolve.Mesh, path: str | Path) -> Path:
     """Write a named 3-D mesh as gmsh 2.2 (physical groups = region/boundary names)."""
     ngmesh = mesh.ngmesh
-    pts = np.asarray(ngmesh.Coordinates(), dtype=float)
+    pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
     regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
     boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
     return write_named_gmsh(path, pts, [("triangle", boundaries, 2), ("tetra", regions, 3)])
@@ -99,9 +102,42 @@ def _check_names(regions: Cells, boundaries: Cells, where: str) -> None:
 
 
 def _read(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
-    if path.suffix.lower() == ".vol":
-        return _read_vol(path)
-    return _read_meshio(path)
+    points, regions, boundaries = (
+        _read_vol(path) if path.suffix.lower() == ".vol" else _read_meshio(path)
+    )
+    if points.shape[1] == 3:
+        _check_geometry(points, regions, str(path))
+    return points, regions, boundaries
+
+
+def _check_geometry(points: NDArray[np.float64], regions: Cells, where: str) -> None:
+    """Finite coordinates, cells that name existing points, no tetrahedron without volume
+    (a flat mesh, one layer of points in a plane, has nothing but)."""
+    if not np.isfinite(points).all():
+        bad = int(np.flatnonzero(~np.isfinite(points).all(axis=1))[0])
+        raise ConfigError(f"point {bad} of the mesh has a NaN or infinite coordinate", where)
+    tets = np.vstack(list(regions.values())) if regions else np.empty((0, 4), np.int64)
+    if len(tets) == 0:
+        raise ConfigError("the mesh has no tetrahedra", where)
+    if tets.min() < 0 or tets.max() >= len(points):
+        raise ConfigError(
+            f"tetrahedra name points up to {int(tets.max())}, the mesh has {len(points)}", where
+        )
+    corners = points[tets]
+    volume = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
+    extent = float(np.ptp(points, axis=0).max())
+    flat = volume <= 1e-12 * extent**3
+    if flat.all():
+        raise ConfigError(
+            "the mesh has no volume: all its tetrahedra are flat (its points in one plane?)",
+            where,
+        )
+    if flat.any():
+        raise ConfigError(
+            f"{int(flat.sum())} of the mesh's {len(tets)} tetrahedra have no volume "
+            f"(e.g. tetrahedron {int(np.flatnonzero(flat)[0])})",
+            where,
+        )
 
 
 def _read_vol(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
@@ -110,6 +146,7 @@ def _read_vol(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
     where = str(path)
     if not path.is_file():
         raise ConfigError("mesh file not found", where)
+    _check_vol_counts(path)
     ngmesh = nm.Mesh()
     try:
         ngmesh.Load(str(path))
@@ -117,10 +154,39 @@ def _read_vol(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
         raise ConfigError(f"netgen cannot read the mesh: {exc}", where) from None
     if ngmesh.dim != 3:
         return np.zeros((0, ngmesh.dim)), {}, {}
-    pts = np.asarray(ngmesh.Coordinates(), dtype=float)
+    pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
     regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
     boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
     return pts, regions, boundaries
+
+
+#: netgen .vol sections whose next line is a value, not a count of the lines that follow
+_VOL_VALUES = frozenset({b"dimension", b"geomtype"})
+#: largest .vol file read [bytes]
+MAX_VOL_BYTES = 2 << 30
+
+
+def _check_vol_counts(path: Path) -> None:
+    """netgen reads as many lines as a section announces, past the end of the file forever
+    (a garbage or truncated ``.vol`` hangs it, its memory growing): check every section's
+    count against the lines that follow first."""
+    where = str(path)
+    if path.stat().st_size > MAX_VOL_BYTES:
+        raise ConfigError(f"the .vol file is larger than {MAX_VOL_BYTES >> 30} GB", where)
+    lines = [line.strip() for line in path.read_bytes().splitlines()]
+    lines = [line for line in lines if line and not line.startswith(b"#")]
+    if not lines or lines[0] not in (b"mesh3d", b"mesh2d"):
+        raise ConfigError("not a netgen .vol mesh: it does not begin with 'mesh3d'", where)
+    for i in range(len(lines) - 1):
+        key, count = lines[i], lines[i + 1]
+        if key.replace(b"_", b"").isalpha() and key not in _VOL_VALUES and count.isdigit():
+            left = len(lines) - i - 2
+            if int(count) > left:
+                raise ConfigError(
+                    f"section {key.decode()!r} announces {int(count)} entries, but only {left} "
+                    "lines follow: a truncated or damaged .vol file",
+                    where,
+                )
 
 
 def _read_meshio(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:

@@ -212,6 +212,27 @@ class AleFsiOptions(PluginOptions):
         return self
 
     @model_validator(mode="after")
+    def _colony_surface_usable(self) -> AleFsiOptions:
+        # the surface file read and sampled now (fbia validate), not at the first run
+        if self.geometry == "colony_3d" and self.colony_surface is not None:
+            from ...core.errors import ConfigError
+            from .colony3d import colony_field
+
+            try:
+                colony_field(
+                    self.colony_surface,
+                    self.channel_length,
+                    self.channel_height,
+                    self.channel_width,
+                    self.colony_offset,
+                    self.colony_resolution,
+                    self.colony_smoothing,
+                )
+            except ConfigError as err:
+                raise ValueError(f"colony_surface {err}") from None
+        return self
+
+    @model_validator(mode="after")
     def _probe_dimension(self) -> AleFsiOptions:
         # a mesh file's dimension is known only once it is read (AleFsiForwardModel checks)
         if self.mesh_file is None:

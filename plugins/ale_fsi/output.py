@@ -91,4 +91,4 @@ def _cells(mesh: Any) -> tuple[NDArray[np.float64], dict[str, NDArray[np.int64]]
         if np.any(sel):
             conn = elements["nodes"][sel][:, :4].astype(np.int64) - 1
             regions[name] = np.vstack([regions[name], conn]) if name in regions else conn
-    return np.asarray(ngmesh.Coordinates(), dtype=float), regions, "tetra"
+    return np.array(ngmesh.Coordinates(), dtype=float, copy=True), regions, "tetra"
