@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .oct import OctSegmentation
-from .plots import _pyplot
+from .plots import _pyplot, legend
 
 __all__ = ["write_segmentation_figures"]
 
@@ -57,7 +57,7 @@ def write_segmentation_figures(
         f"mu {result.attenuation:.3g} 1/mm",
         fontsize=9,
     )
-    ax.legend(fontsize=8, loc="upper right")
+    legend(ax, fontsize=8, loc="upper right")
     fig.tight_layout()
     bscan_path = folder / "oct_bscan.png"
     fig.savefig(bscan_path, dpi=120)

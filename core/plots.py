@@ -25,6 +25,14 @@ def _pyplot() -> Any:
     return plt
 
 
+def legend(ax: Any, **kwargs: Any) -> None:
+    """``legend(ax, **kwargs)`` when something on ``ax`` has a label: matplotlib warns "No
+    artists with labels found to put in legend" for an empty plot (e.g. when every run
+    failed), and a study prints nothing it has no use for."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(**kwargs)
+
+
 def plot_interfaces(
     path: Path, problem: InverseProblem, solution: Solution | None, title: str = ""
 ) -> Path | None:
@@ -69,8 +77,7 @@ def plot_interfaces(
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     ax.set_aspect("equal", adjustable="datalim")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=8)
+    legend(ax, fontsize=8)
     if title:
         ax.set_title(title, fontsize=9)
     if rax is not None:
@@ -82,7 +89,7 @@ def plot_interfaces(
         rax.axhline(0.0, color="0.6", lw=0.6)
         rax.set_xlabel(f"residual index ({type(problem.measure).__name__})")
         rax.set_ylabel("residual [µm]")
-        rax.legend(fontsize=8)
+        legend(rax, fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
@@ -138,7 +145,7 @@ def plot_evaluations(
                 color="red",
                 label="failed",
             )
-            ax.legend(fontsize=8)
+            legend(ax, fontsize=8)
         ax.set_xlabel(f"{names[0]} [{units[0]}]" if units[0] else names[0])
         ax.set_ylabel(f"{names[1]} [{units[1]}]" if units[1] else names[1])
     fig.tight_layout()

@@ -59,7 +59,8 @@ def _options_block(title: str, factory: Any) -> list[str]:
     if not described:
         return [f"# ({title} has no options)"]
     lines = [
-        f"# [{title}]   (to change an option: uncomment this line and the option's; each at its default)"
+        f"# [{title}]   (to change an option: uncomment this line and the option's;"
+        " each at its default)"
     ]
     for name, info in described.items():
         default = info["default"]

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.plots import legend
 from .lm_result import LMResult
 
 FloatArray = NDArray[np.float64]
@@ -122,7 +123,7 @@ def _errors(result: LMResult, chains: list[int], path: Path) -> Path:
         ax.set_xlabel("iteration")
         ax.set_title(title)
         ax.grid(True, alpha=0.3)
-    axes[0][0].legend(fontsize=7)
+    legend(axes[0][0], fontsize=7)
     fig.savefig(path, dpi=110)
     return path
 
@@ -160,7 +161,7 @@ def _paths_2d(
     ax.set_xlabel(a + units[a])
     ax.set_ylabel(b + units[b])
     ax.set_title("search paths (square: start, star: result, cross: declined step)")
-    ax.legend(fontsize=7)
+    legend(ax, fontsize=7)
     fig.savefig(path, dpi=110)
     return path
 
@@ -210,6 +211,6 @@ def _paths_1d(
         ax.grid(True, alpha=0.3)
     for ax in flat[n:]:
         ax.set_visible(False)
-    flat[0].legend(fontsize=7)
+    legend(flat[0], fontsize=7)
     fig.savefig(path, dpi=110)
     return path

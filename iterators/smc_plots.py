@@ -39,6 +39,7 @@ from scipy.stats import chi2, gaussian_kde
 from ..core.errors import ConfigError
 from ..core.likelihood import noise_parameter
 from ..core.parameters import Parameter
+from ..core.plots import legend
 from ..core.problem import InverseProblem
 from .gp_residuals import restore_surrogate
 from .gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
@@ -223,7 +224,7 @@ def _surrogate_fields(gp, r, inputs, labels, folder) -> Path:
         fig.colorbar(cs, ax=ax)
         _design_points(ax, r)
         ax.set(xlabel=labels[0], ylabel=labels[1], title=title)
-    fig.axes[0].legend(loc="lower right", fontsize=7)
+    legend(fig.axes[0], loc="lower right", fontsize=7)
     note = _section_note(inputs, r)
     fig.suptitle(f"GP surrogate on {gp.info.get('n_train', len(gp.y_train))} runs  {note}")
     fig.tight_layout()
@@ -432,7 +433,7 @@ def _posterior_2d(r, inputs, labels, folder) -> Path:
     ax.plot(*x_map, "x", color=_MAP_COLOUR, ms=10, mew=2, label="MAP")
     ax.plot(*pm, "x", color=_PM_COLOUR, ms=10, mew=2, label="posterior mean")
     ax.set(xlim=lim_a, ylim=lim_b, xlabel=labels[0], ylabel=labels[1])
-    ax.legend(loc="lower right", fontsize=7)
+    legend(ax, loc="lower right", fontsize=7)
     _hist_kde(top, particles[:, 0], w, lim_a)
     _prior_line(top, inputs[0], lim_a)
     _hist_kde(right, particles[:, 1], w, lim_b, vertical=True)
@@ -481,7 +482,7 @@ def _marginals(r, inputs, labels, folder) -> Path:
         axes[j].set(xlabel=labels[j], ylabel="density")
     for ax in axes[d:]:
         ax.set_visible(False)
-    axes[0].legend(fontsize=7)
+    legend(axes[0], fontsize=7)
     fig.suptitle("1-D marginals of the posterior (Paper B Fig. 13)")
     fig.tight_layout()
     return _save(fig, folder / "marginals_1d.png")
@@ -559,5 +560,5 @@ def _design_only(r, inputs, folder) -> Path:
         ylabel=_label(inputs[1]) if len(inputs) > 1 else "",
         title="design: every forward run failed",
     )
-    ax.legend(fontsize=7)
+    legend(ax, fontsize=7)
     return _save(fig, folder / "design.png")

@@ -49,6 +49,7 @@ from ..core.iteration import IteratorBase
 from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter
+from ..core.plots import legend
 from ..core.problem import InverseProblem, Result, jsonable
 from .gp_design import unit_to_inputs
 from .gp_surrogate import GpSurrogate
@@ -297,7 +298,7 @@ class SobolIndicesIterator(IteratorBase):
         ax.set_xticks(k, ind.names)
         ax.set(ylabel="Sobol' index", title=f"sensitivity of {result.quantity}")
         ax.axhline(0.0, color="0.5", lw=0.5)
-        ax.legend(fontsize=8)
+        legend(ax, fontsize=8)
         path = folder / "sobol_indices.png"
         fig.savefig(path, dpi=150, bbox_inches="tight")
         plt.close(fig)

@@ -17,6 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..core.parameters import Parameter
+from ..core.plots import legend
 from .gp_design import search_box
 from .gp_surrogate import GpSurrogate
 from .surrogate_convergence_result import SurrogateConvergenceResult
@@ -53,14 +54,14 @@ def _convergence(r: SurrogateConvergenceResult, inputs: Sequence[Parameter], fol
         ax.semilogx(sizes, [row.ml_point[p.name] for row in r.rows], "o-", c="tab:green")
         if r.reference is not None:
             ax.axhline(r.reference[p.name], ls="--", c="k", lw=0.8, label="reference")
-            ax.legend(fontsize=7)
+            legend(ax, fontsize=7)
         ax.set(xlabel="n_train", ylabel=_label(p), title=f"ML point of the GP: {p.name}")
     ax = axes[-1]
     rmse = [row.test_rmse for row in r.rows]
     if np.any(np.isfinite(rmse)):
         ax.loglog(sizes, rmse, "o-", label="RMSE")
         ax.loglog(sizes, [row.test_max_abs for row in r.rows], "s--", label="largest error")
-        ax.legend(fontsize=7)
+        legend(ax, fontsize=7)
     held_out = int(np.isfinite(r.log_likelihood[len(r.log_likelihood) - r.n_test :]).sum())
     ax.set(
         xlabel="n_train",

@@ -240,10 +240,12 @@ def test_run_writes_result_json_with_provenance(study_file, capsys):
     ids=["not-converged", "all-failed"],
 )
 def test_run_exit_status_says_whether_the_result_can_be_trusted(
-    study_file, capsys, case, old, new, status, says
+    study_file, capsys, recwarn, case, old, new, status, says
 ):
     study_file.write_text(edit(old, new))
     assert main(["run", "study.toml"]) == status
+    # plots of a study without a successful run print no matplotlib warning (issue 31 item 6)
+    assert not [w for w in recwarn if "No artists with labels" in str(w.message)]
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith(says) and err[0].endswith(f"(exit status {status})")
     result = json.loads((study_file.parent / "out" / "result.json").read_text())
