@@ -284,3 +284,20 @@ def test_a_volume_from_a_surface_images_the_same_biofilm_as_the_phantom():
     assert seg.substratum_depth == pytest.approx(ph.substratum_depth)
     with pytest.raises(ConfigError, match="does not fit"):
         oct_volume_from_surface(ph.surface(n=8), (4, 32, 32), ph.voxel_size)
+
+
+def test_a_depth_axis_across_which_the_substratum_does_not_lie_is_one_line():
+    """Issue 31 item 2: depth_axis = 2 on a scan whose depth is axis 0 was segmented silently
+    (into nonsense); the substratum's bright reflection says which axis is depth."""
+    ph = phantom()
+    with pytest.raises(ConfigError) as err:
+        segment_oct(ph.volume, ph.voxel_size, depth_axis=2)
+    assert str(err.value).startswith(
+        "oct volume: depth_axis = 2, but the scan's bright flat reflection (the substratum) "
+        "lies across array axis 0 (it stands out "
+    )
+    assert str(err.value).endswith("depth_axis = 0? (or give substratum_depth)")
+    # the same scan stored depth-last segments with depth_axis = 2, as the original does
+    moved = segment_oct(np.moveaxis(ph.volume, 0, 2), ph.voxel_size, depth_axis=2)
+    same = segment_oct(ph.volume, ph.voxel_size)
+    assert np.allclose(moved.interface.vertices, same.interface.vertices)
