@@ -36,6 +36,7 @@ _LAZY = {
     "StudyStore": "fbia.core.store:StudyStore",
     "segment_oct": "fbia.core.oct:segment_oct",
     "load_result": "fbia.core.result_io:load_result",
+    "plot": "fbia.core.plots:plot",
 }
 
 __all__ = [*_core_all, *_LAZY, "__version__"]

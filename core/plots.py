@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .observation import Solution
-from .problem import Evaluation, InverseProblem
+from .problem import Evaluation, InverseProblem, Result
 
 __all__ = ["plot_evaluations", "plot_interfaces"]
 
@@ -114,10 +114,15 @@ def _residuals_um(problem: InverseProblem, solution: Solution | None) -> list[tu
 
 
 def plot_evaluations(
-    path: Path, records: Sequence[Evaluation], names: Sequence[str], units: Sequence[str] = ()
+    path: Path,
+    records: Sequence[Evaluation],
+    names: Sequence[str],
+    units: Sequence[str] = (),
+    truth: Mapping[str, float] | None = None,
 ) -> Path | None:
     """Distance D of every evaluation in order (log scale), and for two parameters the
-    evaluated points in parameter space coloured by log10 D (failed runs as red crosses)."""
+    evaluated points in parameter space coloured by log10 D (failed runs as red crosses, the
+    ground truth of synthetic data as a white cross)."""
     if not records:
         return None
     plt = _pyplot()
@@ -145,7 +150,10 @@ def plot_evaluations(
                 color="red",
                 label="failed",
             )
-            legend(ax, fontsize=8)
+        if truth and names[0] in truth and names[1] in truth:
+            ax.plot([truth[names[0]]], [truth[names[1]]], "P", color="k", mfc="w", ms=10,
+                    label="ground truth")  # fmt: skip
+        legend(ax, fontsize=8)
         ax.set_xlabel(f"{names[0]} [{units[0]}]" if units[0] else names[0])
         ax.set_ylabel(f"{names[1]} [{units[1]}]" if units[1] else names[1])
     fig.tight_layout()
@@ -153,3 +161,31 @@ def plot_evaluations(
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def plot(result: Result, problem: InverseProblem, folder: str | Path = "plots") -> list[Path]:
+    """Draw ``result``'s figures into ``folder`` as ``fbia run`` does; returns their paths.
+
+    The figures of the iterator that made it (``write_plots`` of the registered iterator named
+    ``result.iterator``: LM search paths and error histories, gp_smc posterior and marginals,
+    ...) and the evaluations plot of its forward runs.  ``problem`` is the one the result
+    solved, for the parameters' units and priors and the ground truth of synthetic data
+    (marked): ``fbia.load_study(study_file).problem``.
+
+    >>> study = fbia.load_study("examples/flow_cell/study.toml")      # doctest: +SKIP
+    >>> fbia.plot(fbia.load_result("examples/flow_cell/output"), study.problem)  # doctest: +SKIP
+    """
+    from .registry import default_registry
+
+    out = Path(folder)
+    made: list[Path] = []
+    if result.iterator:
+        iterator = default_registry().create("iterator", result.iterator, {}, where="fbia.plot")
+        write = getattr(iterator, "write_plots", None)
+        if callable(write):
+            made += [Path(p) for p in write(result, problem, out)]
+    units = [p.unit for p in problem.parameters]
+    path = plot_evaluations(
+        out / "evaluations.png", result.evaluations, problem.names, units, problem.truth
+    )
+    return made + ([path] if path is not None else [])

@@ -149,6 +149,9 @@ class InverseProblem:
         for all observations; instead of ``noise_std``, and observations without their own).
     fixed
         Model inputs held at given values in every run (e.g. ``{"inflow_rate": 100.0}``).
+    truth
+        The ground truth of synthetic observations, by name (plots mark it; no iterator
+        reads it).
     """
 
     model: ForwardModel
@@ -159,6 +162,7 @@ class InverseProblem:
     noise_std: float | None = None
     fixed: Mapping[str, float] = field(default_factory=dict)
     noise_prior: Prior | None = None
+    truth: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
         self.observations = list(self.observations)

@@ -403,7 +403,9 @@ def _extras(
     names, units = problem.names, [p.unit for p in problem.parameters]
     made_ev = extra(
         "the evaluations plot",
-        lambda: plot_evaluations(out / "plots" / "evaluations.png", log.records, names, units),
+        lambda: plot_evaluations(
+            out / "plots" / "evaluations.png", log.records, names, units, problem.truth
+        ),
     )
     if made_ev is not None:
         files["evaluations plot"] = str(made_ev)

@@ -216,6 +216,7 @@ class Study:
                 noise_std=self.noise_std,
                 fixed=self.fixed,
                 noise_prior=self.noise_prior,
+                truth=None if self.synthetic is None else dict(self.synthetic.truth),
             )
         except ConfigError as err:
             raise err.located(self.file) from None

@@ -57,12 +57,15 @@ def plot_lm_result(result: LMResult, problem: Any, folder: str | Path) -> list[P
     out.mkdir(parents=True, exist_ok=True)
     names = list(result.names)
     units = _units(problem, names)
+    truth = dict(getattr(problem, "truth", None) or {})  # synthetic data: marked in the paths
     chains = sorted({h["chain"] for h in result.history})
     files = [_errors(result, chains, out / "lm_errors.png")]
     if len(names) == 2:
-        files.append(_paths_2d(result, chains, names, units, out / "lm_search_paths.png"))
+        path = out / "lm_search_paths.png"
+        files.append(_paths_2d(result, chains, names, units, path, truth))
     elif names:
-        files.append(_paths_1d(result, chains, names, units, out / "lm_parameter_paths.png"))
+        path = out / "lm_parameter_paths.png"
+        files.append(_paths_1d(result, chains, names, units, path, truth))
     return files
 
 
@@ -129,7 +132,12 @@ def _errors(result: LMResult, chains: list[int], path: Path) -> Path:
 
 
 def _paths_2d(
-    result: LMResult, chains: list[int], names: list[str], units: dict[str, str], path: Path
+    result: LMResult,
+    chains: list[int],
+    names: list[str],
+    units: dict[str, str],
+    path: Path,
+    truth: dict[str, float],
 ) -> Path:
     fig, axes = _figure(1, 1, (7.0, 5.5))
     fig.subplots_adjust(left=0.12, right=0.98, bottom=0.1, top=0.93)
@@ -158,6 +166,8 @@ def _paths_2d(
             ms=5,
             color=_colour(c),
         )
+    if a in truth and b in truth:
+        ax.plot([truth[a]], [truth[b]], "P", ms=11, color="k", mfc="w", label="ground truth")
     ax.set_xlabel(a + units[a])
     ax.set_ylabel(b + units[b])
     ax.set_title("search paths (square: start, star: result, cross: declined step)")
@@ -188,7 +198,12 @@ def _contour(fig: Any, ax: Any, pts: FloatArray) -> None:
 
 
 def _paths_1d(
-    result: LMResult, chains: list[int], names: list[str], units: dict[str, str], path: Path
+    result: LMResult,
+    chains: list[int],
+    names: list[str],
+    units: dict[str, str],
+    path: Path,
+    truth: dict[str, float],
 ) -> Path:
     n = len(names)
     cols = min(n, 3)
@@ -206,6 +221,8 @@ def _paths_1d(
                 color=_colour(c),
                 label=_label(result, c),
             )
+        if name in truth:
+            ax.axhline(truth[name], color="k", ls="--", lw=0.8, label="ground truth")
         ax.set_xlabel("iteration")
         ax.set_ylabel(name + units[name])
         ax.grid(True, alpha=0.3)

@@ -90,6 +90,7 @@ def plot_gp_smc_result(
             out.append(_design_only(r, inputs, folder))
         return out
     labels = [_label(p) for p in inputs]
+    truth = dict(getattr(problem, "truth", None) or {})  # synthetic data: marked
     # the posterior's inputs: the design's, and sigma_N when it was inferred
     noise = noise_parameter(problem)
     sampled = inputs if noise is None else [*inputs, noise]
@@ -105,13 +106,13 @@ def plot_gp_smc_result(
     if surrogate and "gp_error" in wanted:
         out.append(_gp_error(r, folder, refits))
     if n_x >= 2 and "posterior" in wanted:
-        out.append(_posterior_2d(r, inputs, labels, folder))
+        out.append(_posterior_2d(r, inputs, labels, folder, truth))
     if n_x >= 2 and "particles" in wanted:
         out.append(_particles(r, labels, folder))
     if n_x >= 2 and "marginals_2d" in wanted:
-        out.append(_pairwise(r, sampled, sampled_labels, folder))
+        out.append(_pairwise(r, sampled, sampled_labels, folder, truth))
     if "marginals_1d" in wanted:
-        out.append(_marginals(r, sampled, sampled_labels, folder))
+        out.append(_marginals(r, sampled, sampled_labels, folder, truth))
     if "parallel_axes" in wanted:
         out.append(_parallel_axes(r, sampled_labels, folder))
     return out
@@ -396,7 +397,19 @@ def _hist_kde(ax, values, w, lim, vertical: bool = False) -> None:
             ax.plot(g, kde(g), "k", lw=1.0)
 
 
-def _posterior_2d(r, inputs, labels, folder) -> Path:
+def _mark_truth(ax, inputs, truth, i: int, j: int | None = None) -> None:
+    """The ground truth of synthetic data: a cross (2-D) or a dashed line (1-D)."""
+    a = truth.get(inputs[i].name)
+    if j is None:
+        if a is not None:
+            ax.axvline(a, color="k", ls="--", lw=0.9, label="ground truth")
+        return
+    b = truth.get(inputs[j].name)
+    if a is not None and b is not None:
+        ax.plot([a], [b], "P", color="k", mfc="w", ms=10, label="ground truth")
+
+
+def _posterior_2d(r, inputs, labels, folder, truth) -> Path:
     particles = np.asarray(_post(r).particles)
     w = np.asarray(_post(r).weights)
     lim_a, lim_b = _box(inputs[0], particles[:, 0]), _box(inputs[1], particles[:, 1])
@@ -432,6 +445,7 @@ def _posterior_2d(r, inputs, labels, folder) -> Path:
         _ellipses(ax, x_map, np.asarray(lap.cov)[:2, :2], _MAP_COLOUR, "Laplace approximation")
     ax.plot(*x_map, "x", color=_MAP_COLOUR, ms=10, mew=2, label="MAP")
     ax.plot(*pm, "x", color=_PM_COLOUR, ms=10, mew=2, label="posterior mean")
+    _mark_truth(ax, inputs, truth, 0, 1)
     ax.set(xlim=lim_a, ylim=lim_b, xlabel=labels[0], ylabel=labels[1])
     legend(ax, loc="lower right", fontsize=7)
     _hist_kde(top, particles[:, 0], w, lim_a)
@@ -467,7 +481,7 @@ def _particles(r, labels, folder) -> Path:
 
 
 # -- Figs. 13-15 --------------------------------------------------------------------------------
-def _marginals(r, inputs, labels, folder) -> Path:
+def _marginals(r, inputs, labels, folder, truth) -> Path:
     particles = np.asarray(_post(r).particles)
     w = np.asarray(_post(r).weights)
     d = particles.shape[1]
@@ -479,6 +493,7 @@ def _marginals(r, inputs, labels, folder) -> Path:
         lim = _box(inputs[j], particles[:, j])
         _hist_kde(axes[j], particles[:, j], w, lim)
         _prior_line(axes[j], inputs[j], lim)
+        _mark_truth(axes[j], inputs, truth, j)
         axes[j].set(xlabel=labels[j], ylabel="density")
     for ax in axes[d:]:
         ax.set_visible(False)
@@ -488,7 +503,7 @@ def _marginals(r, inputs, labels, folder) -> Path:
     return _save(fig, folder / "marginals_1d.png")
 
 
-def _pairwise(r, inputs, labels, folder) -> Path:
+def _pairwise(r, inputs, labels, folder, truth) -> Path:
     particles = np.asarray(_post(r).particles)
     w = np.asarray(_post(r).weights)
     n_x = int(_post(r).n_x)
@@ -510,6 +525,7 @@ def _pairwise(r, inputs, labels, folder) -> Path:
             mincnt=1,
         )
         _kde_contours(ax, r, i, j, lim_a, lim_b)
+        _mark_truth(ax, inputs, truth, i, j)
         ax.set(xlim=lim_a, ylim=lim_b, xlabel=labels[i], ylabel=labels[j])
     for ax in axes[len(pairs) :]:
         ax.set_visible(False)

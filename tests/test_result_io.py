@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +15,8 @@ import fbia
 from fbia.core.cli import main
 from fbia.iterators.gp_smc_result import GpSmcResult
 from fbia.iterators.lm_result import LMResult
+
+ROOT = Path(__file__).resolve().parents[1]
 
 BAYES = edit(
     "options = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }",
@@ -94,3 +97,70 @@ def test_a_field_the_file_does_not_hold_is_none_and_a_wrong_type_is_one_line(tmp
     )
     with pytest.raises(fbia.ConfigError, match=r"cannot be read as a Result \(invalid literal"):
         fbia.load_result(tmp_path)
+
+
+def test_the_take_away_example_loads_plots_and_hands_to_arviz(study_file, capsys):
+    """examples/flow_cell/load_results.py on a gp_smc output (issue 29 items 3 and 6): the
+    result loads, fbia.plot draws its figures with the ground truth marked, ArviZ summarises
+    the posterior."""
+    import runpy
+
+    pytest.importorskip("arviz")
+    study_file.write_text(BAYES)
+    assert main(["run", "study.toml"]) == 3
+    capsys.readouterr()
+    example = runpy.run_path(str(ROOT / "examples" / "flow_cell" / "load_results.py"))
+    paths = example["main"](study_file.parent / "out", study_file)
+    printed = capsys.readouterr().out
+    names = sorted(p.name for p in paths)
+    assert {"posterior.png", "marginals_1d.png", "evaluations.png"} <= set(names)
+    assert all(p.is_file() and p.parent.name == "replotted" for p in paths)
+    assert "status unreliable" in printed and "ArviZ groups: posterior" in printed
+    assert "hdi_2.5%" in printed  # az.summary's table
+
+
+def test_plot_marks_the_ground_truth_of_synthetic_data(tmp_path):
+    """fbia.plot of an LM result: its search paths and its evaluations carry the ground
+    truth of the problem's synthetic data (a legend entry each)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    model = fbia.forward_model("analytic_mound_2d", n_points=41)
+    truth = {"E": 400.0, "nu": 0.3}
+    problem = fbia.InverseProblem(
+        model=model,
+        measure=fbia.measure("cpp"),
+        observations=fbia.synthetic_observations(
+            model, truth, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0
+        ),
+        parameters=[
+            fbia.Parameter("E", (100.0, 800.0), unit="Pa"),
+            fbia.Parameter("nu", (-0.8, 0.5)),
+        ],
+        truth=truth,
+    )
+    result = fbia.iterator("levenberg_marquardt", x0={"E": 300.0, "nu": 0.2}).run(problem)
+    seen: list[list[str]] = []
+    savefig = plt.Figure.savefig
+
+    def spy(fig, *args, **kwargs):
+        seen.extend([t.get_text() for t in ax.get_legend().get_texts()] for ax in fig.axes
+                    if ax.get_legend() is not None)  # fmt: skip
+        return savefig(fig, *args, **kwargs)
+
+    plt.Figure.savefig = spy
+    try:
+        paths = fbia.plot(result, problem, tmp_path)
+    finally:
+        plt.Figure.savefig = savefig
+    names = sorted(p.name for p in paths)
+    assert names == ["evaluations.png", "lm_errors.png", "lm_search_paths.png"]
+    assert sum("ground truth" in labels for labels in seen) == 2  # search paths, evaluations
+
+
+def test_a_synthetic_study_gives_its_problem_the_ground_truth(study_file):
+    text = study_file.read_text()
+    assert "[synthetic]" not in text  # the tiny study reads its data from files: no truth
+    assert fbia.load_study(study_file).problem.truth is None
