@@ -10,7 +10,7 @@ TYPECHECK := build/typecheck
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[all,test]'
 	@touch $(STAMP)
 
 # The flow-cell example: Levenberg-Marquardt with the finite-element FSI model (seconds with

@@ -47,6 +47,7 @@ from typing import Any
 from .cluster_options import check_cluster_options
 from .errors import ConfigError
 from .evaluator import BatchEvaluator, Job
+from .extras import require
 from .isolation import RunOutcome, isolation_mode, run_isolated_or_here, run_view
 from .local_executors import workers_ignore_sigint
 from .problem import Evaluable, Evaluation
@@ -121,12 +122,9 @@ class DaskExecutor:
         timeout: float | None = None,
         isolate: bool | None = None,
     ) -> None:
-        try:
-            import distributed
-        except ImportError:  # pragma: no cover - distributed is a dependency of fbia
-            raise ConfigError(
-                "the dask executor needs the package 'distributed' (pip install distributed)"
-            ) from None
+        require(("distributed",), "the dask executor")
+        import distributed
+
         if cluster not in CLUSTERS:
             raise ConfigError(f"unknown cluster {cluster!r}; valid: {', '.join(CLUSTERS)}")
         if workers is not None and workers < 1:

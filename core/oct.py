@@ -64,6 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, field_validator, model_validator
 
 from .errors import ConfigError
+from .extras import require
 from .interface import Interface
 from .oct_reader import read_oct_volume
 from .options import PluginOptions
@@ -254,6 +255,7 @@ def segment_oct(
         :class:`OctOptions`, as an instance, a mapping or keywords.
     """
     where = str(source) if isinstance(source, str | Path) else "oct volume"
+    require(("skimage",), "OCT segmentation")
     opts = _options(options, kwargs, where)
     spacing = _voxel_size(voxel_size, where)
     full = read_oct_volume(source, opts.depth_axis)

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ConfigError
+from .extras import require
 
 __all__ = ["OCT_SUFFIXES", "read_oct_volume"]
 
@@ -72,9 +73,11 @@ def _read_file(path: Path) -> NDArray[Any]:
                     )
                 return npz[names[0]]
         if suffix in (".tif", ".tiff"):
+            require(("tifffile",), "reading a TIFF stack")
             import tifffile
 
             return np.asarray(tifffile.imread(path))
+        require(("nrrd",), "reading an NRRD file")
         import nrrd
 
         data, _ = nrrd.read(str(path), index_order="C")

@@ -21,6 +21,7 @@ import pydantic
 from pydantic import BaseModel, ConfigDict
 
 from .errors import ConfigError
+from .extras import require
 
 #: a unit in brackets inside an option's description: short, no comma, no nested brackets
 _UNIT = re.compile(r"\[([^\[\],]{1,24})\]")
@@ -89,8 +90,12 @@ class Configurable:
     """
 
     Options: type[PluginOptions] = PluginOptions
+    #: modules the plugin needs beyond fbia's core (checked before it is built:
+    #: :mod:`fbia.core.extras`), e.g. ``("ngsolve", "netgen")``
+    requires: tuple[str, ...] = ()
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
+        require(type(self).requires, type(self).__name__)
         if options is None:
             options = self.Options.parse(kwargs, where=type(self).__name__)
         elif kwargs:

@@ -21,6 +21,7 @@ import pluggy
 
 from . import hookspecs
 from .errors import PluginError
+from .extras import require
 from .options import PluginOptions
 
 KINDS: dict[str, str] = {
@@ -159,6 +160,7 @@ class Registry:
     ) -> Any:
         """Look ``name`` up and build it from ``options`` (validated by its ``Options`` schema)."""
         entry = self.get(kind, name, where)
+        require(getattr(entry.factory, "requires", ()), f"{where or kind} {name!r}")
         parsed = entry.factory.Options.parse(options or {}, where=where or f"{kind} {name!r}")
         return entry.factory(parsed)
 

@@ -106,6 +106,9 @@ class GpSmcIterator(IteratorBase):
     See the module docstring for the stages; the options are below.
     """
 
+    #: the extra it needs (fbia.core.extras)
+    requires = ("GPy", "numba")
+
     #: the class of its results (fbia.load_result reads them back as it)
     result_type = GpSmcResult
 

@@ -172,6 +172,9 @@ class SobolState:
 class SobolIndicesIterator(IteratorBase):
     """Sobol' indices of L or D on a GP surrogate (see the module docstring)."""
 
+    #: the extra it needs (fbia.core.extras)
+    requires = ("GPy", "numba", "SALib")
+
     #: the class of its results (fbia.load_result reads them back as it)
     result_type = SobolIndicesResult
 

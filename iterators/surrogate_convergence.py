@@ -65,6 +65,9 @@ class SurrogateConvergenceIterator(IteratorBase):
     """The GP surrogate of L on growing prefixes of one Sobol design (see the module
     docstring)."""
 
+    #: the extra it needs (fbia.core.extras)
+    requires = ("GPy", "numba")
+
     #: the class of its results (fbia.load_result reads them back as it)
     result_type = SurrogateConvergenceResult
 

@@ -83,6 +83,9 @@ class AleFsiForwardModel(Configurable):
     or ``invalid_parameter``.
     """
 
+    #: the extra it needs (fbia.core.extras)
+    requires = ("ngsolve", "netgen")
+
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.core.fingerprints)
     numerics_version = "1"

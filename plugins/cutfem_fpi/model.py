@@ -62,6 +62,9 @@ class CutFemFpiForwardModel(Configurable):
     porosity in (0, 1) and J > 0) raise :class:`fbia.ForwardModelError` with a ``reason``.
     """
 
+    #: the extra it needs (fbia.core.extras)
+    requires = ("ngsolve", "netgen", "xfem")
+
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.core.fingerprints)
     numerics_version = "1"

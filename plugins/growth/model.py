@@ -145,6 +145,9 @@ class GrowthForwardModel(Configurable):
     ``eroded_away`` for a growth step the mesh cannot take.
     """
 
+    #: the extra it needs (fbia.core.extras)
+    requires = ("ngsolve", "netgen")
+
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.core.fingerprints)
     numerics_version = "1"
