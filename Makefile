@@ -5,12 +5,12 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.fbia-installed
 TYPECHECK := build/typecheck
 
-.PHONY: demo test test-slow lint typecheck pytest bench clean reproduce
+.PHONY: demo test test-slow lint typecheck pytest bench clean reproduce docs package-tree
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[all,test]'
+	$(BIN)/python -m pip install --quiet -e '.[all,test,docs]'
 	@touch $(STAMP)
 
 # The flow-cell example: Levenberg-Marquardt with the finite-element FSI model (seconds with
@@ -27,14 +27,22 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-# mypy checks every package of fbia (core, plugins, measures, iterators, testing) as it is
-# installed, through a tree of symlinks (the repository root is the package).
-typecheck: $(STAMP)
+# The package as it is installed, as a tree of symlinks (the repository root is the package):
+# what mypy and the API reference read.
+package-tree:
 	@rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/fbia
 	@for d in core plugins measures iterators testing; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
 	@ln -s ../../../__init__.py $(TYPECHECK)/fbia/__init__.py
 	@for f in pytest_plugin.py; do ln -s ../../../$$f $(TYPECHECK)/fbia/$$f; done
+
+# mypy checks every package of fbia (core, plugins, measures, iterators, testing).
+typecheck: $(STAMP) package-tree
 	MYPYPATH=$(TYPECHECK) $(BIN)/mypy -p fbia
+
+# The guides of docs/ and the API reference from the docstrings (mkdocs.yml), into build/site;
+# a warning (a broken docstring, a reference that resolves to nothing) fails the build.
+docs: $(STAMP) package-tree
+	$(BIN)/mkdocs build --strict --quiet
 
 pytest: $(STAMP)
 	$(BIN)/pytest

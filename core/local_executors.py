@@ -348,10 +348,12 @@ class SerialEvaluator(BatchEvaluator):
 
     Parameters
     ----------
-    workdir, keep_workdirs, on_record, store, retry_failed, listener
+    workdir, keep_workdirs, on_record
         The front part's (:class:`~fbia.core.evaluator.BatchEvaluator`).
     timeout, isolate
         The executor's; ``timeout`` is in seconds of wall time per run.
+    **front
+        The front part's other options: ``store``, ``retry_failed``, ``listener``.
     """
 
     def __init__(
@@ -376,8 +378,10 @@ class ProcessPoolEvaluator(BatchEvaluator):
     ----------
     workers, start_method, timeout, isolate
         The executor's (:class:`PoolExecutor`).
-    workdir, keep_workdirs, on_record, store, retry_failed, listener
+    workdir, keep_workdirs, on_record
         The front part's (:class:`~fbia.core.evaluator.BatchEvaluator`).
+    **front
+        The front part's other options: ``store``, ``retry_failed``, ``listener``.
     """
 
     def __init__(

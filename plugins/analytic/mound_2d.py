@@ -6,7 +6,8 @@
 >>> gamma = sol.interface({"inflow_rate": 100.0})
 >>> gamma                                                   # upstream foot -> downstream foot
 Interface(41 vertices, 40 segments, 2-D)
->>> round(float(sol.diagnostics["states"][0]["lean_mm"]), 3)
+>>> (state,) = sol.diagnostics["states"]                    # one coordinate, one state
+>>> round(float(state["lean_mm"]), 3)
 0.075
 
 Geometry (Paper A, homogeneous example; Paper B, "Problem setup", Fig. 2): a channel of
