@@ -140,7 +140,7 @@ def _label(p: Parameter) -> str:
 
 def _save(fig: Figure, path: Path) -> Path:
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=90, bbox_inches="tight")  # a long title on a narrow figure: not cut
     return path
 
 

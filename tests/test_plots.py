@@ -55,3 +55,61 @@ def test_a_plot_without_labelled_artists_gets_no_legend_and_no_warning(recwarn):
         if re.search(r"\.legend\(", line) and "ax.legend(**kwargs)" not in line
     ]
     assert direct == []
+
+
+def test_no_figure_of_a_calibration_is_clipped(tmp_path):
+    """Issue 29 item 6: every figure fbia.plot and the interfaces plot write holds all it
+    draws (labels, tick labels, titles) inside the saved image: measured as the figure's
+    tight bounding box against its own box, unless it is saved with bbox_inches='tight'.
+    (Found so: the pairwise marginals' title of a two-input posterior was cut by 73 px.)"""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    import fbia
+    from fbia.core.plots import plot_interfaces
+
+    clipped: dict[str, list[int]] = {}
+    saved: list[str] = []
+    savefig = Figure.savefig
+
+    def spy(fig, fname, *args, **kwargs):
+        saved.append(str(fname))
+        fig.canvas.draw()
+        box = fig.get_tightbbox(fig.canvas.get_renderer()).transformed(fig.dpi_scale_trans)
+        out = [box.x0 - fig.bbox.x0, box.y0 - fig.bbox.y0, fig.bbox.x1 - box.x1,
+               fig.bbox.y1 - box.y1]  # fmt: skip
+        if min(out) < -1.0 and kwargs.get("bbox_inches") != "tight":
+            clipped[str(fname).rsplit("/", 1)[-1]] = [round(v) for v in out]
+        return savefig(fig, fname, *args, **kwargs)
+
+    model = fbia.forward_model("analytic_mound_2d", n_points=41)
+    truth = {"E": 400.0, "nu": 0.3}
+    obs = fbia.synthetic_observations(
+        model, truth, [{"inflow_rate": 100.0}], noise_std=0.001, seed=0
+    )
+    problem = fbia.InverseProblem(
+        model=model,
+        measure=fbia.measure("cpp"),
+        observations=obs,
+        parameters=[
+            fbia.Parameter("E", (100.0, 800.0), unit="Pa"),
+            fbia.Parameter("nu", (-0.8, 0.5)),
+        ],
+        noise_std=0.002,
+        truth=truth,
+    )
+    Figure.savefig = spy
+    try:
+        x0 = [{"E": 300.0, "nu": 0.2}, {"E": 600.0, "nu": 0.0}]
+        lm = fbia.iterator("levenberg_marquardt", x0=x0).run(problem)
+        fbia.plot(lm, problem, tmp_path / "lm")
+        smc = fbia.iterator("gp_smc", n_train=40, n_particles=500, seed=0, design="sobol")
+        fbia.plot(smc.run(problem), problem, tmp_path / "smc")
+        best = problem.evaluate(lm.x, keep_solution=True)
+        plot_interfaces(tmp_path / "interfaces.png", problem, best.solution, "LM result")
+    finally:
+        Figure.savefig = savefig
+    assert len(saved) >= 10
+    assert clipped == {}
