@@ -1,6 +1,6 @@
 """Warnings about units before anything runs: data in µm, noise in µm, moduli in kPa.
 
-fbia's units are mm, s, Pa (``../shared/ARCHITECTURE.md``; the README's "Units").  A study
+fbia's units are mm, s, Pa (``../shared/ARCHITECTURE.md``; docs/command_line.md, "Units").  A study
 whose observed interfaces are in µm, whose noise is in µm or whose Young's moduli are in kPa
 is valid to the schema, and then fails every forward run ("ray ... meets no element") or
 calibrates nonsense.  :func:`unit_warnings` compares what a study file says with the scales

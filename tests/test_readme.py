@@ -1,4 +1,6 @@
-"""The README cannot rot: its code blocks are run, its excerpts checked against the files.
+"""The README and the guides it hands on to (docs/guide.md, docs/command_line.md,
+docs/plugins.md, read in that order as one document) cannot rot: their code blocks are run,
+their excerpts checked against the files.
 
 Fenced blocks, in order:
 
@@ -29,6 +31,8 @@ from fbia.core.cli import main as fbia_main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+#: the README and the pages its details moved to, in reading order
+PAGES = [README, *(ROOT / "docs" / n for n in ("guide.md", "command_line.md", "plugins.md"))]
 
 _FENCE = re.compile(
     r"(?:<!-- readme-test: (?P<marker>[^>]*?) -->\n)?^```(?P<lang>\w*)\n(?P<body>.*?)^```$",
@@ -42,14 +46,20 @@ class Block:
     body: str
     marker: str
     line: int
+    page: str = "README.md"
 
 
 def blocks() -> list[Block]:
-    text = README.read_text()
-    return [
-        Block(m["lang"], m["body"], (m["marker"] or "").strip(), text.count("\n", 0, m.start()) + 1)
-        for m in _FENCE.finditer(text)
-    ]
+    out = []
+    for page in PAGES:
+        text = page.read_text()
+        name = page.relative_to(ROOT).as_posix()
+        out += [
+            Block(m["lang"], m["body"], (m["marker"] or "").strip(),
+                  text.count("\n", 0, m.start()) + 1, name)
+            for m in _FENCE.finditer(text)
+        ]  # fmt: skip
+    return out
 
 
 def runnable(lang: str) -> list[Block]:
@@ -72,11 +82,11 @@ def test_python_and_pycon_blocks_run(tmp_path, monkeypatch):
     for block in blocks():
         if block.marker or block.lang not in ("python", "pycon"):
             continue
-        where = f"README.md, block at line {block.line}"
+        where = f"{block.page}, block at line {block.line}"
         if block.lang == "python":
             exec(compile(block.body, where, "exec"), namespace)  # noqa: S102 - the point
         else:
-            test = parser.get_doctest(block.body, namespace, where, str(README), block.line)
+            test = parser.get_doctest(block.body, namespace, where, block.page, block.line)
             result = runner.run(test, clear_globs=False)
             assert result.failed == 0, f"{where}: doctest failed (output above)"
         ran += 1
@@ -97,7 +107,9 @@ def test_excerpts_are_in_their_files():
             try:
                 pos = lines.index(wanted, pos) + 1
             except ValueError:
-                pytest.fail(f"README.md line {block.line}: {wanted!r} is not in {path} (in order)")
+                pytest.fail(
+                    f"{block.page} line {block.line}: {wanted!r} is not in {path} (in order)"
+                )
 
 
 def cli_lines(prefix: str) -> list[list[str]]:
