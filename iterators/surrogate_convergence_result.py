@@ -3,6 +3,7 @@ held-out error) and the design it was trained on."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -62,7 +63,9 @@ class SurrogateConvergenceResult(Result):
         n_train): per row ``n_train.<n>.<name>`` (its ML point), ``n_train.<n>.distance``
         (|ML point - reference| in box units, NaN without a reference), ``.test_rmse``,
         ``.test_max_abs``, ``.test_relative_l2`` (held-out error in L), ``.n_used`` and
-        ``.ml_log_likelihood``; ``n_test``."""
+        ``.ml_log_likelihood``; for every smaller row ``a``, ``n_train.<n>.gain_over.<a>``,
+        the held-out relative L2 error at ``a`` over the one at ``n`` (how much the larger
+        design gained: 1 none, 2 half the error; Fig. 12); ``n_test``."""
         out = super().quantities()
         for r in self.rows:
             key = f"n_train.{r.n_train}"
@@ -73,6 +76,10 @@ class SurrogateConvergenceResult(Result):
             out[f"{key}.test_relative_l2"] = float(r.test_relative_l2)
             out[f"{key}.n_used"] = float(r.n_used)
             out[f"{key}.ml_log_likelihood"] = float(r.ml_log_likelihood)
+        for i, r in enumerate(self.rows):
+            for a in self.rows[:i]:
+                gain = a.test_relative_l2 / r.test_relative_l2 if r.test_relative_l2 else math.nan
+                out[f"n_train.{r.n_train}.gain_over.{a.n_train}"] = float(gain)
         out["n_test"] = float(self.n_test)
         return out
 

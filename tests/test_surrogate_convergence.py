@@ -46,6 +46,12 @@ def test_the_ml_point_approaches_the_truth_and_the_held_out_error_falls(tmp_path
     assert result.x == last.ml_point
     # the GP mean at its ML point is at least the best training run's L
     assert last.ml_log_likelihood >= np.max(result.log_likelihood[:160]) - 1e-6
+    # Fig. 12's gain of a larger design: the held-out error at a over the one at n
+    q = result.quantities()
+    rel = {r.n_train: r.test_relative_l2 for r in result.rows}
+    assert q["n_train.160.gain_over.10"] == pytest.approx(rel[10] / rel[160])
+    assert q["n_train.40.gain_over.10"] == pytest.approx(rel[10] / rel[40])
+    assert "n_train.10.gain_over.40" not in q and q["n_train.160.gain_over.10"] > 1.0
     text = result.summary()
     assert "n_train" in text and "|ML-ref|" in text
     assert result.to_dict()["info"]["rows"][-1]["n_train"] == 160  # JSON without GP states
