@@ -209,7 +209,10 @@ def code_digest(obj: Any) -> dict[str, str]:
     (``fbia.plugins.ale_fsi`` -> ``ale_fsi/``, a third party's ``fbia_mysolver`` -> its
     folder), or the module alone when it is a top-level module or one of ``fbia.plugins``'
     single-file plugins.  Code the plugin imports from elsewhere (fbia.core, numpy, NGSolve)
-    is not included: their versions are in the run's provenance."""
+    is not included: their versions are in the run's provenance.  A plugin that declares a
+    ``numerics_version`` also gets its package's version and that declaration: a new release
+    of the package that declares the same numerics keeps the stores (an edit without a new
+    version does not)."""
     cls = type(obj)
     module = sys.modules.get(cls.__module__)
     source = getattr(module, "__file__", None)
@@ -232,7 +235,11 @@ def code_digest(obj: Any) -> dict[str, str]:
             h.update(b"(unreadable)")
         h.update(b"\0")
     shown = str(root) if len(files) > 1 else str(path)
-    return {"class": name, "files": shown, "sha256": h.hexdigest()}
+    out = {"class": name, "files": shown, "sha256": h.hexdigest()}
+    declared = getattr(cls, "numerics_version", None)
+    if declared is not None:  # a release may change the code but declare the same numerics
+        out.update(version=_package_version(obj), numerics=str(declared))
+    return out
 
 
 # -- fingerprints --------------------------------------------------------------------------------

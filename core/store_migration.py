@@ -148,6 +148,9 @@ def code_change(old: dict[str, Any], code: dict[str, str], n: int) -> str | None
     not reused by the code ``code`` (None: they are)."""
     if n == 0 or old.get("class") != code["class"] or old.get("sha256") == code["sha256"]:
         return None
+    released = old.get("version") is not None and old.get("version") != code.get("version")
+    if released and code.get("numerics") is not None and old.get("numerics") == code["numerics"]:
+        return None  # another release of the package, same declared numerics: its author's word
     return (
         f"the store holds {n} run{'s' if n != 1 else ''} made by other code of the model "
         f"plugin {code['class']} (its source changed since: {code['files']}); they are not "

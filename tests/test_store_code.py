@@ -236,3 +236,32 @@ def test_a_store_keyed_by_a_mesh_files_bytes_is_rekeyed_when_the_bytes_are_the_s
     db.close()
     with pytest.raises(fbia.ConfigError, match="different model"):
         _evaluate(path, rewritten)
+
+
+def test_a_new_release_with_the_same_numerics_keeps_the_runs_an_edit_does_not(
+    tmp_path, plugin, monkeypatch
+):
+    """Issue 31 item 5 with issue 29 item 2: a store written by the previous release of a
+    plugin package resumes with 0 reruns when the new release declares the same
+    numerics_version, although its code changed; the same edit without a new version (a
+    user editing the installed plugin) is refused, and so is a release that declares other
+    numerics (another model: another key)."""
+    from fbia.core import fingerprints
+
+    path = tmp_path / "s.sqlite"
+    monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "1.0.0")
+    first = plugin(attrs='    numerics_version = "1"')
+    assert _evaluate(path, _problem(first)) == (set(), 3)
+    edited = plugin(
+        attrs='    numerics_version = "1"', body="        parameters = dict(parameters)"
+    )
+    with pytest.raises(fbia.ConfigError, match="made by other code"):
+        _evaluate(path, _problem(edited))  # edited, same version: refused
+    monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "1.0.1")  # released
+    assert _evaluate(path, _problem(edited)) == ({0, 1, 2}, 3)  # 0 reruns
+    bumped = plugin(
+        attrs='    numerics_version = "2"', body="        parameters = dict(parameters)"
+    )
+    monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "1.1.0")
+    with pytest.raises(fbia.ConfigError, match="different model"):
+        _evaluate(path, _problem(bumped))
