@@ -357,7 +357,10 @@ def _plugins(args: argparse.Namespace) -> int:
         return 0
     from .tables import format_table
 
-    print(format_table(rows, ["name", "kind", "distribution", "version", "class"]))
+    columns = ["name", "kind", "distribution", "version", "class"]
+    if any(r["missing"] for r in rows):  # a plugin whose extra is not installed: say which
+        columns.append("missing")
+    print(format_table(rows, columns))
     return 0
 
 

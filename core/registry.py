@@ -21,7 +21,7 @@ import pluggy
 
 from . import hookspecs
 from .errors import PluginError
-from .extras import require
+from .extras import missing, require
 from .options import PluginOptions
 
 KINDS: dict[str, str] = {
@@ -56,6 +56,7 @@ class PluginEntry:
             "plugin": self.plugin,
             "distribution": self.distribution,
             "version": self.version,
+            "missing": ", ".join(missing(getattr(self.factory, "requires", ()))),
         }
 
 

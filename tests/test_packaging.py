@@ -152,3 +152,14 @@ def test_the_wheel_holds_every_sub_package_and_module(tmp_path):
         for path in (ROOT / folder).rglob("*.py"):
             expected.add(f"fbia/{path.relative_to(ROOT).as_posix()}")
     assert sorted(expected - names) == []
+
+
+def test_fbia_plugins_says_which_modules_a_plugin_misses(tmp_path):
+    done = _core_only(
+        "from fbia.core.cli import main\nraise SystemExit(main(['plugins']))", tmp_path
+    )
+    assert done.returncode == 0, done.stderr
+    rows = {line.split()[0]: line for line in done.stdout.splitlines()[2:]}
+    assert rows["ale_fsi"].rstrip().endswith("ngsolve, netgen")
+    assert rows["gp_smc"].rstrip().endswith("GPy, numba")
+    assert rows["levenberg_marquardt"].rstrip().endswith("LevenbergMarquardtIterator")
