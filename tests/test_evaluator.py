@@ -286,35 +286,35 @@ def _threads_here() -> tuple[dict[str, str], list[int]]:
     return {k: os.environ.get(k, "") for k in names}, [i["num_threads"] for i in threadpool_info()]
 
 
-def test_pool_workers_share_the_cores(monkeypatch):
-    """Every worker of a pool of n gets cpu_count // n BLAS, OpenMP and numba threads (issue
-    29 item 7): two workers each using every core would oversubscribe the machine."""
+def _limited_pool_threads(workers: int) -> tuple[dict[str, str], list[int]]:
+    """The thread settings a spawned worker sees after ``limit_threads(workers)``."""
     import multiprocessing
-    import os
     from concurrent.futures import ProcessPoolExecutor
-
-    import numpy  # noqa: F401  (a BLAS loaded before the limit, as unpickling a problem does)
 
     from fbia.core.local_executors import limit_threads
 
-    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
-    workers = os.cpu_count() or 1
     with ProcessPoolExecutor(
         max_workers=1,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=limit_threads,
         initargs=(workers,),
     ) as pool:
-        env, blas = pool.submit(_threads_here).result()
+        return pool.submit(_threads_here).result()
+
+
+def test_pool_workers_share_the_cores(monkeypatch):
+    """Every worker of a pool of n gets cpu_count // n BLAS, OpenMP and numba threads (issue
+    29 item 7): two workers each using every core would oversubscribe the machine."""
+    import os
+
+    import numpy  # noqa: F401  (a BLAS loaded before the limit, as unpickling a problem does)
+
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    workers = os.cpu_count() or 1
+    env, blas = _limited_pool_threads(workers)
     assert set(env.values()) == {"1"}
     assert blas and set(blas) == {1}
     # the user's OMP_NUM_THREADS wins
     monkeypatch.setenv("OMP_NUM_THREADS", "3")
-    with ProcessPoolExecutor(
-        max_workers=1,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=limit_threads,
-        initargs=(workers,),
-    ) as pool:
-        env, blas = pool.submit(_threads_here).result()
+    env, blas = _limited_pool_threads(workers)
     assert set(env.values()) == {"3"} and max(blas) <= 3  # a BLAS may cap it at its own size
