@@ -61,3 +61,13 @@ def test_all_failed_result_plots_the_design(tmp_path):
     result = it.run(problem)
     paths = it.write_plots(result, problem, tmp_path)
     assert [p.name for p in paths] == ["design.png"]
+
+
+def test_the_figures_refit_no_gp_beyond_2000_runs():
+    """The GP-over-n_train figures refit a GP of L on design prefixes; on a 6000-run design
+    the last one (all 6000) took more than 7 min and 10 GB. They stop at 2000 runs."""
+    from fbia.iterators.smc_plots import _MAX_REFIT, _prefix_sizes
+
+    assert _prefix_sizes(64) == [10, 20, 50, 64]
+    assert _prefix_sizes(2000) == [50, 100, 200, 500, 1000, 2000]
+    assert max(_prefix_sizes(6000)) == _MAX_REFIT == 2000
