@@ -111,14 +111,11 @@ def _file_digest(path: Path) -> dict[str, Any]:
     file (points, cell blocks, cell and point data, field data), else of its bytes.  Moving a
     study folder keeps a store valid, editing the mesh file it names does not, rewriting the
     same mesh with another header does not either."""
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return {"file": str(path), "sha256": None}
     parsed = _parsed_digest(path)
     if parsed is not None:
         return {"file": path.name, "content": parsed}
-    return {"file": path.name, "sha256": hashlib.sha256(data).hexdigest()}
+    digest = _bytes_digest(path)
+    return {"file": path.name if digest else str(path), "sha256": digest}
 
 
 def _parsed_digest(path: Path) -> str | None:

@@ -403,12 +403,18 @@ def _crop(
     return volume[tuple(slices)], (origin[0], origin[1], origin[2])
 
 
-def _reflection(volume: NDArray[np.float32], axis: int) -> float:
-    """How much the brightest plane across ``axis`` stands out: the largest second difference
-    of the log mean intensity of the planes along it (step 1 of the module docstring)."""
+def _plane_contrast(volume: NDArray[np.float32], axis: int = 0) -> NDArray[np.float64]:
+    """How much each plane across ``axis`` stands out: the second difference of the log mean
+    intensity of the planes along it, which an exponential decay leaves at zero (step 1 of the
+    module docstring: the substratum is the plane that stands out most across depth)."""
     m = np.log(np.maximum(np.moveaxis(volume, axis, 0).mean(axis=(1, 2), dtype=np.float64), 1e-300))
     m = np.r_[m[1], m, m[-2]]  # the end planes compare with their one neighbour
-    return float(np.max(m[1:-1] - 0.5 * (m[:-2] + m[2:])))
+    return m[1:-1] - 0.5 * (m[:-2] + m[2:])
+
+
+def _reflection(volume: NDArray[np.float32], axis: int) -> float:
+    """How much the brightest plane across ``axis`` stands out."""
+    return float(np.max(_plane_contrast(volume, axis)))
 
 
 def _check_depth_axis(volume: NDArray[np.float32], depth_axis: int, where: str) -> None:
@@ -434,9 +440,7 @@ def _substratum_row(
 ) -> int:
     """First row (of the crop) under the substratum surface."""
     if depth is None:
-        m = np.log(np.maximum(volume.mean(axis=(1, 2), dtype=np.float64), 1e-300))
-        m = np.r_[m[1], m, m[-2]]  # the end rows compare with their one neighbour
-        ks = int(np.argmax(m[1:-1] - 0.5 * (m[:-2] + m[2:])))
+        ks = int(np.argmax(_plane_contrast(volume)))
     else:
         ks = int(math.floor(depth / dz + 1.0)) - z0  # the surface lies at the row's top edge
     if not 2 <= ks < volume.shape[0]:

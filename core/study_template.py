@@ -21,7 +21,7 @@ import textwrap
 from typing import Any
 
 from .errors import ConfigError
-from .registry import close_name, list_plugins
+from .registry import default_registry
 
 __all__ = ["study_template"]
 
@@ -30,12 +30,7 @@ _LIKELIHOOD_ITERATORS = frozenset({"gp_smc", "sobol_indices", "surrogate_converg
 
 
 def _entry(kind: str, name: str, flag: str) -> Any:
-    entries = {e.name: e for e in list_plugins() if e.kind == kind}
-    if name not in entries:
-        close = close_name(name, sorted(entries))
-        hint = f"; did you mean {close}?" if close else f"; installed: {', '.join(sorted(entries))}"
-        raise ConfigError(f"no {kind.replace('_', ' ')} named {name!r}{hint}", flag)
-    return entries[name]
+    return default_registry().get(kind, name, where=flag)
 
 
 def _toml(value: Any) -> str:

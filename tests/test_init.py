@@ -67,10 +67,11 @@ def test_bad_init_requests_are_one_line_and_exit_2(tmp_path, capsys):
     path = tmp_path / "study.toml"
     assert main(["init", str(path), "--model", "ale_fs"]) == 2
     assert one_error_line(capsys) == (
-        "--model: no forward model named 'ale_fs'; did you mean ale_fsi?"
+        "--model: unknown forward model 'ale_fs' (did you mean 'ale_fsi'?); valid: ale_fsi, "
+        "analytic_mound_2d, analytic_mound_3d, cutfem_fpi, growth"
     )
     assert main(["init", str(path), "--model", "ale_fsi", "--iterator", "lm"]) == 2
-    assert one_error_line(capsys).startswith("--iterator: no iterator named 'lm'")
+    assert one_error_line(capsys).startswith("--iterator: unknown iterator 'lm'")
     assert not path.exists()
     path.write_text("# mine\n")
     assert main(["init", str(path), "--model", "ale_fsi"]) == 2
