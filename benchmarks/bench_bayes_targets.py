@@ -54,7 +54,7 @@ import numpy as np
 from bayes_models import Case, Moments, build_case, grid_posterior  # next to this file
 
 import fbia
-from fbia.iterators.gp_smc import GpSmcIterator
+from fbia.iterators.gp_smc.iterator import GpSmcIterator
 
 # -- what is tested: one table, easy to change -----------------------------------------------------
 CASES = ("2d", "2d_inflow", "7d")

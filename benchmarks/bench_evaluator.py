@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 import fbia  # noqa: E402
-from fbia.core.store import StudyStore  # noqa: E402
+from fbia.storage.store import StudyStore  # noqa: E402
 
 SLEEP = 0.5  # s per evaluation of the throughput model
 

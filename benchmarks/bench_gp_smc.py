@@ -29,9 +29,9 @@ import tracemalloc
 import numpy as np
 
 import fbia
-from fbia.iterators.gp_design import sobol_design
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.smc import SequentialMonteCarlo
+from fbia.iterators.smc.sampler import SequentialMonteCarlo
+from fbia.iterators.surrogates.design import sobol_design
+from fbia.iterators.surrogates.gp import GpSurrogate
 
 TRUTH = np.array([500.0, 0.2, 200.0, 0.1, 1000.0, 0.3, 100.0])  # Paper B heterogeneous example
 SHARE = np.array([0.25, 0.6, 0.15])

@@ -75,7 +75,7 @@ def main() -> None:
             [
                 sys.executable,
                 "-m",
-                "fbia.core.cli",
+                "fbia.studies.cli",
                 "run",
                 str(ROOT / "examples/growth/study.toml"),
                 "--output",

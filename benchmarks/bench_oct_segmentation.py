@@ -27,7 +27,7 @@ import tracemalloc
 import numpy as np
 
 import fbia
-from fbia.core.oct import segment_oct
+from fbia.imaging.oct import segment_oct
 from fbia.measures import CppMeasure
 from fbia.testing.oct import oct_phantom
 

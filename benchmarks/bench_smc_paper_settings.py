@@ -37,8 +37,8 @@ import numpy as np
 from scipy.stats import qmc
 
 import fbia
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.smc import SequentialMonteCarlo, SmcResult
+from fbia.iterators.smc.sampler import SequentialMonteCarlo, SmcResult
+from fbia.iterators.surrogates.gp import GpSurrogate
 
 D = 7
 MEAN = np.array([500.0, 0.2, 200.0, 0.1, 1000.0, 0.3, 100.0])

@@ -33,8 +33,8 @@ import numpy as np
 from scipy.stats import qmc
 
 import fbia
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.smc import SequentialMonteCarlo
+from fbia.iterators.smc.sampler import SequentialMonteCarlo
+from fbia.iterators.surrogates.gp import GpSurrogate
 
 LOWER = np.array([50.0, -0.8])
 UPPER = np.array([1000.0, 0.5])

@@ -19,7 +19,7 @@ it prints, beside the thesis' facts (Paper A "Homogeneous biofilm", Paper B exam
 - the eleven Table 1 starts: solved or why not.
 
 Saint Venant-Kirchhoff, quasi-static, the default mesh; each run takes 0.2-2 s.  Measured
-figures of the candidates tried are in the docstring of fbia.plugins.ale_fsi.outlines.
+figures of the candidates tried are in the docstring of fbia.plugins.fem.outlines.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from bench_ale_fsi import TABLE_1  # Paper A Table 1 (this folder)
 
 from fbia import ForwardModelError
 from fbia.plugins.ale_fsi import AleFsiForwardModel
-from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE, DEFAULT_OUTLINE_NAME
+from fbia.plugins.fem.outlines import DEFAULT_OUTLINE, DEFAULT_OUTLINE_NAME
 
 TRUTH_DISPLACEMENT = 0.053  # mm, Paper A text below Table 1
 WORKDIR = tempfile.mkdtemp(prefix="fbia-outline-")

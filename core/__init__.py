@@ -1,13 +1,19 @@
-"""fbia.core: data types, protocols, plugin registry, evaluators, study files and CLI."""
+"""fbia.core, the kernel: the contracts and values every other part of fbia builds on.
+
+Errors, options, the plugin registry and its hooks, the three extension contracts
+(``ForwardModel`` and ``Discrepancy`` in ``protocols``, ``InverseIterator`` with the
+``Evaluator`` it receives in ``iteration``), interfaces, observations, parameters and priors,
+the inverse problem and its results, the likelihood and synthetic data.  It imports nothing of
+fbia outside itself (``tests/test_architecture.py``), and no store, executor, plotting or
+finite-element library: where runs happen is ``fbia.execution``, the store ``fbia.storage``,
+the study application ``fbia.studies``, OCT scans ``fbia.imaging``.
+"""
 
 from . import parameters as priors
 from .errors import ConfigError, FbiaError, ForwardModelError, MeasureError, PluginError
-from .evaluator import BatchEvaluator, Evaluator
-from .executors import make_evaluator
 from .hookspecs import hookimpl
 from .interface import Interface
-from .iteration import InverseIterator, IteratorBase
-from .local_executors import ProcessPoolEvaluator, SerialEvaluator
+from .iteration import Evaluator, InverseIterator, IteratorBase
 from .observation import (
     Coordinate,
     MeasurementPoints,
@@ -27,7 +33,6 @@ __all__ = [
     "Coordinate",
     "Discrepancy",
     "Evaluation",
-    "BatchEvaluator",
     "Evaluator",
     "FbiaError",
     "ForwardModel",
@@ -43,16 +48,13 @@ __all__ = [
     "PluginError",
     "PluginOptions",
     "Prior",
-    "ProcessPoolEvaluator",
     "Registry",
     "Result",
-    "SerialEvaluator",
     "Solution",
     "coordinate_key",
     "forward_model",
     "hookimpl",
     "iterator",
-    "make_evaluator",
     "measure",
     "list_plugins",
     "priors",

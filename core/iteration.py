@@ -12,19 +12,39 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Callable, Generator, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
-from .evaluator import Evaluator
-from .local_executors import SerialEvaluator
 from .options import Configurable
-from .problem import InverseProblem, Result
+from .problem import Evaluable, Evaluation, InverseProblem, Result
 
 logger = logging.getLogger(__name__)
 
 S = TypeVar("S")
 R = TypeVar("R")
+
+
+@runtime_checkable
+class Evaluator(Protocol):
+    """Evaluates batches of parameter points; results come back in the order of ``points``
+    (``fbia.execution``: ``SerialEvaluator``, ``ProcessPoolEvaluator``, ``DaskEvaluator``)."""
+
+    def evaluate(
+        self, problem: Evaluable, points: Sequence[Mapping[str, float]]
+    ) -> list[Evaluation]: ...
+
+
+#: What :meth:`IteratorBase.run` evaluates with when it is given no evaluator: a factory of
+#: evaluators, set by the package root (``fbia/__init__.py``: the serial evaluator of
+#: ``fbia.execution``), so the kernel names no executor.
+_default_evaluator: Callable[[], Evaluator] | None = None
+
+
+def set_default_evaluator(factory: Callable[[], Evaluator]) -> None:
+    """Set the factory :meth:`IteratorBase.run` builds its evaluator with when none is given."""
+    global _default_evaluator
+    _default_evaluator = factory
 
 
 def drain(
@@ -82,10 +102,13 @@ class IteratorBase(Configurable):
     def run(self, problem: InverseProblem, evaluator: Evaluator | None = None) -> Result:
         """Run to the end and return the :class:`Result` (serial evaluation by default)."""
         own = evaluator is None
-        ev: Evaluator = SerialEvaluator() if evaluator is None else evaluator
+        if evaluator is None:
+            if _default_evaluator is None:
+                raise RuntimeError("no default evaluator: pass one, e.g. fbia.SerialEvaluator()")
+            evaluator = _default_evaluator()
         try:
-            self.result = drain(self.steps(problem, ev), name=type(self).__name__)
+            self.result = drain(self.steps(problem, evaluator), name=type(self).__name__)
             return self.result
         finally:
             if own:
-                ev.close()  # type: ignore[attr-defined]
+                evaluator.close()  # type: ignore[attr-defined]

@@ -204,25 +204,6 @@ class Observation:
         mp = MeasurementPoints.read(points) if points is not None else None
         return cls(gamma, coordinate or {}, mp, noise_std=noise_std, name=name)
 
-    @classmethod
-    def from_oct(
-        cls,
-        source: str | Path | ArrayLike,
-        voxel_size: tuple[float, float, float],
-        coordinate: Coordinate | None = None,
-        noise_std: float | None = None,
-        name: str = "",
-        **options: Any,
-    ) -> Observation:
-        """An observation whose interface is segmented from an OCT volume (an array, or a
-        .npy/.npz/TIFF/NRRD file) with voxel size (dz, dy, dx) [mm]; ``options`` are those
-        of :class:`fbia.core.oct.OctOptions`.  :func:`fbia.core.oct.segment_oct` does the
-        work and also returns what a figure of the segmentation needs."""
-        from .oct import segment_oct
-
-        seg = segment_oct(source, voxel_size, **options)
-        return cls(seg.interface, coordinate or {}, noise_std=noise_std, name=name)
-
 
 @dataclass
 class Solution:

@@ -96,7 +96,7 @@ class Evaluation:
 class Evaluable(Protocol):
     """What an evaluator runs: an :class:`InverseProblem`, or the residual function of
     ``fbia.least_squares`` dressed as one.  ``parameters`` and ``uncertain`` (their priors)
-    are what a worker may leave behind (:func:`fbia.core.isolation.run_view`)."""
+    are what a worker may leave behind (:func:`fbia.execution.isolation.run_view`)."""
 
     parameters: Sequence[Parameter]
     uncertain: Sequence[Parameter]
@@ -466,7 +466,7 @@ class Result:
         return path
 
     def quantities(self) -> dict[str, float]:
-        """The numbers a study may compare with a paper (``[paper]``, :mod:`fbia.core.paper`):
+        """The numbers a study may compare with a paper (``[paper]``, :mod:`fbia.studies.paper`):
         ``x.<name>`` per parameter of the point estimate, ``converged`` (1 if ``success``,
         else 0), ``nfev`` and ``n_failed``; iterators' results add their own."""
         out = {f"x.{k}": float(v) for k, v in (self.x or {}).items()}

@@ -9,7 +9,7 @@ def register_iterators(register):
     from .levenberg_marquardt import LevenbergMarquardtIterator
 
     register("levenberg_marquardt", LevenbergMarquardtIterator)
-    from .gp_smc import GpSmcIterator
+    from .gp_smc.iterator import GpSmcIterator
 
     register("gp_smc", GpSmcIterator)
     from .sobol_indices import SobolIndicesIterator

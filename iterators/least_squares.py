@@ -16,13 +16,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError, ForwardModelError
-from ..core.evaluator import Evaluator
-from ..core.iteration import drain
-from ..core.local_executors import SerialEvaluator
+from ..core.iteration import Evaluator, drain
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation
+from ..execution.local_executors import SerialEvaluator
 from .levenberg_marquardt import LevenbergMarquardtIterator
-from .lm_result import LMResult
+from .lm.result import LMResult
 
 FloatArray = NDArray[np.float64]
 

@@ -30,7 +30,7 @@ On a plain residual function, like ``scipy.optimize.least_squares`` (same iterat
 ``mode="paper"`` runs the algorithm exactly as Paper A describes it (including its known
 weaknesses: it can stall on a bound and gives no result when a forward run fails);
 ``mode="robust"`` (default) is the improved variant described in
-:mod:`fbia.iterators.lm_core`.
+:mod:`fbia.iterators.lm.chains`.
 
 Status tags of the result (``success`` is True for the first three):
 
@@ -64,14 +64,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import ConfigError
-from ..core.evaluator import Evaluator
-from ..core.iteration import IteratorBase
+from ..core.iteration import Evaluator, IteratorBase
 from ..core.problem import Evaluation, ProblemLike
-from .lm_core import LMChain, LMSettings, Outcome, PaperChain, err_res_of
-from .lm_handoff import POSTERIOR_LABELS, posterior_starts
-from .lm_options import LMOptions
-from .lm_result import FitStatistics, LMResult, LMState, compare_starts
-from .lm_robust import RobustChain
+from .lm.chains import LMChain, LMSettings, Outcome, PaperChain, err_res_of
+from .lm.handoff import POSTERIOR_LABELS, posterior_starts
+from .lm.options import LMOptions
+from .lm.result import FitStatistics, LMResult, LMState, compare_starts
+from .lm.robust import RobustChain
 
 FloatArray = NDArray[np.float64]
 
@@ -87,7 +86,7 @@ class LevenbergMarquardtIterator(IteratorBase):
     Each iteration evaluates the forward model at x and at n_x perturbed points
     (eq. 21-23, one batch for the evaluator), computes the step of eq. 18 and stops on
     eq. 29a-c.  Several initial guesses run as independent chains whose batches share the
-    evaluator; the result compares their optima.  See :mod:`fbia.iterators.lm_core` for the
+    evaluator; the result compares their optima.  See :mod:`fbia.iterators.lm.chains` for the
     ``paper`` and ``robust`` modes.
     """
 
@@ -202,7 +201,7 @@ class LevenbergMarquardtIterator(IteratorBase):
 
     def write_plots(self, result: LMResult, problem: Any, folder: str | Path) -> list[Path]:
         """Search paths and error histories as PNG files (see :func:`plot_lm_result`)."""
-        from .lm_plots import plot_lm_result
+        from .lm.plots import plot_lm_result
 
         return plot_lm_result(result, problem, folder)
 

@@ -44,15 +44,14 @@ from pydantic import Field
 from scipy.stats import qmc
 
 from ..core.errors import ConfigError
-from ..core.evaluator import Evaluator
-from ..core.iteration import IteratorBase
+from ..core.iteration import Evaluator, IteratorBase
 from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter
-from ..core.plots import legend
 from ..core.problem import InverseProblem, Result, jsonable
-from .gp_design import unit_to_inputs
-from .gp_surrogate import GpSurrogate
+from ..imaging.figures import legend, pyplot
+from .surrogates.design import unit_to_inputs
+from .surrogates.gp import GpSurrogate
 
 __all__ = ["SobolIndices", "SobolIndicesIterator", "SobolIndicesResult", "sobol_indices"]
 
@@ -287,11 +286,7 @@ class SobolIndicesIterator(IteratorBase):
         """``sobol_indices.png``: S1 and ST per input with their confidence intervals."""
         if not isinstance(result, SobolIndicesResult) or result.indices is None:
             return []
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
+        plt = pyplot()
         ind = result.indices
         folder.mkdir(parents=True, exist_ok=True)
         k = np.arange(len(ind.names))

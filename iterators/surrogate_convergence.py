@@ -7,7 +7,7 @@ point is compared with the ground truth (Fig. 8); the error at held-out points o
 Fig. 12.  This iterator does that study in one go:
 
 1. **Design**: the first ``max(n_train) + n_test`` points of the Sobol sequence of
-   :func:`~fbia.iterators.gp_design.sobol_design` (the same points, seed for seed, as
+   :func:`~fbia.iterators.surrogates.design.sobol_design` (the same points, seed for seed, as
    ``gp_smc`` with ``design = "sobol"``, so a study store shares the runs), one evaluator
    batch; the last ``n_test`` are held out.
 2. **Per n_train**: the GP of :mod:`.gp_surrogate` (eq. 26-29) on the successful runs among
@@ -39,14 +39,13 @@ from pydantic import Field, field_validator
 from scipy.optimize import minimize
 
 from ..core.errors import ConfigError
-from ..core.evaluator import Evaluator
-from ..core.iteration import IteratorBase
+from ..core.iteration import Evaluator, IteratorBase
 from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
 from ..core.options import PluginOptions
 from ..core.problem import InverseProblem, Result
-from .gp_design import search_box, sobol_design
-from .gp_surrogate import GpSurrogate
-from .surrogate_convergence_result import ConvergenceRow, SurrogateConvergenceResult
+from .convergence.result import ConvergenceRow, SurrogateConvergenceResult
+from .surrogates.design import search_box, sobol_design
+from .surrogates.gp import GpSurrogate
 
 __all__ = ["ConvergenceRow", "SurrogateConvergenceIterator", "SurrogateConvergenceResult"]
 
@@ -221,7 +220,7 @@ class SurrogateConvergenceIterator(IteratorBase):
     @staticmethod
     def write_plots(result: Result, problem: InverseProblem, folder: Path) -> list[Path]:
         """``surrogate_convergence.png`` and ``surrogate_convergence_fields.png`` (Fig. 8)."""
-        from .surrogate_convergence_plots import plot_surrogate_convergence
+        from .convergence.plots import plot_surrogate_convergence
 
         if not isinstance(result, SurrogateConvergenceResult) or not result.rows:
             return []

@@ -220,7 +220,7 @@ class RkhsMeasure(Configurable):
     """
 
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
-    #: package version: fbia.core.fingerprints)
+    #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
 
     class Options(PluginOptions):

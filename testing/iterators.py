@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from ..core.local_executors import SerialEvaluator
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..core.registry import forward_model
 from ..core.registry import measure as make_measure
 from ..core.synthetic import synthetic_observations
+from ..execution.local_executors import SerialEvaluator
 from .errors import _fail
 
 

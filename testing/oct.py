@@ -1,5 +1,5 @@
 """Synthetic OCT-like volumes with a known biofilm surface, to verify the segmentation of
-:mod:`fbia.core.oct` (issue 18, part 3).
+:mod:`fbia.imaging.oct` (issue 18, part 3).
 
 >>> from fbia.testing.oct import oct_phantom
 >>> ph = oct_phantom(shape=(24, 20, 20), seed=0)

@@ -304,8 +304,8 @@ _DRIVER = """
 import sys
 sys.path.insert(0, {tests!r})
 from _models import PLUGIN
-from fbia.core import study_file as study
-from fbia.core.cli import main
+from fbia.studies import study_file as study
+from fbia.studies.cli import main
 from fbia.core.registry import Registry
 registry = Registry.load(extra=[PLUGIN])
 study.default_registry = lambda: registry

@@ -23,9 +23,9 @@ import pytest
 from _studies import edit, write_study
 
 import fbia
-from fbia.core.cli import main
 from fbia.core.data_files import MAX_COORDINATE, MAX_LINE_CHARS, read_csv_table
 from fbia.measures._geometry import ElementGeometry, closest_points
+from fbia.studies.cli import main
 
 FBIA = Path(sys.executable).parent / "fbia"
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from _studies import one_error_line
 
-from fbia.core.cli import main
+from fbia.studies.cli import main
 
 STUDY = """\
 [study]

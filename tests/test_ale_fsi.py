@@ -21,7 +21,7 @@ pytest.importorskip("ngsolve")
 
 import fbia  # noqa: E402
 from fbia.plugins.ale_fsi import AleFsiForwardModel  # noqa: E402
-from fbia.plugins.ale_fsi.outlines import DEFAULT_OUTLINE  # noqa: E402
+from fbia.plugins.fem.outlines import DEFAULT_OUTLINE  # noqa: E402
 
 COARSE = {"mesh_size": 0.2, "interface_mesh_size": 0.06}
 
@@ -292,7 +292,7 @@ def test_heterogeneous_subdomains(tmp_path):
 
 
 def test_user_mesh_round_trip_gives_the_same_answer(tmp_path):
-    from fbia.plugins.ale_fsi.geometry import write_mesh
+    from fbia.plugins.fem.flow_cell import write_mesh
 
     model = AleFsiForwardModel(**COARSE, curved=False, warm_start=False)  # files: straight
     path = write_mesh(model.solver.mesh, tmp_path / "cell.msh")

@@ -160,7 +160,7 @@ def test_probes_at_the_interface_vertices_give_the_largest_displacement(dome):
 
 
 def test_probes_of_the_wrong_dimension_or_outside_the_mesh_are_config_errors(tmp_path):
-    from fbia.plugins.ale_fsi.geometry import write_mesh
+    from fbia.plugins.fem.flow_cell import write_mesh
 
     with pytest.raises(fbia.ConfigError, match="probes need 3 coordinates"):
         AleFsiForwardModel(**DOME, probes=[(0.8, 0.4)])

@@ -222,7 +222,7 @@ def test_an_unloaded_oct_scan_becomes_the_colony_surface(tmp_path):
     1/mm), segmented and written in model axes by colony_from_oct: its height field has the
     cap's centre (to a tenth of a voxel: the axes are mapped right), volume and footprint area
     (observed -0.5 % and +1.9 %: segmentation and grid error)."""
-    from fbia.core.oct import in_model_axes
+    from fbia.imaging.oct import in_model_axes
     from fbia.plugins.ale_fsi.colony3d import (
         colony_from_oct,
         colony_height_field,

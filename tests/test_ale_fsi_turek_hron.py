@@ -40,7 +40,7 @@ def _check(case: str, mesh_file: Path, tmp_path: Path) -> dict[str, float]:
 
 
 def test_mesh_file_has_the_named_regions_and_boundaries(mesh_file):
-    from fbia.plugins.ale_fsi.geometry import read_mesh_names
+    from fbia.plugins.fem.flow_cell import read_mesh_names
 
     names = set(read_mesh_names(mesh_file))
     assert names == {

@@ -3,19 +3,34 @@
 * Inside the package every import of fbia is relative, so the import graph can be read from
   the files (the folders map to ``fbia.*`` only through pyproject.toml).
 * The graph has no cycle (imports inside functions and under TYPE_CHECKING included).
-* No module grows beyond about 600 lines; the ones still above it are listed with the size
-  they may not exceed, until the redesign (issue 13) splits them.
+* The layers: which package may import which (``LAYERS``, as docs/architecture.md states
+  them); the kernel imports nothing of fbia outside itself, and importing it loads no store,
+  executor, plotting, GP or finite-element library.
+* The kernel stays thin, iterators/ keeps its families in sub-packages, and no module grows
+  beyond about 600 lines.
 """
 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("core", "plugins", "measures", "iterators", "testing")
+PACKAGES = (
+    "core",
+    "execution",
+    "storage",
+    "imaging",
+    "studies",
+    "plugins",
+    "measures",
+    "iterators",
+    "testing",
+)
 MAX_LINES = 600
 #: Modules still above MAX_LINES, with the size they may not exceed (shrink, never grow).
 OVERSIZE: dict[str, int] = {}
@@ -85,6 +100,80 @@ def test_the_import_graph_reads_from_the_files_and_has_no_cycle():
     for node in sorted(graph):
         if node not in state:
             visit(node)
+
+
+#: Which top-level package may import which (docs/architecture.md, "Layers"); a package may
+#: always import itself.  ``fbia`` is the package root (the composition root: it re-exports
+#: and wires), ``pytest_plugin`` the conformance kit's fixtures.
+LAYERS: dict[str, set[str]] = {
+    "core": set(),
+    "imaging": {"core"},
+    "storage": {"core"},
+    "execution": {"core", "storage"},
+    "measures": {"core"},
+    "plugins": {"core", "imaging"},
+    "iterators": {"core", "execution", "imaging"},
+    "studies": {"core", "execution", "storage", "imaging"},
+    "testing": {"core", "execution", "storage", "studies", "imaging"},
+    "pytest_plugin": {"core", "testing"},
+}
+
+
+def layer(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "fbia"
+
+
+def test_each_package_imports_only_the_layers_below_it():
+    wrong = []
+    for source, targets in import_graph().items():
+        here = layer(source)
+        if here == "fbia":
+            continue
+        for target in sorted(targets):
+            there = layer(target)
+            if there != here and there not in LAYERS[here]:
+                wrong.append(f"{source} -> {target}")
+    assert wrong == []
+
+
+def test_plugins_do_not_import_each_other_except_the_shared_fem():
+    """A model plugin reaches another only through the shared ``plugins/fem``; ``growth``,
+    built on ``ale_fsi``, through its solver and options alone."""
+    allowed = {("growth", "ale_fsi.solver"), ("growth", "ale_fsi.options")}
+    wrong = []
+    for source, targets in import_graph().items():
+        if not source.startswith("fbia.plugins."):
+            continue
+        mine = source.split(".")[2]
+        for target in targets:
+            if not target.startswith("fbia.plugins.") or target == "fbia.plugins":
+                continue
+            theirs = target.split(".")[2]
+            rest = ".".join(target.split(".")[2:])
+            if theirs not in (mine, "fem") and (mine, rest) not in allowed:
+                wrong.append(f"{source} -> {target}")
+    assert wrong == []
+
+
+def test_the_kernel_is_thin_and_light():
+    modules = sorted((ROOT / "core").glob("*.py"))
+    lines = sum(len(p.read_text(encoding="utf-8").splitlines()) for p in modules)
+    assert len(modules) <= 16 and lines <= 3000, (len(modules), lines)
+    code = (
+        "import sys, fbia.core\n"
+        "heavy = ('sqlite3', 'dask', 'distributed', 'GPy', 'ngsolve', 'netgen', 'matplotlib')\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy))\n"
+        "print(sorted(m for m in sys.modules if m.startswith('fbia.') and\n"
+        "             not m.startswith('fbia.core')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split("\n")[:2] == ["[]", "[]"], out.stdout
+
+
+def test_iterators_keep_their_families_in_sub_packages():
+    top = sorted(p.name for p in (ROOT / "iterators").glob("*.py"))
+    assert len(top) <= 6, top
 
 
 def test_modules_stay_small():

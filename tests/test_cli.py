@@ -19,9 +19,9 @@ from _models import PLUGIN, write_driver
 from _studies import BAD_CASES, STUDY, TRUTH, edit, one_error_line
 
 import fbia
-from fbia.core import study_file as study_module
-from fbia.core.cli import main
 from fbia.core.registry import Registry
+from fbia.studies import study_file as study_module
+from fbia.studies.cli import main
 
 FBIA = Path(sys.executable).parent / "fbia"
 
@@ -254,8 +254,8 @@ def test_run_exit_status_says_whether_the_result_can_be_trusted(
 
 
 def test_an_unreliable_success_is_not_trusted():
-    from fbia.core.cli import EXIT_NO_RESULT, EXIT_OK, EXIT_UNTRUSTED, run_exit_status
     from fbia.core.problem import Result
+    from fbia.studies.cli import EXIT_NO_RESULT, EXIT_OK, EXIT_UNTRUSTED, run_exit_status
 
     assert run_exit_status(Result("completed", True, "", x={"E": 1.0})) == EXIT_OK
     assert run_exit_status(Result("completed", True, "")) == EXIT_OK  # Sobol: no x

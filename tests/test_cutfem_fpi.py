@@ -149,10 +149,10 @@ def test_curved_biofilm_mesh_follows_the_outline_spline() -> None:
     miss the spline by ~5 um, second- and third-order geometry by ~1 and ~0.07 um."""
     import shapely
 
-    from fbia.plugins.ale_fsi.outlines import NAMED_OUTLINES
     from fbia.plugins.cutfem_fpi.coupled import InterfaceSampler
     from fbia.plugins.cutfem_fpi.meshes import biofilm_mesh
     from fbia.plugins.cutfem_fpi.model import POROELASTIC_OUTLINE
+    from fbia.plugins.fem.outlines import NAMED_OUTLINES
 
     outline = np.array(NAMED_OUTLINES[POROELASTIC_OUTLINE])
     fine = InterfaceSampler(biofilm_mesh(outline, True, 0.01, 3), 4).reference

@@ -18,10 +18,10 @@ import meshio  # noqa: E402
 import shapely  # noqa: E402
 
 import fbia  # noqa: E402
-from fbia.core.cli import main  # noqa: E402
-from fbia.plugins.ale_fsi.outlines import NAMED_OUTLINES  # noqa: E402
 from fbia.plugins.cutfem_fpi import CutFemFpiForwardModel  # noqa: E402
 from fbia.plugins.cutfem_fpi.model import POROELASTIC_OUTLINE  # noqa: E402
+from fbia.plugins.fem.outlines import NAMED_OUTLINES  # noqa: E402
+from fbia.studies.cli import main  # noqa: E402
 
 LEVEL = {"inflow_rate": 100.0}
 COMMON = {"background_mesh_size": 0.1, "coupling_tol": 1e-7}
@@ -30,7 +30,7 @@ H = 0.08  # interface and solid element size of the file [mm]
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from fbia.plugins.ale_fsi.geometry import build_flow_cell, write_mesh
+    from fbia.plugins.fem.flow_cell import build_flow_cell, write_mesh
 
     mesh = build_flow_cell(
         outline=NAMED_OUTLINES[POROELASTIC_OUTLINE],  # cutfem_fpi's default mound
@@ -122,7 +122,7 @@ def test_a_mesh_without_the_names_is_a_one_line_config_error(cell, tmp_path, ren
 def test_solid_subdomains_merge_into_one_skeleton(tmp_path) -> None:
     """An ale_fsi file with regions solid_1, solid_2 (Paper A Fig. 9 layers): cutfem_fpi has one
     skeleton material, so the regions become one skeleton mesh, their 'internal' edges dropped."""
-    from fbia.plugins.ale_fsi.geometry import build_flow_cell, mesh_arrays, write_mesh
+    from fbia.plugins.fem.flow_cell import build_flow_cell, mesh_arrays, write_mesh
 
     layer = [(0.0, -0.1), (2.0, -0.1), (2.0, 0.08), (0.0, 0.08)]
     mesh = build_flow_cell(

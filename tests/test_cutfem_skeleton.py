@@ -98,10 +98,10 @@ def test_porosity_out_of_range_raises() -> None:
 def _extension_errors(h: float) -> tuple[float, float]:
     import ngsolve as ngs
 
-    from fbia.plugins.ale_fsi.outlines import NAMED_OUTLINES
     from fbia.plugins.cutfem_fpi.meshes import biofilm_mesh
     from fbia.plugins.cutfem_fpi.model import POROELASTIC_OUTLINE
     from fbia.plugins.cutfem_fpi.skeleton import Skeleton, SkeletonSettings
+    from fbia.plugins.fem.outlines import NAMED_OUTLINES
 
     mesh = biofilm_mesh(NAMED_OUTLINES[POROELASTIC_OUTLINE], True, h)
     sk = Skeleton(mesh, SkeletonSettings())

@@ -16,12 +16,12 @@ import pytest
 from _models import FAULT_BOUNDS, PLUGIN, check_injected_faults, toy_problem
 
 import fbia
-from fbia.core import study_file as study_module
-from fbia.core.cli import main
-from fbia.core.dask_executor import DaskEvaluator, _jobqueue_cluster
 from fbia.core.registry import Registry
-from fbia.core.store import StudyStore
-from fbia.core.study import ExecutorSpec
+from fbia.execution.dask_executor import DaskEvaluator, _jobqueue_cluster
+from fbia.storage.store import StudyStore
+from fbia.studies import study_file as study_module
+from fbia.studies.cli import main
+from fbia.studies.study import ExecutorSpec
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_architecture import PACKAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -17,7 +18,7 @@ def test_the_api_reference_builds_without_warnings(tmp_path):
     pytest.importorskip("mkdocstrings")
     tree = tmp_path / "tree" / "fbia"  # the package as installed (make package-tree)
     tree.mkdir(parents=True)
-    for name in ("core", "plugins", "measures", "iterators", "testing", "__init__.py"):
+    for name in (*PACKAGES, "__init__.py"):
         (tree / name).symlink_to(ROOT / name)
     config = yaml.safe_load((ROOT / "mkdocs.yml").read_text())
     config["docs_dir"] = str(ROOT / "docs")

@@ -1,4 +1,4 @@
-"""Noise judged over draws (``[synthetic] draws = N``, fbia.core.draws): one run per draw,
+"""Noise judged over draws (``[synthetic] draws = N``, fbia.studies.draws): one run per draw,
 a shared store, the range over the draws, the [paper] rows judged by it."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import pytest
 from _studies import one_error_line
 
 import fbia
-from fbia.core.cli import main
-from fbia.core.draws import MIN_DRAWS, DrawRecord, collect, draw_seed, draw_study
-from fbia.core.paper import compare_draws, read_paper
+from fbia.studies.cli import main
+from fbia.studies.draws import MIN_DRAWS, DrawRecord, collect, draw_seed, draw_study
+from fbia.studies.paper import compare_draws, read_paper
 
 TRUTH_E = 400.0
 
@@ -200,7 +200,7 @@ def test_every_draw_gets_a_model_of_its_own(tmp_path):
 
 
 def test_a_draws_result_loads_back_as_it_was(ran):
-    from fbia.core.draws import DrawsResult
+    from fbia.studies.draws import DrawsResult
 
     folder, result = ran
     loaded = fbia.load_result(folder / "out")

@@ -23,9 +23,9 @@ import pytest
 from _models import FAULT_GRID, check_injected_faults, toy_curve, toy_problem
 
 import fbia
-from fbia.core.evaluation_log import EvaluationLog
-from fbia.core.progress import RunProgress
-from fbia.core.store import StudyStore
+from fbia.storage.store import StudyStore
+from fbia.studies.evaluation_log import EvaluationLog
+from fbia.studies.progress import RunProgress
 
 PROBLEM = toy_problem(fail_above=650.0, bug_above=680.0, die_above=750.0, slow_above=790.0)
 POINTS = [{"E": E, "nu": nu} for E, nu in [(200.0, 0.1), (400.0, 0.3), (600.0, -0.2), (300.0, 0.0)]]
@@ -291,7 +291,7 @@ def _limited_pool_threads(workers: int) -> tuple[dict[str, str], list[int]]:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from fbia.core.local_executors import limit_threads
+    from fbia.execution.local_executors import limit_threads
 
     with ProcessPoolExecutor(
         max_workers=1,

@@ -9,16 +9,16 @@ from test_gp_smc import _problem
 
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
-from fbia.iterators.gp_adaptive import (
+from fbia.iterators.gp_smc.adaptive import (
     Moments,
     floor_depth,
     posterior_shift,
     select_batch,
     soft_floor,
 )
-from fbia.iterators.gp_smc_run import log_prior
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.smc import smc
+from fbia.iterators.gp_smc.run import log_prior
+from fbia.iterators.smc.sampler import smc
+from fbia.iterators.surrogates.gp import GpSurrogate
 
 
 # -- the pieces -------------------------------------------------------------------------------

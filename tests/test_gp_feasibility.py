@@ -7,8 +7,8 @@ from test_gp_smc import _problem
 
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
-from fbia.iterators.gp_feasibility import Feasibility, fit_feasibility
-from fbia.iterators.gp_residuals import restore_surrogate
+from fbia.iterators.surrogates.feasibility import Feasibility, fit_feasibility
+from fbia.iterators.surrogates.residuals import restore_surrogate
 
 # the model fails for E below this (a soft biofilm, Paper B Figs. 5-8), where the
 # unconstrained posterior would still hold mass (truth E = 400 Pa)

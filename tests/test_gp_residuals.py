@@ -13,14 +13,14 @@ from test_gp_smc import FAST, _problem
 
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood, profile_log_likelihood
-from fbia.iterators.gp_residuals import (
+from fbia.iterators.surrogates.gp import GpSurrogate
+from fbia.iterators.surrogates.residuals import (
     ResidualLink,
     ResidualSurrogate,
     residual_link,
     residual_vectors,
     restore_surrogate,
 )
-from fbia.iterators.gp_surrogate import GpSurrogate
 
 BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
 SIGMA = 0.05

@@ -8,14 +8,14 @@ import pytest
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood as log_likelihood_of
 from fbia.core.likelihood import measurement_count
-from fbia.iterators.gp_design import sobol_design
-from fbia.iterators.gp_smc import GpSmcIterator
-from fbia.iterators.posterior import (
+from fbia.iterators.gp_smc.iterator import GpSmcIterator
+from fbia.iterators.gp_smc.posterior import (
     laplace_approximation,
     load_posterior,
     map_by_binning,
     save_posterior,
 )
+from fbia.iterators.surrogates.design import sobol_design
 
 TRUTH = {"E": 400.0, "nu": 0.3}
 # Paper B's fixed Sobol design (the adaptive default is tested in test_gp_adaptive.py)
@@ -252,7 +252,7 @@ def test_arviz_reads_the_posterior(runs, tmp_path):
     arviz = pytest.importorskip("arviz")
     _, result, _ = runs[True]
     save_posterior(result, tmp_path)
-    from fbia.iterators.posterior import to_inference_data
+    from fbia.iterators.gp_smc.posterior import to_inference_data
 
     idata = to_inference_data(load_posterior(tmp_path))
     assert isinstance(idata, arviz.InferenceData)
@@ -264,7 +264,7 @@ def test_arviz_reads_the_posterior(runs, tmp_path):
 
 
 def test_hpd_mass_of_map_truth_and_a_far_point(runs):
-    from fbia.iterators.posterior import hpd_mass
+    from fbia.iterators.gp_smc.posterior import hpd_mass
 
     _, result, _ = runs[False]
     assert hpd_mass(result, result.x) < 0.05
@@ -301,7 +301,7 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
     """
     from pathlib import Path
 
-    from fbia.iterators.posterior import hpd_mass
+    from fbia.iterators.gp_smc.posterior import hpd_mass
 
     example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
     result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
@@ -411,7 +411,7 @@ def test_surrogate_uncertainty_option_widens_a_starved_posterior():
 
 
 def test_the_laplace_angle_is_measured_in_the_design_box_scale():
-    from fbia.iterators.gp_smc_result import principal_angle
+    from fbia.iterators.gp_smc.result import principal_angle
 
     # rank-one covariances: their principal axes are exactly (100 Pa, +-0.2)
     band = np.outer([100.0, 0.2], [100.0, 0.2])

@@ -5,7 +5,7 @@ import pytest
 from scipy.stats import qmc
 
 import fbia
-from fbia.iterators.gp_surrogate import GpSurrogate, matern32_cross
+from fbia.iterators.surrogates.gp import GpSurrogate, matern32_cross
 
 
 def _log_lik(x):
@@ -145,7 +145,7 @@ def test_fused_product_kernel_equals_gpys_product_with_exact_gradients():
     """The one-pass kernel (gp_kernels.py) is GPy's product of 1-D Matérn 3/2 kernels."""
     import GPy
 
-    from fbia.iterators.gp_kernels import Matern32Product
+    from fbia.iterators.surrogates.kernels import Matern32Product
 
     rng = np.random.default_rng(3)
     x = rng.standard_normal((40, 4))
@@ -177,7 +177,7 @@ def test_guard_caps_a_mean_that_overshoots_outside_the_data_and_counts_it():
     """Issue 16, item 4: a concave quadratic peaking at (2, 2), trained on [0, 1]^2. The GP
     carries the rise on beyond the data (to hundreds of units above the largest training
     value, above the true function); the guard caps it at max L + chi2_2(0.999) / 2."""
-    from fbia.iterators.smc import SmcResult
+    from fbia.iterators.smc.sampler import SmcResult
 
     x = qmc.Sobol(2, scramble=True, seed=4).random(64)
     y = -100.0 * np.sum((x - 2.0) ** 2, axis=1)

@@ -3,8 +3,8 @@ what it is for: a surrogate that follows a tilted ridge beyond the runs."""
 
 import numpy as np
 
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.gp_trend import QuadraticTrend
+from fbia.iterators.surrogates.gp import GpSurrogate
+from fbia.iterators.surrogates.trend import QuadraticTrend
 
 
 def ridge(x):

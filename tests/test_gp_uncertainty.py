@@ -19,15 +19,15 @@ import pytest
 from scipy.stats import qmc
 
 import fbia
-from fbia.iterators.gp_surrogate import GpSurrogate
-from fbia.iterators.gp_uncertainty import (
+from fbia.iterators.gp_smc.posterior import summarise, weighted_quantiles
+from fbia.iterators.smc.sampler import SmcResult
+from fbia.iterators.surrogates.gp import GpSurrogate
+from fbia.iterators.surrogates.uncertainty import (
     MAX_TAIL_MASS,
     MIN_ESS,
     marginalise_surrogate_uncertainty,
     reweight_by_sample_paths,
 )
-from fbia.iterators.posterior import summarise, weighted_quantiles
-from fbia.iterators.smc import SmcResult
 
 LO, HI = np.array([100.0, 0.0]), np.array([1000.0, 0.49])  # E [Pa], nu [-]
 X0, STD, RHO = np.array([420.0, 0.31]), np.array([12.0, 0.008]), 0.6

@@ -21,7 +21,7 @@ import pytest
 pytest.importorskip("ngsolve")
 
 import fbia  # noqa: E402
-from fbia.plugins.ale_fsi.geometry import check_mesh, mesh_arrays  # noqa: E402
+from fbia.plugins.fem.flow_cell import check_mesh, mesh_arrays  # noqa: E402
 from fbia.plugins.growth.geometry import (  # noqa: E402
     finger_channel,
     finger_outline,

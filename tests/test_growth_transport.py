@@ -13,7 +13,7 @@ import pytest
 ngs = pytest.importorskip("ngsolve")
 
 from fbia.core.errors import ForwardModelError  # noqa: E402
-from fbia.plugins.ale_fsi.geometry import mesh_from_arrays  # noqa: E402
+from fbia.plugins.fem.flow_cell import mesh_from_arrays  # noqa: E402
 from fbia.plugins.growth.transport import NutrientTransport, TransportSettings  # noqa: E402
 
 D = 2.5e-3  # mm^2/s
@@ -324,8 +324,8 @@ def test_moving_biofilm_keeps_its_content():
 
 # -- 3. global balance on the flow cell ----------
 def test_balance_on_the_flow_cell_shrinks_with_the_mesh():
-    from fbia.plugins.ale_fsi.geometry import build_flow_cell
     from fbia.plugins.ale_fsi.solver import AleFsiSolver, SolverSettings
+    from fbia.plugins.fem.flow_cell import build_flow_cell
 
     residuals = []
     for h in (0.12, 0.06):

@@ -8,8 +8,8 @@ import tomllib
 import pytest
 from _studies import one_error_line
 
-from fbia.core.cli import main
 from fbia.core.registry import list_plugins
+from fbia.studies.cli import main
 
 MODELS = sorted(e.name for e in list_plugins() if e.kind == "forward_model")
 ITERATORS = sorted(e.name for e in list_plugins() if e.kind == "iterator")

@@ -401,7 +401,7 @@ def test_plots_two_parameters(tmp_path):
 def test_plots_three_parameters(tmp_path):
     X = np.column_stack([np.ones_like(T), T, np.exp(-T)])
     result = fbia.least_squares(lambda b: X @ b - Y, [0.0, 0.0, 0.0])
-    from fbia.iterators.lm_plots import plot_lm_result
+    from fbia.iterators.lm.plots import plot_lm_result
 
     files = plot_lm_result(result, None, tmp_path / "out")
     assert sorted(f.name for f in files) == ["lm_errors.png", "lm_parameter_paths.png"]
@@ -410,7 +410,7 @@ def test_plots_three_parameters(tmp_path):
 @pytest.mark.parametrize(
     "module",
     [
-        "fbia.iterators.lm_robust",
+        "fbia.iterators.lm.robust",
         "fbia.iterators.levenberg_marquardt",
     ],
 )

@@ -8,7 +8,7 @@ import json
 import pytest
 
 import fbia
-from fbia.core.cli import main
+from fbia.studies.cli import main
 
 FAST = {"n_train": 128, "n_particles": 1000, "n_rejuvenation": 5, "zeta": 0.9, "seed": 0}
 

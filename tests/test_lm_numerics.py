@@ -1,13 +1,13 @@
 """The numerics under the robust LM mode: finite-difference stencils and the predicted
-reduction of the trust-region step (``fbia.iterators.finite_differences``, ``trust_region``)."""
+reduction of the trust-region step (``fbia.iterators.lm.finite_differences``, ``trust_region``)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fbia.iterators.finite_differences import central_factor, central_stencil, forward_steps
-from fbia.iterators.trust_region import lm_step, predicted_reduction
+from fbia.iterators.lm.finite_differences import central_factor, central_stencil, forward_steps
+from fbia.iterators.lm.trust_region import lm_step, predicted_reduction
 
 T = np.linspace(0.0, 2.0, 7)
 

@@ -14,7 +14,7 @@ import pytest
 from _models import toy_problem
 
 import fbia
-from fbia.core.isolation import escaped_message
+from fbia.execution.isolation import escaped_message
 
 EXECUTORS: dict[str, Callable[[Path], fbia.BatchEvaluator]] = {
     "serial": lambda wd: fbia.SerialEvaluator(workdir=wd),

@@ -135,7 +135,7 @@ def test_sigma_n_posterior_matches_quadrature(exact, tmp_path):
     assert lo < NOISE < hi
     assert "sigma_N = " in result.message and "inferred" in result.message
     # its marginal is drawn beside the parameters'
-    from fbia.iterators.gp_smc import GpSmcIterator
+    from fbia.iterators.gp_smc.iterator import GpSmcIterator
 
     (path,) = GpSmcIterator.write_plots(result, problem, tmp_path, figures=["marginals_1d"])
     assert path.name == "marginals_1d.png" and path.stat().st_size > 10_000

@@ -14,9 +14,9 @@ import pytest
 
 import fbia
 from fbia.core.errors import ConfigError
-from fbia.core.oct import OctOptions, segment_oct
-from fbia.core.oct_figures import write_segmentation_figures
+from fbia.imaging.oct import OctOptions, segment_oct
 from fbia.measures import CppMeasure, RkhsMeasure
+from fbia.studies.oct_figures import write_segmentation_figures
 from fbia.testing.oct import OctPhantom, oct_phantom, oct_volume_from_surface
 
 VOXEL = 0.01  # mm
@@ -141,7 +141,7 @@ def test_the_readers_give_the_same_interface(small, tmp_path):
     tifffile.imwrite(tmp_path / "v.tif", stack)
     nrrd.write(str(tmp_path / "v.nrrd"), small.volume, index_order="C")
     for name, axis in [("v.npy", 0), ("v.npz", 0), ("v.tif", 1), ("v.nrrd", 0)]:
-        obs = fbia.Observation.from_oct(
+        obs = fbia.observation_from_oct(
             tmp_path / name, small.voxel_size, {"inflow_rate": 0.0}, depth_axis=axis
         )
         assert obs.coordinate == {"inflow_rate": 0.0}
@@ -231,7 +231,7 @@ def test_options_are_a_strict_schema():
 
 def test_the_measures_take_the_extracted_interface_as_an_observation():
     ph = phantom(0)
-    obs = fbia.Observation.from_oct(
+    obs = fbia.observation_from_oct(
         ph.volume, ph.voxel_size, {"inflow_rate": 100.0}, attenuation=MU
     )
     r = CppMeasure().residuals(ph.surface(n=64, min_height=2 * VOXEL), obs)

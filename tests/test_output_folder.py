@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from _studies import one_error_line
 
-from fbia.core.cli import main
 from fbia.core.errors import ConfigError
-from fbia.core.output_folder import OutputLock, clear_runs, is_fbia_store
+from fbia.storage.output_folder import OutputLock, clear_runs, is_fbia_store
+from fbia.studies.cli import main
 
 
 def test_forward_into_a_running_studys_folder_is_refused_and_changes_nothing(

@@ -126,7 +126,7 @@ def test_a_study_with_a_missing_extra_is_refused_at_validate(tmp_path):
         '[measure]\nname = "ray"\n'
     )
     done = _core_only(
-        "from fbia.core.cli import main\nraise SystemExit(main(['validate', 'study.toml']))",
+        "from fbia.studies.cli import main\nraise SystemExit(main(['validate', 'study.toml']))",
         tmp_path,
     )
     assert done.returncode == 2
@@ -156,7 +156,7 @@ def test_the_wheel_holds_every_sub_package_and_module(tmp_path):
 
 def test_fbia_plugins_says_which_modules_a_plugin_misses(tmp_path):
     done = _core_only(
-        "from fbia.core.cli import main\nraise SystemExit(main(['plugins']))", tmp_path
+        "from fbia.studies.cli import main\nraise SystemExit(main(['plugins']))", tmp_path
     )
     assert done.returncode == 0, done.stderr
     rows = {line.split()[0]: line for line in done.stdout.splitlines()[2:]}

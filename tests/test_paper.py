@@ -12,11 +12,11 @@ import pytest
 from _studies import STUDY, one_error_line, write_study
 
 import fbia
-from fbia.core.cli import main
-from fbia.core.paper import KINDS, compare, lookup, read_paper
-from fbia.core.paper_report import PaperRecord, comparison_table, rules_table, write_summary
-from fbia.iterators.gp_smc_result import DesignRuns, GpSmcResult, ParticlePosterior, PosteriorCheck
-from fbia.iterators.surrogate_convergence_result import ConvergenceRow, SurrogateConvergenceResult
+from fbia.iterators.convergence.result import ConvergenceRow, SurrogateConvergenceResult
+from fbia.iterators.gp_smc.result import DesignRuns, GpSmcResult, ParticlePosterior, PosteriorCheck
+from fbia.studies.cli import main
+from fbia.studies.paper import KINDS, compare, lookup, read_paper
+from fbia.studies.paper_report import PaperRecord, comparison_table, rules_table, write_summary
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PAPER_STUDIES = sorted(
@@ -58,7 +58,7 @@ paper = 1
 KINDS_LIST = "modulus, ratio, scale, count, ordering, shown"
 
 
-def _spec(values: list[dict], **paper) -> fbia.core.paper.PaperSpec:
+def _spec(values: list[dict], **paper) -> fbia.studies.paper.PaperSpec:
     return read_paper({"source": "S", **paper, "values": values}, "s.toml")
 
 

@@ -10,8 +10,8 @@ import pytest
 from _studies import one_error_line
 
 import fbia
-from fbia.core.cli import main
-from fbia.core.paper_report import write_summary
+from fbia.studies.cli import main
+from fbia.studies.paper_report import write_summary
 
 
 def test_summary_refuses_a_foreign_json(tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from _models import toy_problem
 
-from fbia.core.plots import _residuals_um, plot_interfaces
+from fbia.studies.plots import _residuals_um, plot_interfaces
 
 
 def test_the_residual_panel_shows_the_measures_residuals_in_micrometres(tmp_path):
@@ -26,7 +26,7 @@ def test_the_residual_panel_shows_the_measures_residuals_in_micrometres(tmp_path
 
 def test_a_plot_without_labelled_artists_gets_no_legend_and_no_warning(recwarn):
     """An empty plot (every run failed) prints no "No artists with labels" warning: every
-    legend of fbia's plots goes through fbia.core.plots.legend (issue 31 item 6)."""
+    legend of fbia's plots goes through fbia.studies.plots.legend (issue 31 item 6)."""
     import pathlib
     import re
 
@@ -35,7 +35,7 @@ def test_a_plot_without_labelled_artists_gets_no_legend_and_no_warning(recwarn):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fbia.core.plots import legend
+    from fbia.imaging.figures import legend
 
     fig, ax = plt.subplots()
     ax.plot([0, 1], [0, 1])  # no label
@@ -68,7 +68,7 @@ def test_no_figure_of_a_calibration_is_clipped(tmp_path):
     from matplotlib.figure import Figure
 
     import fbia
-    from fbia.core.plots import plot_interfaces
+    from fbia.studies.plots import plot_interfaces
 
     clipped: dict[str, list[int]] = {}
     saved: list[str] = []

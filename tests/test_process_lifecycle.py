@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from _models import _alive, toy_problem
 
-from fbia.core.isolation import _recv, _send
+from fbia.execution.isolation import _recv, _send
 
 TESTS = Path(__file__).resolve().parent
 
@@ -96,7 +96,7 @@ def _helper(tmp_path: Path) -> tuple[subprocess.Popen[bytes], int, int, Path]:
             [
                 sys.executable,
                 "-c",
-                "from fbia.core.isolation import _helper_main; _helper_main()",
+                "from fbia.execution.isolation import _helper_main; _helper_main()",
                 str(job_r),
                 str(res_w),
             ],

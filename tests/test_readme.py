@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from fbia.core.cli import main as fbia_main
+from fbia.studies.cli import main as fbia_main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"

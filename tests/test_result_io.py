@@ -12,9 +12,9 @@ import pytest
 from _studies import edit
 
 import fbia
-from fbia.core.cli import main
-from fbia.iterators.gp_smc_result import GpSmcResult
-from fbia.iterators.lm_result import LMResult
+from fbia.iterators.gp_smc.result import GpSmcResult
+from fbia.iterators.lm.result import LMResult
+from fbia.studies.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -84,7 +84,7 @@ def test_what_is_not_a_result_is_one_line(tmp_path):
 def test_a_field_the_file_does_not_hold_is_none_and_a_wrong_type_is_one_line(tmp_path):
     from dataclasses import dataclass
 
-    from fbia.core.result_io import from_dict
+    from fbia.studies.result_io import from_dict
 
     @dataclass
     class Row:

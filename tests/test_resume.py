@@ -20,11 +20,11 @@ import pytest
 from _models import PLUGIN, write_driver
 
 import fbia
-from fbia.core import study_file as study_module
-from fbia.core.cli import main
 from fbia.core.registry import Registry
-from fbia.core.store import StudyStore
-from fbia.core.study_file import load_study
+from fbia.storage.store import StudyStore
+from fbia.studies import study_file as study_module
+from fbia.studies.cli import main
+from fbia.studies.study_file import load_study
 
 STUDY = """\
 [study]

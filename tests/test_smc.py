@@ -7,8 +7,8 @@ import pytest
 from scipy import stats
 
 import fbia
-from fbia.iterators.smc import SequentialMonteCarlo, ess, systematic_resample
-from fbia.iterators.smc_tempering import EssTempering, default_max_steps
+from fbia.iterators.smc.sampler import SequentialMonteCarlo, ess, systematic_resample
+from fbia.iterators.smc.tempering import EssTempering, default_max_steps
 
 N = 2000
 
@@ -200,7 +200,7 @@ def test_wrong_output_shape_is_a_config_error():
 
 
 def test_fbia_smc_is_the_standalone_sampler():
-    from fbia.iterators import smc as smc_module
+    from fbia.iterators.smc import sampler as smc_module
 
     assert fbia.smc is smc_module.smc
     assert "gp_smc" in {e.name for e in fbia.list_plugins("iterator")}

@@ -1,4 +1,4 @@
-"""Tabulated log-densities for Algorithm 1 (fbia.iterators.smc_table): the spline is scipy's,
+"""Tabulated log-densities for Algorithm 1 (fbia.iterators.smc.table): the spline is scipy's,
 it converges at order 4, the sampler on the table gives the exact posterior, and a run is the
 same on one thread and on two."""
 
@@ -10,8 +10,8 @@ import pytest
 from scipy.ndimage import map_coordinates
 
 import fbia
-from fbia.iterators.smc import SequentialMonteCarlo
-from fbia.iterators.smc_table import LogTables, tabulable
+from fbia.iterators.smc.sampler import SequentialMonteCarlo
+from fbia.iterators.smc.table import LogTables, tabulable
 
 PRIORS = [fbia.priors.uniform(50.0, 1000.0), fbia.priors.uniform(-0.8, 0.5)]
 

@@ -10,8 +10,8 @@ import numpy as np
 from scipy import stats
 
 import fbia
-from fbia.iterators.gp_surrogate import GpSurrogate
 from fbia.iterators.sobol_indices import sobol_indices
+from fbia.iterators.surrogates.gp import GpSurrogate
 
 A, B = 7.0, 0.1
 PI = math.pi
@@ -99,7 +99,7 @@ def test_a_starved_design_is_reported_unreliable():
 
 
 def test_a_study_file_runs_the_indices_and_writes_the_plot(study_file, tmp_path, capsys):
-    from fbia.core.cli import main
+    from fbia.studies.cli import main
 
     study = study_file
     text = study.read_text()

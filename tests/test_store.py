@@ -15,7 +15,8 @@ import pytest
 from _models import toy_curve, toy_problem
 
 import fbia
-from fbia.core.fingerprints import (
+from fbia.core.likelihood import gaussian_log_likelihood
+from fbia.storage.fingerprints import (
     comparison_key,
     comparison_part,
     coordinates_of,
@@ -23,8 +24,7 @@ from fbia.core.fingerprints import (
     problem_fingerprint,
     run_key,
 )
-from fbia.core.likelihood import gaussian_log_likelihood
-from fbia.core.store import StudyStore
+from fbia.storage.store import StudyStore
 
 POINTS = [{"E": 200.0, "nu": 0.1}, {"E": 400.0, "nu": 0.3}, {"E": 700.0, "nu": 0.2}]
 
@@ -267,8 +267,8 @@ def test_a_file_option_counts_by_its_content_not_its_folder(tmp_path):
     """A mesh file named by a study: moving the study keeps its store, editing the file not."""
     from pathlib import Path
 
-    from fbia.core.fingerprints import _options
     from fbia.core.options import PluginOptions
+    from fbia.storage.fingerprints import _options
 
     class Options(PluginOptions):
         mesh_file: Path | None = None

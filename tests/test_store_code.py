@@ -16,16 +16,16 @@ import pytest
 from _models import toy_problem
 
 import fbia
-from fbia.core.fingerprints import (
+from fbia.core.options import plugin_options
+from fbia.storage.fingerprints import (
     canonical,
     code_digest,
     coordinates_of,
     model_part,
     problem_fingerprint,
 )
-from fbia.core.options import plugin_options
-from fbia.core.store import StudyStore
-from fbia.core.store_migration import rekey
+from fbia.storage.migration import rekey
+from fbia.storage.store import StudyStore
 
 POINTS = [{"E": 200.0, "nu": 0.1}, {"E": 400.0, "nu": 0.3}, {"E": 700.0, "nu": 0.2}]
 
@@ -151,7 +151,7 @@ def test_the_code_digest_covers_a_plugin_package_and_only_it():
 def test_a_package_upgrade_keeps_the_runs_of_a_plugin_with_a_numerics_version(
     tmp_path, plugin, monkeypatch
 ):
-    from fbia.core import fingerprints
+    from fbia.storage import fingerprints
 
     path = tmp_path / "s.sqlite"
     declared = plugin(attrs='    numerics_version = "1"')
@@ -206,7 +206,7 @@ def test_a_mesh_file_is_keyed_by_its_content_not_its_header(tmp_path, plugin):
 def test_a_store_keyed_by_a_mesh_files_bytes_is_rekeyed_when_the_bytes_are_the_same(
     tmp_path, plugin
 ):
-    from fbia.core import fingerprints
+    from fbia.storage import fingerprints
 
     path = tmp_path / "s.sqlite"
     model = _surface_plugin(plugin)
@@ -246,7 +246,7 @@ def test_a_new_release_with_the_same_numerics_keeps_the_runs_an_edit_does_not(
     numerics_version, although its code changed; the same edit without a new version (a
     user editing the installed plugin) is refused, and so is a release that declares other
     numerics (another model: another key)."""
-    from fbia.core import fingerprints
+    from fbia.storage import fingerprints
 
     path = tmp_path / "s.sqlite"
     monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "1.0.0")

@@ -16,8 +16,8 @@ import pytest
 from _studies import write_study
 
 from fbia.core.errors import StoreError
-from fbia.core.store import StudyStore
-from fbia.core.store_db import store_error
+from fbia.storage.db import store_error
+from fbia.storage.store import StudyStore
 
 _FULL_DISK = textwrap.dedent(
     """
@@ -25,7 +25,7 @@ _FULL_DISK = textwrap.dedent(
     limit = int(sys.argv[1])
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-    from fbia.core.cli import main
+    from fbia.studies.cli import main
     sys.exit(main(sys.argv[2:]))
     """
 )
@@ -33,7 +33,7 @@ _FULL_DISK = textwrap.dedent(
 
 def _run(tmp_path, *argv: str, limit: int | None = None) -> subprocess.CompletedProcess[str]:
     (tmp_path / "full.py").write_text(_FULL_DISK)
-    head = ["full.py", str(limit)] if limit else ["-m", "fbia.core.cli"]
+    head = ["full.py", str(limit)] if limit else ["-m", "fbia.studies.cli"]
     return subprocess.run(
         [sys.executable, *head, *argv], cwd=tmp_path, capture_output=True, text=True, timeout=120
     )

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import fbia
-from fbia.core import fingerprints
-from fbia.core.store import STORE_FORMAT, StudyStore
+from fbia.storage import fingerprints
+from fbia.storage.store import STORE_FORMAT, StudyStore
 
 DATA = Path(__file__).parent / "data" / "store_v1"
 EXPECTED = json.loads((DATA / "expected.json").read_text())

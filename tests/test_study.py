@@ -13,8 +13,8 @@ from _studies import BAD_CASES, STUDY, TRUTH, write_study
 
 import fbia
 from fbia.core.registry import Registry
-from fbia.core.study import ExecutorSpec, derived_seed
-from fbia.core.study_file import load_study
+from fbia.studies.study import ExecutorSpec, derived_seed
+from fbia.studies.study_file import load_study
 
 
 @pytest.fixture(scope="module")
@@ -275,7 +275,7 @@ def test_synthetic_data_noise_is_not_the_likelihood_sigma(tmp_path, monkeypatch)
     ],
 )
 def test_section_schemas_give_one_located_line(section, table, message):
-    from fbia.core import study_schema
+    from fbia.studies import study_schema
 
     model = {
         "executor": study_schema.ExecutorSection,

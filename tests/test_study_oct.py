@@ -1,9 +1,9 @@
-"""Study files that read OCT scans: ``[[observations]] oct = ...`` (fbia.core.study_oct).
+"""Study files that read OCT scans: ``[[observations]] oct = ...`` (fbia.studies.study_oct).
 
 The scan is a synthetic OCT volume (fbia.testing.oct) of the closed-form 3-D dome
 ``analytic_mound_3d`` at E = 400 Pa, nu = 0.3, inflow 100 mm^3/s: 60 x 50 x 100 voxels of
 10 um x 20 um x 20 um, seeded.  The study segments it when it is read; what it observes must
-be bit-equal to what :func:`fbia.core.oct.segment_oct` gives for the same options (so the
+be bit-equal to what :func:`fbia.imaging.oct.segment_oct` gives for the same options (so the
 study is the Python recipe, not an approximation of it), its record must carry the digest
 the store keys comparisons by, and a changed option must give the result of a fresh run
 with that option (the store compares its runs with the new surface, never with the old).
@@ -19,9 +19,9 @@ import pytest
 from _studies import one_error_line
 
 import fbia
-from fbia.core.cli import main
-from fbia.core.fingerprints import problem_fingerprint
-from fbia.core.oct import in_model_axes, segment_oct
+from fbia.imaging.oct import in_model_axes, segment_oct
+from fbia.storage.fingerprints import problem_fingerprint
+from fbia.studies.cli import main
 from fbia.testing.oct import oct_volume_from_surface
 
 VOXEL = (0.01, 0.02, 0.02)  # (dz, dy, dx) mm

@@ -9,8 +9,8 @@ import pytest
 from _studies import STUDY, write_study
 
 import fbia
-from fbia.core.store import StudyStore
-from fbia.iterators.gp_design import sobol_design
+from fbia.iterators.surrogates.design import sobol_design
+from fbia.storage.store import StudyStore
 
 TRUTH = {"E": 400.0, "nu": 0.3}
 

@@ -8,10 +8,10 @@
    :data:`VOXEL_SIZE`, partial volume, speckle (2 looks), Beer–Lambert attenuation
    (:data:`ATTENUATION`) and a noise floor, seeded.  Axes: the model's flow direction x is
    the scan's x, the model's span z is the scan's y, the model's height y is the scan's
-   height above the substratum (:func:`fbia.core.oct.in_model_axes` with
+   height above the substratum (:func:`fbia.imaging.oct.in_model_axes` with
    ``height_axis = "y"``, its own inverse).  Written as ``data/scan_loaded.npy`` (depth, y, x) with
    ``data/scan_loaded.json`` (voxel size, attenuation).
-3. :func:`fbia.core.oct.segment_oct` segments it (Otsu threshold, marching cubes, the known
+3. :func:`fbia.imaging.oct.segment_oct` segments it (Otsu threshold, marching cubes, the known
    attenuation compensated); the surface, mapped back to the model's axes, is the observed
    interface ``data/observed_100.ply`` of ``study_lm.toml`` and ``study_bayes.toml``
    (``study_lm_scan.toml`` reads the scan itself: ``[[observations]] oct = {...}``).
@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 import fbia
-from fbia.core.oct import OctSegmentation, in_model_axes, segment_oct
-from fbia.core.oct_figures import write_segmentation_figures
+from fbia.imaging.oct import OctSegmentation, in_model_axes, segment_oct
 from fbia.plugins.ale_fsi.colony3d import colony_from_oct
+from fbia.studies.oct_figures import write_segmentation_figures
 from fbia.testing.oct import oct_volume_from_surface
 
 HERE = Path(__file__).parent

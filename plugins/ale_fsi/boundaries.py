@@ -14,7 +14,7 @@
 * :func:`normal_axis`: the axis a boundary is normal to, if it is planar and axis-aligned
   (``symmetry`` side walls: v and d normal to them vanish).
 
-Boundary names per :mod:`fbia.plugins.ale_fsi.geometry`.
+Boundary names per :mod:`fbia.plugins.fem.flow_cell`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
-from .geometry import FLUID
+from ..fem.flow_cell import FLUID
 
 __all__ = ["InflowFace", "InflowSegment", "inflow_of", "mesh_dirichlet", "normal_axis"]
 

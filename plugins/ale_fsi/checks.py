@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
-from .geometry import FLUID
+from ..fem.flow_cell import FLUID
 
 
 class CheckedState(Protocol):

@@ -3,7 +3,7 @@
 ``geometry = "colony_3d"`` meshes the duct of ``dome_3d`` (``length x height x width``, floor
 ``y = 0``, flow along x) with the colony given as a triangulated surface in a file -- any
 format meshio or trimesh reads (STL, PLY, OBJ, VTU), closed (with its base on the floor) or
-open (the upper surface alone, as :func:`fbia.core.oct.segment_oct` writes it) -- in the
+open (the upper surface alone, as :func:`fbia.imaging.oct.segment_oct` writes it) -- in the
 model's axes (x along the flow, y the height above the floor, z across).
 
 Construction (:func:`build_colony_cell`):
@@ -28,7 +28,7 @@ Construction (:func:`build_colony_cell`):
 
 :func:`colony_from_oct` is the one step from an unloaded OCT scan to the ``colony_surface``
 file: segment, map the OCT frame (x, y = span, z = height) to the model's (x, y = height,
-z = span) by :func:`fbia.core.oct.in_model_axes`, write.
+z = span) by :func:`fbia.imaging.oct.in_model_axes`, write.
 
 >>> from fbia.plugins.ale_fsi.colony3d import build_colony_cell
 >>> mesh = build_colony_cell("colony.ply", interface_mesh_size=0.15)  # doctest: +SKIP
@@ -45,13 +45,13 @@ from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
 from ...core.interface import Interface
-from .geometry import FLUID, SOLID, check_mesh
+from ..fem.flow_cell import FLUID, SOLID, check_mesh
 from .geometry3d import _named, _split_locked_tets, mesh_from_arrays_3d
 
 if TYPE_CHECKING:
     import ngsolve
 
-    from ...core.oct import OctSegmentation
+    from ...imaging.oct import OctSegmentation
 
 __all__ = [
     "ColonyHeightField",
@@ -378,12 +378,12 @@ def colony_from_oct(
     """Segment an (unloaded) OCT scan and write its surface, in model axes, to ``path``: the
     ``colony_surface`` of a ``colony_3d`` model whose reference geometry is the scan.
 
-    ``source`` and ``options`` are those of :func:`fbia.core.oct.segment_oct` (an array or a
+    ``source`` and ``options`` are those of :func:`fbia.imaging.oct.segment_oct` (an array or a
     .npy/.npz/TIFF/NRRD file; ``attenuation``, ``crop_mm``, ...); the scan's x and y (in mm
     from its voxel 0) become the model's x and z, so give the model the duct the scan
     shows, or move the colony by ``colony_offset``.  Returns the segmentation (for figures).
     """
-    from ...core.oct import in_model_axes, segment_oct
+    from ...imaging.oct import in_model_axes, segment_oct
 
     seg = segment_oct(source, voxel_size, **options)
     in_model_axes(seg.interface, "y").write(path)

@@ -30,7 +30,7 @@ on the reference mesh, so it is assembled once and added to every Jacobian.
 and :class:`~fbia.plugins.fem.continuation.ArclengthContinuation` need);
 :class:`~fbia.plugins.ale_fsi.solver.AleFsiSolver` adds the solution algorithms.
 
->>> from fbia.plugins.ale_fsi.geometry import build_flow_cell
+>>> from fbia.plugins.fem.flow_cell import build_flow_cell
 >>> from fbia.plugins.ale_fsi.solver import AleFsiSolver, SolverSettings
 >>> solver = AleFsiSolver(build_flow_cell(mesh_size=0.2), SolverSettings())  # doctest: +SKIP
 >>> solver.set_materials({"solid": (400.0, 0.3)})                             # doctest: +SKIP
@@ -47,9 +47,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..fem.flow_cell import FLUID, solid_regions
 from .boundaries import inflow_of, mesh_dirichlet, symmetry_axis
 from .checks import StateChecks
-from .geometry import FLUID, solid_regions
 from .materials import lame, stress_pk2
 
 if TYPE_CHECKING:
@@ -87,7 +87,7 @@ class AleFsiProblem:
     Parameters
     ----------
     mesh
-        A mesh named per :mod:`fbia.plugins.ale_fsi.geometry`.
+        A mesh named per :mod:`fbia.plugins.fem.flow_cell`.
     settings
         Physics and numerics.
     """

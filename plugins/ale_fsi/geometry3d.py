@@ -1,6 +1,6 @@
 """3-D flow cells for the ALE FSI model: a dome on the floor of a duct, and a long ridge.
 
-Both meshes follow the names of :mod:`fbia.plugins.ale_fsi.geometry` (regions ``fluid`` and
+Both meshes follow the names of :mod:`fbia.plugins.fem.flow_cell` (regions ``fluid`` and
 ``solid``; boundaries ``inflow`` at ``x = 0``, ``outflow`` at ``x = length``, ``walls``,
 ``interface``, ``solid_fixed``, and for the ridge ``symmetry``), with the floor at ``y = 0``
 and the depth along z:
@@ -10,7 +10,7 @@ and the depth along z:
   ``z <= width/2`` and the mesh is mirrored, so that it -- and a steady state on it -- is
   mirror-symmetric to rounding, and a symmetry test is exact up to the solver's tolerance;
 * :func:`build_ridge_cell` -- the 2-D flow cell of
-  :func:`~fbia.plugins.ale_fsi.geometry.build_flow_cell` extruded over ``depth`` in ``layers``
+  :func:`~fbia.plugins.fem.flow_cell.build_flow_cell` extruded over ``depth`` in ``layers``
   layers (every triangle a prism of three tetrahedra), with ``symmetry`` side walls: the
   plane-strain limit, where the 3-D model must give the 2-D model's answer.
 
@@ -39,8 +39,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
-from .geometry import FLUID, SOLID, build_flow_cell, check_mesh, mesh_arrays
-from .outlines import DEFAULT_OUTLINE
+from ..fem.flow_cell import FLUID, SOLID, build_flow_cell, check_mesh, mesh_arrays
+from ..fem.outlines import DEFAULT_OUTLINE
 
 if TYPE_CHECKING:
     import ngsolve

@@ -1,6 +1,6 @@
 """A user's 3-D tetrahedral mesh for the ALE FSI model: read (gmsh, VTU, netgen .vol) and write.
 
-The names are those of the 2-D convention (:mod:`fbia.plugins.ale_fsi.geometry`): tetrahedra
+The names are those of the 2-D convention (:mod:`fbia.plugins.fem.flow_cell`): tetrahedra
 in regions ``fluid`` and ``solid`` or ``solid_1..n`` (subdomains with parameters ``E_k``,
 ``nu_k``), boundary triangles in ``inflow``, ``outflow``, ``walls``, ``interface``,
 ``solid_fixed`` (and optionally ``symmetry``, ``obstacle``, ``internal``):
@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
-from .geometry import (
+from ..fem.flow_cell import (
     FLUID,
     REQUIRED_BOUNDARIES,
     SOLID,

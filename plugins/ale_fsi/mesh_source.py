@@ -1,7 +1,7 @@
 """Where the ``ale_fsi`` mesh comes from: a user's mesh file or one of the built-in cells.
 
 :func:`build_mesh` dispatches on the options (``mesh_file``, ``geometry``) to
-:mod:`~fbia.plugins.ale_fsi.geometry` (2-D flow cell, 2-D mesh files),
+:mod:`~fbia.plugins.fem.flow_cell` (2-D flow cell, 2-D mesh files),
 :mod:`~fbia.plugins.ale_fsi.mesh_file3d` (3-D mesh files),
 :mod:`~fbia.plugins.ale_fsi.geometry3d` (3-D dome and ridge) and
 :mod:`~fbia.plugins.ale_fsi.colony3d` (a user's 3-D colony surface); :func:`regions_in_file`
@@ -15,14 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from ...core.errors import ConfigError
-from .geometry import BOUNDARY_NAMES, FLUID, SOLID
+from ..fem.flow_cell import BOUNDARY_NAMES, FLUID, SOLID
+from ..fem.outlines import resolve_outline
 from .options import AleFsiOptions
-from .outlines import resolve_outline
 
 
 def build_mesh(o: AleFsiOptions) -> Any:
     """The NGSolve mesh for these options (built or read on every call)."""
-    from . import geometry
+    from ..fem import flow_cell as geometry
 
     if o.mesh_file is not None:
         from .mesh_file3d import is_3d_mesh_file, read_mesh_3d
@@ -90,7 +90,7 @@ def build_mesh(o: AleFsiOptions) -> Any:
 
 def regions_in_file(path: Path) -> list[str]:
     """Solid region names in a mesh file, read with meshio (no NGSolve needed)."""
-    from .geometry import read_mesh_names
+    from ..fem.flow_cell import read_mesh_names
     from .mesh_file3d import is_3d_mesh_file, read_mesh_names_3d
 
     names = read_mesh_names_3d(path) if is_3d_mesh_file(path) else read_mesh_names(path)

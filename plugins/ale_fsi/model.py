@@ -53,7 +53,7 @@ from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Coordinate, Solution
 from ...core.options import Configurable, PluginOptions
-from .geometry import SOLID
+from ..fem.flow_cell import SOLID
 from .mesh_source import build_mesh, regions_in_file
 from .options import AleFsiOptions, solver_settings
 
@@ -87,7 +87,7 @@ class AleFsiForwardModel(Configurable):
     requires = ("ngsolve", "netgen")
 
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
-    #: package version: fbia.core.fingerprints)
+    #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
 
     Options = AleFsiOptions

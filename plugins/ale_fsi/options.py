@@ -13,7 +13,12 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from ...core.options import PluginOptions
-from .outlines import DEFAULT_INTERFACE_MESH_SIZE, NAMED_OUTLINES, OutlineName, outline_mesh_size
+from ..fem.outlines import (
+    DEFAULT_INTERFACE_MESH_SIZE,
+    NAMED_OUTLINES,
+    OutlineName,
+    outline_mesh_size,
+)
 
 Point = tuple[float, float]
 Probe = tuple[float, float] | tuple[float, float, float]  # one coordinate per mesh dimension
@@ -74,7 +79,7 @@ class AleFsiOptions(PluginOptions):
         description="biofilm outline from the upstream to the downstream foot, both on "
         "the floor y = 0, or a named one; default 'paper_a_facts', derived from the facts "
         "the thesis publishes about its mound ('fig2_sketch': fbia's earlier one; "
-        "fbia.plugins.ale_fsi.outlines) [mm]",
+        "fbia.plugins.fem.outlines) [mm]",
     )
     smooth_outline: bool = Field(
         True, description="interpolate the outline by a cubic spline (else polygon) [-]"

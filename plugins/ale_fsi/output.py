@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import FLUID, mesh_arrays
+from ..fem.flow_cell import FLUID, mesh_arrays
 
 
 def write_vtu(solver: Any, path: str | Path, extra: dict[str, np.ndarray] | None = None) -> Path:

@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.interface import Interface
+from ..fem.flow_cell import interface_chains, interface_triangles
 from .forms import AleFsiProblem
-from .geometry import interface_chains, interface_triangles
 
 
 class AleFsiPostprocess:

@@ -5,7 +5,7 @@ continuation in the inflow rate) and transient runs (one-step-theta).
 :class:`~fbia.plugins.fem.newton.NewtonSolver` and
 :class:`~fbia.plugins.fem.continuation.ArclengthContinuation` of :mod:`fbia.plugins.fem`.
 
->>> from fbia.plugins.ale_fsi.geometry import build_flow_cell
+>>> from fbia.plugins.fem.flow_cell import build_flow_cell
 >>> from fbia.plugins.ale_fsi.solver import AleFsiSolver, SolverSettings
 >>> solver = AleFsiSolver(build_flow_cell(mesh_size=0.2), SolverSettings())  # doctest: +SKIP
 >>> solver.set_materials({"solid": (400.0, 0.3)})                             # doctest: +SKIP
@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...core.errors import ForwardModelError
 from ..fem.continuation import ArclengthContinuation
+from ..fem.flow_cell import interface_chains
 from ..fem.newton import NewtonFailure, NewtonSolver, StepReport, sparse_direct_solver
 from .forms import AleFsiProblem, SolverSettings
-from .geometry import interface_chains
 from .materials import lame
 
 if TYPE_CHECKING:
@@ -37,7 +38,7 @@ class AleFsiSolver(AleFsiProblem):
     Parameters
     ----------
     mesh
-        A mesh named per :mod:`fbia.plugins.ale_fsi.geometry`.
+        A mesh named per :mod:`fbia.plugins.fem.flow_cell`.
     settings
         Physics and numerics.
     """
@@ -82,6 +83,20 @@ class AleFsiSolver(AleFsiProblem):
     @timings.setter
     def timings(self, value: dict[str, float]) -> None:
         self._newton.timings = value
+
+    # -- what other models built on this solver read from its state (growth) -----------------
+    def interface_nodal_forces(self) -> Any:
+        """The fluid's force on each interface vertex (``AleFsiPostprocess``)."""
+        from .postprocess import AleFsiPostprocess
+
+        return AleFsiPostprocess(self).interface_nodal_forces()
+
+    def write_vtu(self, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
+        """The current state as a VTU file (``output.write_vtu``), with ``extra`` vertex
+        fields."""
+        from .output import write_vtu
+
+        return write_vtu(self, path, extra)
 
     # -- quasi-static solution with continuation ---------------------------------------------
     def solve_steady(

@@ -61,7 +61,7 @@ def write_benchmark_mesh(
     import ngsolve
     from netgen.occ import Circle, Glue, OCCGeometry, Rectangle, X, Y
 
-    from .geometry import check_mesh, write_mesh
+    from ..fem.flow_cell import check_mesh, write_mesh
 
     h_bar = bar_mesh_size if bar_mesh_size is not None else mesh_size / 4.0
     h_cyl = cylinder_mesh_size if cylinder_mesh_size is not None else mesh_size / 3.0

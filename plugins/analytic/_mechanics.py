@@ -260,7 +260,7 @@ class MoundModel(Configurable):
     """
 
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
-    #: package version: fbia.core.fingerprints)
+    #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
 
     field_suffix = ".vtu"

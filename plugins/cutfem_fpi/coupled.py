@@ -73,7 +73,7 @@ class InterfaceSampler:
     def __init__(self, mesh: Any, per_edge: int) -> None:
         import ngsolve as ngs
 
-        from ..ale_fsi.geometry import interface_chains
+        from ..fem.flow_cell import interface_chains
 
         chains = interface_chains(mesh, ngs)
         if len(chains) != 1:

@@ -26,7 +26,7 @@ def channel_mesh(
     import ngsolve as ngs
     from netgen.occ import OCCGeometry, Rectangle, X, Y
 
-    from ..ale_fsi.geometry import mesh_arrays, mesh_from_arrays
+    from ..fem.flow_cell import mesh_arrays, mesh_from_arrays
 
     face = Rectangle(length, height).Face()
     face.edges.Min(X).name = "inflow"
@@ -47,7 +47,7 @@ def biofilm_mesh(
     boundaries ``interface`` (the outline) and ``solid_fixed`` (the floor).
 
     The outline runs from the upstream to the downstream foot on ``y = 0`` and is, with
-    ``smooth``, the same cubic spline as :func:`fbia.plugins.ale_fsi.geometry.build_flow_cell`
+    ``smooth``, the same cubic spline as :func:`fbia.plugins.fem.flow_cell.build_flow_cell`
     makes of it, so both models see the same biofilm.  ``curve_order`` 2 makes the element
     geometry follow the spline: on the default mound at h = 0.04 mm the reference interface
     is then 0.2 um off it, against 1.4 um with straight sides (``h^2 / (8 R)``).
@@ -92,7 +92,7 @@ class FlowCellFile:
 def read_flow_cell(path: str | Path) -> FlowCellFile:
     """The biofilm and channel of a flow-cell mesh file, the same file ``ale_fsi`` reads.
 
-    The file is read and its names checked by :func:`fbia.plugins.ale_fsi.geometry.read_mesh`
+    The file is read and its names checked by :func:`fbia.plugins.fem.flow_cell.read_mesh`
     (regions ``fluid``, ``solid`` or ``solid_1..n``; boundaries ``inflow``, ``outflow``,
     ``interface``, ``solid_fixed``, optional ``walls``); a file that breaks the convention
     raises its :class:`ConfigError`, which names the file.  Of the mesh, ``cutfem_fpi`` uses
@@ -108,7 +108,7 @@ def read_flow_cell(path: str | Path) -> FlowCellFile:
     """
     import ngsolve as ngs
 
-    from ..ale_fsi.geometry import (
+    from ..fem.flow_cell import (
         interface_chains,
         mesh_arrays,
         mesh_from_arrays,

@@ -40,7 +40,7 @@ from ...core.options import Configurable, PluginOptions
 Point = tuple[float, float]
 
 
-#: The default biofilm outline (a name of ``fbia.plugins.ale_fsi.outlines``).  Paper A's
+#: The default biofilm outline (a name of ``fbia.plugins.fem.outlines``).  Paper A's
 #: poroelastic example uses the same mound as its FSI examples, but ale_fsi's default
 #: ``paper_a_facts`` (issue 26) does not solve here yet: measured, the skeleton's Newton
 #: stagnates in coupling iteration 2 at 100 mm^2/s (scaled updates 0.21, 0.47, 0.046, 0.062)
@@ -66,7 +66,7 @@ class CutFemFpiForwardModel(Configurable):
     requires = ("ngsolve", "netgen", "xfem")
 
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
-    #: package version: fbia.core.fingerprints)
+    #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
 
     dim = 2
@@ -415,7 +415,7 @@ class CutFemFpiForwardModel(Configurable):
 
     def _outline(self) -> np.ndarray:
         """The biofilm outline option (mm), checked like the ``ale_fsi`` flow cell checks it."""
-        from ..ale_fsi.outlines import NAMED_OUTLINES
+        from ..fem.outlines import NAMED_OUTLINES
 
         o = self.options
         where = "cutfem_fpi options: outline"

@@ -7,7 +7,7 @@ axis at ``x0 = 0.2 mm``, a third of the length: 0.18 mm of channel upstream (at 
 parabolic inflow profile is developed at once) and 0.38 mm downstream for the wake.
 
 The interface helpers work on the vertices of an ``ale_fsi`` mesh (named per
-:mod:`fbia.plugins.ale_fsi.geometry`): the ordered vertex chains of the interface (solid on
+:mod:`fbia.plugins.fem.flow_cell`): the ordered vertex chains of the interface (solid on
 the right, i.e. from the upstream foot to the downstream foot), unit normals out of the
 biofilm, lumped nodal lengths and traction densities from ``ale_fsi``'s consistent nodal
 forces, all in the reference or a deformed configuration; :func:`interface_state` gives them
@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...core.errors import ConfigError
-from ..ale_fsi.geometry import build_flow_cell, interface_chains
+from ..fem.flow_cell import build_flow_cell, interface_chains
 
 if TYPE_CHECKING:
     import ngsolve
@@ -46,7 +46,7 @@ def finger_outline(
     From the upstream foot ``(x0 - width/2, 0)`` up the straight side, over the tip (``n_tip``
     equal chords of the semicircle of radius ``width/2`` centred at ``(x0, height - width/2)``)
     and down to the downstream foot: the solid lies on the right of the walking direction, as
-    :func:`~fbia.plugins.ale_fsi.geometry.build_flow_cell` expects.  The polygon is mirror
+    :func:`~fbia.plugins.fem.flow_cell.build_flow_cell` expects.  The polygon is mirror
     symmetric about ``x = x0`` for every ``n_tip``.
     """
     r = 0.5 * width
@@ -238,12 +238,10 @@ def interface_state(solver: Any, deformed: bool = True) -> list[InterfaceState]:
     ``deformed``: normals and nodal lengths of the deformed interface (the tractions act
     there), else of the reference one.  The tractions are always the deformed state's.
     """
-    from ..ale_fsi.postprocess import AleFsiPostprocess
-
     mesh = solver.mesh
     pts = vertex_coordinates(mesh)
     u = vertex_displacement(solver)
-    forces = AleFsiPostprocess(solver).interface_nodal_forces()
+    forces = solver.interface_nodal_forces()
     out = []
     for chain, closed in _interface_chains(mesh):
         disp = u if deformed else None

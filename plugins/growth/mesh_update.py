@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...core.errors import ForwardModelError
-from ..ale_fsi.geometry import mesh_arrays, mesh_from_arrays, solid_regions
+from ..fem.flow_cell import mesh_arrays, mesh_from_arrays, solid_regions
 from .geometry import interface_vertices, vertex_normals
 
 #: Outer boundaries held fixed by the extension (the interface is prescribed).
@@ -143,7 +143,7 @@ def grow_mesh(
     Parameters
     ----------
     mesh
-        A straight-sided ``ale_fsi`` mesh (:mod:`fbia.plugins.ale_fsi.geometry`); a curved
+        A straight-sided ``ale_fsi`` mesh (:mod:`fbia.plugins.fem.flow_cell`); a curved
         mesh is grown from its vertices and comes back straight.
     vertices, displacement
         Interface vertex numbers and their displacement (e.g. from

@@ -149,7 +149,7 @@ class GrowthForwardModel(Configurable):
     requires = ("ngsolve", "netgen")
 
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
-    #: package version: fbia.core.fingerprints)
+    #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
 
     Options = GrowthOptions
@@ -308,13 +308,11 @@ class GrowthForwardModel(Configurable):
     def _write_vtu(state: _StepState, growth: NDArray[Any], path: Path) -> Path:
         """The FSI state (velocity, pressure, displacement, interface force) with the nutrient
         ``phi`` [mol/mm^3] and the growth displacement ``growth`` [mm] of this step."""
-        from ..ale_fsi.output import write_vtu
-
         nv = state.solver.mesh.nv
         g = np.zeros((nv, 2))
         g[state.vertices] = growth
         phi = np.array(state.transport.phi.vec.FV().NumPy()[:nv], copy=True)
-        return write_vtu(state.solver, path, {"phi": phi, "growth": g})
+        return state.solver.write_vtu(path, {"phi": phi, "growth": g})
 
     def _growth(self, state: _StepState, params: dict[str, float], dt_g: float) -> NDArray[Any]:
         """Eq. 9 at the interface vertices."""
@@ -416,14 +414,14 @@ class GrowthForwardModel(Configurable):
         """The biofilm outline of the built mesh (mm): ``outline`` or the finger."""
         o = self.options
         if o.outline is not None:
-            from ..ale_fsi.outlines import resolve_outline
+            from ..fem.outlines import resolve_outline
 
             return np.asarray(resolve_outline(o.outline), dtype=float)
         return finger_outline(o.finger_x0, o.finger_width, o.finger_height)
 
     def build_mesh(self) -> Any:
         """The initial mesh: a user mesh, an outline in a channel, or the finger channel."""
-        from ..ale_fsi import geometry
+        from ..fem import flow_cell as geometry
 
         o = self.options
         if o.mesh_file is not None:

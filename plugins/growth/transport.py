@@ -78,7 +78,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
-from ..ale_fsi.geometry import FLUID, solid_regions
+from ..fem.flow_cell import FLUID, solid_regions
 from ..fem.newton import NewtonFailure, NewtonSolver, sparse_direct_solver
 
 __all__ = ["NutrientTransport", "TransportReport", "TransportSettings"]
@@ -118,7 +118,7 @@ class NutrientTransport:
     Parameters
     ----------
     mesh
-        A mesh named per :mod:`fbia.plugins.ale_fsi.geometry` (region ``fluid``, solid regions
+        A mesh named per :mod:`fbia.plugins.fem.flow_cell` (region ``fluid``, solid regions
         ``solid`` / ``solid_k``; boundary ``inflow`` Dirichlet, ``interface`` for the flux;
         every other boundary no-flux).  A mesh without fluid or without solid works too.
     settings

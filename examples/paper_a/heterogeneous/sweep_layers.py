@@ -34,11 +34,11 @@ import sys
 from pathlib import Path
 
 import fbia
-from fbia.core.draws import draw_study
+from fbia.studies.draws import draw_study
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "output_sweep_layers"
-HEIGHT = 0.5036  # mm, the mound's height (plugins/ale_fsi/outlines.py, "paper_a_facts")
+HEIGHT = 0.5036  # mm, the mound's height (plugins/fem/outlines.py, "paper_a_facts")
 TRUTH = {"E_1": 500.0, "nu_1": 0.2, "E_2": 200.0, "nu_2": 0.1, "E_3": 1000.0, "nu_3": 0.3}
 NOISE_SEED = 20220417  # make_data.py's
 
@@ -58,7 +58,7 @@ def layers(lo: float, hi: float) -> list[list[tuple[float, float]]]:
 def layer_areas(lo: float, hi: float) -> list[float]:
     from shapely.geometry import Polygon, box
 
-    from fbia.plugins.ale_fsi.outlines import NAMED_OUTLINES
+    from fbia.plugins.fem.outlines import NAMED_OUTLINES
 
     mound = Polygon(NAMED_OUTLINES["paper_a_facts"])
     y_lo, y_hi = lo * HEIGHT, hi * HEIGHT

@@ -19,7 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fbia.iterators.gp_surrogate import GpSurrogate  # noqa: E402
+from fbia.iterators.surrogates.gp import GpSurrogate  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 MEASURES = {"ray": "a  Euclidean distance (ray)", "cpp": "b  closest point (cpp)",

@@ -1,0 +1,343 @@
+"""The Dask executor: forward runs on a Dask cluster, from a laptop to SLURM or PBS.
+
+>>> import fbia
+>>> # a LocalCluster of 4 worker processes, started for the study and stopped with it:
+>>> # with fbia.make_evaluator("dask", workers=4, timeout=3600.0) as ev:
+>>> #     records = ev.evaluate(problem, points)
+>>> # an existing scheduler:   make_evaluator("dask", address="tcp://10.0.0.5:8786")
+>>> # a SLURM allocation:      make_evaluator("dask", cluster="slurm", workers=20,
+>>> #     cluster_options={"cores": 8, "memory": "16GB", "walltime": "04:00:00"})
+
+Three ways to get workers, chosen by the options (the study file's ``[executor]`` section):
+
+* ``address``: connect to a running scheduler (``dask scheduler`` + ``dask worker`` started by
+  hand or by a batch script).  The working folders must lie on a file system the workers share.
+  Dask's protocol is unauthenticated unless TLS is configured (Dask's ``security``): whoever
+  reaches the scheduler's port can run code on its workers, so start it on a trusted network
+  or with TLS.
+* ``cluster = "local"`` (default): a ``distributed.LocalCluster`` of ``workers`` processes with
+  one thread each, started for the study and closed with it.
+* ``cluster = "slurm" | "pbs" | "sge" | "lsf" | "htcondor" | "moab" | "oar"``: a
+  ``dask-jobqueue`` cluster (``pip install dask-jobqueue``) built from ``cluster_options``
+  (``cores``, ``memory``, ``walltime``, ``queue``, ``account``, ``job_extra_directives``,
+  ...), scaled to ``workers`` workers.
+
+``cluster_options`` are checked against an allow-list (:mod:`fbia.execution.cluster_options`): the
+options that run code (``preload``, ``job_script_prologue``, ``python``, ...) or bind network
+interfaces (``host``, ``interface``, ...) are refused.
+
+Every run is a task that evaluates in a child process of the worker
+(:mod:`fbia.execution.isolation`, ``isolate = True`` by default here): a time-out kills that
+child, not the worker, and a run that crashes its process costs the child only, instead of
+the worker and every other task on it (Dask would also retry a task whose worker died, three
+times by default).  The problem is
+scattered to the workers once; each task sends back only the record.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import time
+import uuid
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import ConfigError
+from ..core.extras import require
+from ..core.problem import Evaluable, Evaluation
+from .cluster_options import check_cluster_options
+from .evaluator import BatchEvaluator, Job
+from .isolation import RunOutcome, isolation_mode, run_isolated_or_here, run_view
+from .local_executors import workers_ignore_sigint
+from .resources import check_workers
+
+__all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator", "DaskExecutor"]
+
+Finish = Callable[[RunOutcome], Evaluation]
+
+#: ``cluster`` names of dask-jobqueue and their classes
+JOBQUEUE_CLUSTERS = {
+    "slurm": "SLURMCluster",
+    "pbs": "PBSCluster",
+    "sge": "SGECluster",
+    "lsf": "LSFCluster",
+    "htcondor": "HTCondorCluster",
+    "moab": "MoabCluster",
+    "oar": "OARCluster",
+}
+CLUSTERS = ("local", *JOBQUEUE_CLUSTERS)
+
+
+def _task(
+    problem: Evaluable,
+    x: dict[str, float],
+    workdir: str,
+    index: int,
+    timeout: float | None,
+    isolate: bool,
+) -> RunOutcome:
+    """One forward run on a Dask worker (in the worker's child process when ``isolate``)."""
+    from distributed import get_worker
+
+    outcome = run_isolated_or_here(problem, x, workdir, index, timeout, isolate)
+    try:
+        outcome.worker = str(get_worker().address)
+    except ValueError:  # not on a worker (a synchronous scheduler): keep host:pid
+        pass
+    return outcome
+
+
+class DaskExecutor:
+    """Runs each batch as Dask tasks, one task per forward run (a back end of
+    :class:`~fbia.execution.evaluator.BatchEvaluator`).
+
+    Parameters
+    ----------
+    address
+        Scheduler address of a running cluster, e.g. ``"tcp://10.0.0.5:8786"``.
+    workers
+        Worker processes of the cluster started here (default: the number of cores for
+        ``"local"``, 1 for a jobqueue cluster); not allowed with ``address``.
+    cluster
+        ``"local"`` or a dask-jobqueue kind (see :data:`JOBQUEUE_CLUSTERS`).
+    cluster_options
+        Keyword arguments of the cluster class (for ``"local"``: those of
+        ``distributed.LocalCluster``, e.g. ``memory_limit``), from an allow-list
+        (:mod:`fbia.execution.cluster_options`).
+    connect_timeout
+        Seconds to wait for the scheduler at ``address``.
+    timeout, isolate
+        See :mod:`fbia.execution.evaluator`; ``isolate`` defaults to True here.
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int | None = None,
+        cluster: str = "local",
+        cluster_options: Mapping[str, Any] | None = None,
+        connect_timeout: float = 30.0,
+        timeout: float | None = None,
+        isolate: bool | None = None,
+    ) -> None:
+        require(("distributed",), "the dask executor")
+        import distributed
+
+        if cluster not in CLUSTERS:
+            raise ConfigError(f"unknown cluster {cluster!r}; valid: {', '.join(CLUSTERS)}")
+        if workers is not None and workers < 1:
+            raise ConfigError(f"workers must be at least 1, got {workers}")
+        self.isolate = isolation_mode(timeout, isolate, default=True)
+        self.timeout = timeout
+        cluster_options = dict(cluster_options or {})
+        try:
+            check_cluster_options(cluster, cluster_options)
+        except ConfigError as exc:
+            raise ConfigError(f"cluster_options: {exc.reason}") from None
+        self.address = address
+        self.cluster_kind = "scheduler" if address else cluster
+        self._cluster: Any = None
+        self._token = uuid.uuid4().hex[:8]
+        self._scattered: tuple[Evaluable, Any] | None = None
+        self.client: Any = None
+        t0 = time.perf_counter()
+        try:
+            self._connect(distributed, address, workers, cluster, cluster_options, connect_timeout)
+        except BaseException:
+            self.close()  # a half-started cluster
+            raise
+        #: seconds taken to start (or reach) the cluster
+        self.startup_time = time.perf_counter() - t0
+
+    def _connect(
+        self,
+        distributed: Any,
+        address: str | None,
+        workers: int | None,
+        cluster: str,
+        cluster_options: dict[str, Any],
+        connect_timeout: float,
+    ) -> None:
+        if address:
+            if workers is not None or cluster != "local" or cluster_options:
+                raise ConfigError(
+                    "with an address the cluster exists already: workers, cluster and "
+                    "cluster_options do not apply"
+                )
+            try:
+                self.client = distributed.Client(address, timeout=connect_timeout)
+            except OSError as exc:
+                raise ConfigError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+        elif cluster == "local":
+            check_workers(workers or os.cpu_count() or 1, "dask executor (local cluster)")
+            settings: dict[str, Any] = {
+                "n_workers": workers or os.cpu_count() or 1,
+                "threads_per_worker": 1,
+                "processes": True,
+                "dashboard_address": None,
+                "silence_logs": logging.ERROR,  # no warnings about tasks cancelled by Ctrl-C
+                **cluster_options,
+            }
+            try:
+                with workers_ignore_sigint():  # Ctrl-C reaches the study, which stops them
+                    self._cluster = distributed.LocalCluster(**settings)
+            except TypeError as exc:
+                raise ConfigError(f"bad cluster_options for the local cluster: {exc}") from None
+            self.client = distributed.Client(self._cluster)
+        else:
+            self._cluster = _jobqueue_cluster(cluster, cluster_options)
+            self._cluster.scale(n=workers or 1)
+            self.client = distributed.Client(self._cluster)
+
+    @property
+    def slots(self) -> int:
+        try:
+            return max(1, sum(self.client.nthreads().values()))
+        except (OSError, TimeoutError):  # the scheduler is gone: the batch will tell
+            return 1
+
+    def _problem_on_cluster(self, problem: Evaluable) -> Any:
+        if self._scattered is None or self._scattered[0] is not problem:
+            data = self.client.scatter(run_view(problem), broadcast=True, hash=False)
+            self._scattered = (problem, data)
+        return self._scattered[1]
+
+    def run(self, problem: Evaluable, jobs: Sequence[Job], finish: Finish) -> dict[int, Evaluation]:
+        from distributed import KilledWorker, as_completed
+
+        data = self._problem_on_cluster(problem)
+        futures = {
+            self.client.submit(
+                _task,
+                data,
+                x,
+                str(wd),
+                i,
+                self.timeout,
+                self.isolate,
+                pure=False,
+                key=f"fbia-eval-{self._token}-{i}",
+            ): (i, wd, x)
+            for i, wd, x in jobs
+        }
+        done: dict[int, Evaluation] = {}
+        try:
+            for fut in as_completed(futures):
+                i, wd, x = futures[fut]
+                try:
+                    outcome = fut.result()
+                except KilledWorker:
+                    outcome = RunOutcome.unfinished(
+                        i,
+                        x,
+                        str(wd),
+                        "the Dask worker process died during this run, on every worker that "
+                        "tried it (killed, crashed or exited)",
+                    )
+                except Exception as exc:  # raised outside problem.evaluate's guard
+                    message = f"{type(exc).__name__}: {exc}"
+                    outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
+                fut.release()
+                done[i] = finish(outcome)
+        except BaseException:  # Ctrl-C or a bug: stop the tasks instead of waiting for them
+            self.client.cancel(list(futures), force=True)
+            raise
+        return done
+
+    def describe(self) -> dict[str, Any]:
+        import dask
+        import distributed
+
+        return {
+            "kind": "dask",
+            "workers": self.slots,
+            "timeout": self.timeout,
+            "isolate": self.isolate,
+            "cluster": self.cluster_kind,
+            "scheduler": self.client.scheduler.address if self.client.scheduler else None,
+            "dask": dask.__version__,
+            "distributed": distributed.__version__,
+            "startup_seconds": round(self.startup_time, 3),
+        }
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+
+class DaskEvaluator(BatchEvaluator):
+    """A :class:`~fbia.execution.evaluator.BatchEvaluator` with a :class:`DaskExecutor`.
+
+    Parameters
+    ----------
+    address, workers, cluster, cluster_options, connect_timeout, timeout, isolate
+        The executor's (:class:`DaskExecutor`).
+    workdir, keep_workdirs, on_record, store, retry_failed, listener
+        The front part's (:class:`~fbia.execution.evaluator.BatchEvaluator`); ``workdir`` must be
+        visible to the workers.
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int | None = None,
+        cluster: str = "local",
+        cluster_options: Mapping[str, Any] | None = None,
+        workdir: str | Path | None = None,
+        keep_workdirs: bool | None = None,
+        on_record: Callable[[Evaluation], None] | None = None,
+        connect_timeout: float = 30.0,
+        *,
+        timeout: float | None = None,
+        isolate: bool | None = None,
+        **front: Any,
+    ) -> None:
+        executor = DaskExecutor(
+            address, workers, cluster, cluster_options, connect_timeout, timeout, isolate
+        )
+        try:
+            super().__init__(executor, workdir, keep_workdirs, on_record, **front)
+        except BaseException:
+            executor.close()
+            raise
+        self.dask = executor
+
+    @property
+    def client(self) -> Any:
+        """The Dask client."""
+        return self.dask.client
+
+    @property
+    def startup_time(self) -> float:
+        """Seconds taken to start (or reach) the cluster."""
+        return self.dask.startup_time
+
+
+def _jobqueue_cluster(kind: str, options: Mapping[str, Any]) -> Any:
+    try:
+        import dask_jobqueue
+    except ImportError:
+        raise ConfigError(
+            f"cluster {kind!r} needs the package 'dask-jobqueue' (pip install dask-jobqueue, "
+            "or pip install 'fbia[cluster]')"
+        ) from None
+    factory = getattr(dask_jobqueue, JOBQUEUE_CLUSTERS[kind])
+    # dask-jobqueue only logs a failed job submission and the study would wait for workers
+    # that never come: without the batch system's submit command, say so now
+    submit = str(factory.job_cls.submit_command).split()[0]
+    if shutil.which(submit) is None:
+        raise ConfigError(
+            f"cluster {kind!r} submits jobs with {submit!r}, which is not on this machine's PATH "
+            "(run the study on the cluster's login node)"
+        )
+    try:
+        return factory(**options)
+    except TypeError as exc:
+        raise ConfigError(f"bad cluster_options for {JOBQUEUE_CLUSTERS[kind]}: {exc}") from None

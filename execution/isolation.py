@@ -1,0 +1,552 @@
+"""Forward runs in a process of their own: a wall-time limit that really stops a hung run.
+
+>>> import fbia
+>>> from fbia.execution.isolation import IsolatedRunner
+>>> # problem = fbia.InverseProblem(...)
+>>> # with IsolatedRunner() as runner:
+>>> #     outcome = runner.run(problem, {"E": 300.0, "nu": 0.2}, "runs/eval_000000", 0, timeout=600)
+
+An :class:`IsolatedRunner` starts one helper Python process (in a session of its own) that
+imports fbia and loads the problem once, then *forks* one child per run.  The child runs the
+forward model in a process group of its own and sends the record back; the helper passes it
+on.  So:
+
+* a run that passes its time limit is stopped for good: its whole process group (the child and
+  any solver it started) is killed with SIGKILL and the run becomes a failed record
+  ``"time-out after N s ..."``;
+* a run that kills its process (``os._exit``, a segfault, the out-of-memory killer) becomes a
+  failed record that says how it died;
+* neither costs more than that run: the helper, with everything imported, serves the next run
+  at once (a fork takes milliseconds), and no state of one run leaks into the next;
+* a helper whose caller dies (the study was killed) kills the run under way and exits.
+
+Every executor uses it the same way: the serial evaluator in the study's process, the process
+pool in each worker, the Dask executor inside each worker's task (a Dask worker is a daemon
+process, which may not have ``multiprocessing`` children: the helper is a plain subprocess).
+POSIX only (fork, process groups, pipes passed by descriptor).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import ctypes
+import os
+import pickle
+import select
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..core.errors import ConfigError, Terminated
+from ..core.interface import Interface
+from ..core.observation import CoordinateKey
+from ..core.parameters import Parameter
+from ..core.problem import Evaluable, Evaluation
+
+__all__ = [
+    "IsolatedRunner",
+    "isolation_mode",
+    "RunOutcome",
+    "evaluate_here",
+    "run_isolated_or_here",
+    "run_view",
+    "worker_label",
+]
+
+_HEADER = struct.Struct("<Q")
+_KILL_WAIT = 10.0  # s to wait for the helper to confirm a killed run before replacing it
+
+
+@dataclass
+class RunOutcome:
+    """One finished run: its record, who ran it, and the files it made (name -> path)."""
+
+    record: Evaluation
+    worker: str = ""
+    artifacts: dict[str, str] = field(default_factory=dict)
+    #: the interfaces the forward model gave (for the store), None if it gave none
+    interfaces: dict[CoordinateKey, Interface] | None = None
+
+    @classmethod
+    def unfinished(
+        cls,
+        index: int,
+        x: dict[str, float],
+        workdir: str,
+        message: str,
+        status: str = "failed",
+        seconds: float = 0.0,
+        worker: str = "",
+    ) -> RunOutcome:
+        """A run that gave no record of its own (its process died, timed out, raised outside
+        ``problem.evaluate``'s guard): a record with ``status`` and ``message``."""
+        record = Evaluation(
+            index=index, x=dict(x), status=status, message=message, workdir=workdir, time=seconds
+        )
+        return cls(record, worker)
+
+
+def worker_label() -> str:
+    """``host:pid`` of this process (the executors' default worker name)."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def evaluate_here(problem: Evaluable, x: dict[str, float], workdir: str, index: int) -> RunOutcome:
+    """Evaluate in this process; the solution object is dropped, its interfaces travel with
+    the record (for the store) and its field files are kept as artifacts.
+
+    A model that raises SystemExit (``sys.exit``) or KeyboardInterrupt itself gives a failed
+    record, the same under every executor; a real Ctrl-C (SIGINT to this process while the
+    run is under way) still raises KeyboardInterrupt and stops the study.
+    """
+    t0 = time.perf_counter()
+    with _sigint_watch() as signalled:
+        try:
+            ev = problem.evaluate(x, workdir=workdir, index=index, keep_solution=True)
+        except Terminated:  # SIGTERM to the study (fbia.studies.cli): always real
+            raise
+        except (SystemExit, KeyboardInterrupt) as exc:
+            if signalled:
+                raise
+            seconds = time.perf_counter() - t0
+            return RunOutcome.unfinished(
+                index, x, workdir, escaped_message(exc), seconds=seconds, worker=worker_label()
+            )
+    if signalled:  # a Ctrl-C that the model caught and turned into a record
+        raise KeyboardInterrupt
+    artifacts: dict[str, str] = {}
+    interfaces = None
+    if ev.solution is not None:
+        artifacts = {str(k): str(v) for k, v in ev.solution.fields.items()}
+        interfaces = dict(ev.solution.interfaces)
+        ev.solution = None
+    return RunOutcome(ev, worker_label(), artifacts, interfaces)
+
+
+def escaped_message(exc: BaseException) -> str:
+    """The message of a failed record whose model raised SystemExit or KeyboardInterrupt."""
+    if isinstance(exc, SystemExit):
+        what = f"SystemExit({exc.code!r}) (sys.exit or exit() in the model or a library it calls)"
+    else:
+        what = "KeyboardInterrupt, with no Ctrl-C to the study"
+    return (
+        f"the forward model raised {what}: a run may not end its process; a failed run "
+        "raises fbia.ForwardModelError"
+    )
+
+
+@contextlib.contextmanager
+def _sigint_watch() -> Iterator[list[int]]:
+    """A list that gets an entry when SIGINT arrives during the block: what tells a real
+    Ctrl-C from a KeyboardInterrupt the model raised.  Only where SIGINT raises
+    KeyboardInterrupt at all (the main thread, with a Python handler): elsewhere (a pool
+    worker ignores SIGINT, an isolated run's child dies of it, a Dask task runs in a thread)
+    every KeyboardInterrupt comes from the model."""
+    seen: list[int] = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield seen
+        return
+
+    def handler(signum: int, frame: Any) -> Any:
+        seen.append(signum)
+        return previous(signum, frame)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def run_view(problem: Evaluable) -> Evaluable:
+    """The problem as a worker needs it to evaluate runs, to be sent to other processes.
+
+    A run needs the model, the measure, the observations and the fixed inputs, not the
+    priors: the copy keeps the parameters' names and units only, so that loading it in a
+    worker does not import ``scipy.stats`` (about 2 s per worker process).  Its ``evaluate``
+    gives exactly the records of the original.
+    """
+    if all(p.prior is None for p in [*problem.parameters, *problem.uncertain]):
+        return problem
+    view = copy.copy(problem)
+    view.parameters = [Parameter(p.name, unit=p.unit) for p in problem.parameters]
+    view.uncertain = [Parameter(p.name, unit=p.unit) for p in problem.uncertain]
+    return view
+
+
+# -- messages: length-prefixed pickles on raw pipes ----------------------------------------------
+def _send(fd: int, message: Any) -> None:
+    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    view = memoryview(_HEADER.pack(len(data)) + data)
+    while view:
+        view = view[os.write(fd, view) :]
+
+
+def _read_exactly(fd: int, n: int, deadline: float | None) -> bytes | None:
+    """``n`` bytes; None at end of file; TimeoutError once ``deadline`` (monotonic) passes."""
+    chunks: list[bytes] = []
+    got = 0
+    while got < n:
+        wait = None if deadline is None else deadline - time.monotonic()
+        if wait is not None and wait <= 0:
+            raise TimeoutError
+        ready, _, _ = select.select([fd], [], [], wait)
+        if not ready:
+            raise TimeoutError
+        chunk = os.read(fd, min(n - got, 1 << 20))
+        if not chunk:
+            return None
+        chunks.append(chunk)
+        got += len(chunk)
+    return b"".join(chunks)
+
+
+def _recv(fd: int, deadline: float | None = None) -> Any:
+    """One message; None at end of file (the other side is gone)."""
+    header = _read_exactly(fd, _HEADER.size, deadline)
+    if header is None:
+        return None
+    data = _read_exactly(fd, _HEADER.unpack(header)[0], deadline)
+    return None if data is None else pickle.loads(data)
+
+
+def _exit_text(status: int) -> str:
+    """``exit status 3`` or ``killed by SIGSEGV`` from a ``waitpid`` status."""
+    if os.WIFSIGNALED(status):
+        sig = os.WTERMSIG(status)
+        with contextlib.suppress(ValueError):
+            return f"killed by {signal.Signals(sig).name}"
+        return f"killed by signal {sig}"
+    return f"exit status {os.waitstatus_to_exitcode(status)}"
+
+
+# -- the caller's side ---------------------------------------------------------------------------
+class IsolatedRunner:
+    """Runs evaluations one at a time, each in a forked child of a helper process, and kills
+    a run that passes its time limit.
+
+    Not thread-safe: a thread that runs evaluations keeps a runner of its own.
+    """
+
+    def __init__(self) -> None:
+        if os.name != "posix":
+            raise ConfigError("isolated runs (and time-outs) need a POSIX system")
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._jobs: int | None = None
+        self._answers: int | None = None
+        self._problem: Evaluable | None = None
+
+    @property
+    def pid(self) -> int | None:
+        """The helper's process id (None when none runs)."""
+        return None if self._proc is None else self._proc.pid
+
+    def _start(self) -> None:
+        job_r, job_w = os.pipe()
+        res_r, res_w = os.pipe()
+        code = "from fbia.execution.isolation import _helper_main; _helper_main()"
+        try:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-c", code, str(job_r), str(res_w)],
+                pass_fds=(job_r, res_w),
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,  # no terminal Ctrl-C: the caller decides what stops
+            )
+        finally:
+            os.close(job_r)
+            os.close(res_w)
+        self._jobs, self._answers = job_w, res_r
+        self._problem = None
+        _send(job_w, ("init", list(sys.path)))
+
+    def _load(self, problem: Evaluable) -> str | None:
+        """Start the helper if none runs and give it ``problem`` unless it has it; returns the
+        helper's message if it cannot load the problem (e.g. cannot import the model)."""
+        if self._proc is not None and self._problem is problem:
+            return None
+        blob = pickle.dumps(run_view(problem), protocol=pickle.HIGHEST_PROTOCOL)
+        for _attempt in (1, 2):  # a helper that died between runs is replaced once
+            if self._proc is None:
+                self._start()
+            assert self._jobs is not None and self._answers is not None
+            try:
+                _send(self._jobs, ("problem", blob))
+                answer = _recv(self._answers)
+            except BrokenPipeError:
+                answer = None
+            if answer is not None:
+                break
+            self.stop()
+        else:
+            return "the helper process for isolated runs ended as it started"
+        if answer[1] is not None:
+            self.stop()
+            return str(answer[1])
+        self._problem = problem
+        return None
+
+    def run(
+        self,
+        problem: Evaluable,
+        x: dict[str, float],
+        workdir: str,
+        index: int,
+        timeout: float | None = None,
+    ) -> RunOutcome:
+        """Evaluate ``x`` in a child process; a time-out or a dead child gives a failed record.
+
+        The time limit counts from the start of the child: starting the helper and loading the
+        problem (imports of the model's libraries) are not part of the run.
+        """
+        try:
+            return self._run(problem, dict(x), workdir, index, timeout)
+        except BaseException:  # Ctrl-C or a broken helper: no run goes on alone
+            self.stop()
+            raise
+
+    def _run(
+        self,
+        problem: Evaluable,
+        x: dict[str, float],
+        workdir: str,
+        index: int,
+        timeout: float | None,
+    ) -> RunOutcome:
+        error = self._load(problem)
+        if error is not None:
+            return RunOutcome.unfinished(index, x, workdir, error, "error", worker=worker_label())
+        assert self._jobs is not None and self._answers is not None
+        t0 = time.perf_counter()
+        with contextlib.suppress(BrokenPipeError):  # a dead helper: its silence says so below
+            _send(self._jobs, ("run", x, workdir, index))
+        started = _recv(self._answers)
+        if started is None or started[0] != "started":
+            return self._lost(x, workdir, index, t0, "the helper process for isolated runs died")
+        deadline = None if timeout is None else time.monotonic() + timeout
+        try:
+            answer = _recv(self._answers, deadline)
+        except TimeoutError:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(started[1], signal.SIGKILL)
+            try:  # the helper reaps the child and says so; a silent helper is replaced
+                _recv(self._answers, time.monotonic() + _KILL_WAIT)
+            except TimeoutError:
+                self.stop()
+            message = (
+                f"time-out after {timeout:g} s: the run was stopped (its process group was killed)"
+            )
+            return RunOutcome.unfinished(
+                index, x, workdir, message, seconds=time.perf_counter() - t0, worker=worker_label()
+            )
+        if answer is None:
+            return self._lost(x, workdir, index, t0, "the helper process for isolated runs died")
+        if answer[0] == "died":
+            message = (
+                f"the process running this evaluation died ({answer[1]}: e.g. os._exit, a "
+                "segfault, the out-of-memory killer)"
+            )
+            return RunOutcome.unfinished(
+                index, x, workdir, message, seconds=time.perf_counter() - t0, worker=worker_label()
+            )
+        outcome: RunOutcome = pickle.loads(answer[1])
+        outcome.worker = worker_label()
+        return outcome
+
+    def _lost(
+        self, x: dict[str, float], workdir: str, index: int, t0: float, why: str
+    ) -> RunOutcome:
+        status = self._reap()
+        return RunOutcome.unfinished(
+            index,
+            x,
+            workdir,
+            f"{why} ({status})",
+            seconds=time.perf_counter() - t0,
+            worker=worker_label(),
+        )
+
+    def _reap(self) -> str:
+        proc = self._proc
+        code = None
+        if proc is not None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                code = proc.wait(timeout=5.0)
+        self.stop()
+        if code is None:
+            return "no exit status"
+        return f"killed by signal {-code}" if code < 0 else f"exit status {code}"
+
+    def stop(self) -> None:
+        """Kill the helper (and the run under way) and forget it."""
+        proc, self._proc = self._proc, None
+        for fd in (self._jobs, self._answers):
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self._jobs = self._answers = None
+        self._problem = None
+        if proc is not None:
+            # closing its job pipe makes the helper kill its child and exit; SIGKILL to its
+            # process group covers a helper that does not answer
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=2.0)
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=10.0)
+
+    def __enter__(self) -> IsolatedRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+_LOCAL = threading.local()
+
+
+#: why a time-out cannot go with ``isolate = false`` (the one place this rule is written)
+TIMEOUT_NEEDS_ISOLATION = (
+    "a time-out needs isolated runs (only a run in its own process can be stopped): "
+    "drop isolate = false or the timeout"
+)
+
+
+def isolation_mode(timeout: float | None, isolate: bool | None, default: bool) -> bool:
+    """Whether runs go to child processes: ``isolate`` if given, else whenever there is a
+    ``timeout``, else ``default``; a ConfigError for a time-out that is not positive or a
+    time-out with ``isolate = False``."""
+    if timeout is not None and not timeout > 0:
+        raise ConfigError(f"timeout must be a positive number of seconds, got {timeout}")
+    if timeout is not None and isolate is False:
+        raise ConfigError(TIMEOUT_NEEDS_ISOLATION)
+    return bool(isolate) if isolate is not None else (timeout is not None or default)
+
+
+def thread_runner() -> IsolatedRunner:
+    """The runner of the calling thread (pool and Dask workers keep one per thread)."""
+    runner = getattr(_LOCAL, "runner", None)
+    if runner is None:
+        runner = _LOCAL.runner = IsolatedRunner()
+    return runner
+
+
+def run_isolated_or_here(
+    problem: Evaluable,
+    x: dict[str, float],
+    workdir: str,
+    index: int,
+    timeout: float | None,
+    isolate: bool,
+) -> RunOutcome:
+    """What a worker does with one run: in a child of its thread's helper, or in itself."""
+    if isolate:
+        return thread_runner().run(problem, x, workdir, index, timeout)
+    return evaluate_here(problem, x, workdir, index)
+
+
+# -- the helper's side ---------------------------------------------------------------------------
+def _die_with_parent() -> None:
+    """Linux: this process gets SIGKILL when its parent ends (a run whose helper was killed)."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+
+
+def _child(problem: Evaluable, x: dict[str, float], workdir: str, index: int, out: int) -> None:
+    """In the forked child: run, send the outcome, exit without cleanup of the helper's state
+    (status 0 with an outcome sent; 1 if the run raised SystemExit or the like)."""
+    code = 1
+    try:
+        os.setpgid(0, 0)
+        _die_with_parent()
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        outcome = evaluate_here(problem, x, workdir, index)
+        try:
+            data = pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            ev = outcome.record
+            ev.status, ev.message = "error", f"the record could not be sent back: {exc}"
+            ev.diagnostics = {}
+            data = pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)
+        view = memoryview(data)
+        while view:
+            view = view[os.write(out, view) :]
+        code = 0
+    finally:
+        os._exit(code)
+
+
+def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
+    """Read the child's outcome; if the caller goes away meanwhile, kill the child and exit."""
+    chunks: list[bytes] = []
+    while True:
+        ready, _, _ = select.select([pipe, jobs], [], [])
+        if jobs in ready:  # the caller closed its end (or died): nothing waits for this run
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(pid, signal.SIGKILL)
+            os._exit(0)
+        chunk = os.read(pipe, 1 << 20)
+        if not chunk:
+            return b"".join(chunks) if chunks else None
+        chunks.append(chunk)
+
+
+def _helper_main() -> None:  # pragma: no cover - runs in the helper process
+    jobs, answers = int(sys.argv[1]), int(sys.argv[2])
+    running: list[int] = []  # the child of the run under way
+    try:
+        _serve(jobs, answers, running)
+    except (BrokenPipeError, ConnectionResetError):  # the caller is gone (killed, e.g. during
+        for pid in running:  # start-up): stop the run and exit silently, no traceback
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
+    os._exit(0)  # nothing left to flush to a caller that may be gone
+
+
+def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no cover - helper
+    problem: Evaluable | None = None
+    while True:
+        message = _recv(jobs)
+        if message is None:  # the caller closed the pipe or died
+            return
+        kind = message[0]
+        if kind == "init":
+            sys.path[:] = message[1]
+        elif kind == "problem":
+            try:
+                problem = pickle.loads(message[1])
+            except Exception as exc:  # e.g. a model class this process cannot import
+                _send(answers, ("problem", f"the problem could not be loaded: {exc!r}"))
+                return  # the caller starts a new helper for the next problem
+            _send(answers, ("problem", None))
+        elif kind == "run":
+            assert problem is not None
+            _, x, workdir, index = message
+            pipe_r, pipe_w = os.pipe()
+            pid = os.fork()
+            if pid == 0:
+                for fd in (pipe_r, jobs, answers):
+                    os.close(fd)
+                _child(problem, x, workdir, index, pipe_w)
+            running[:] = [pid]
+            os.close(pipe_w)
+            with contextlib.suppress(OSError):  # also done by the child: no race with a kill
+                os.setpgid(pid, pid)
+            _send(answers, ("started", pid))
+            data = _collect(jobs, pipe_r, pid)
+            os.close(pipe_r)
+            _, status = os.waitpid(pid, 0)
+            running.clear()
+            if data is not None and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
+                _send(answers, ("done", data))
+            else:
+                _send(answers, ("died", _exit_text(status)))

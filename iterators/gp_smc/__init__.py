@@ -1,0 +1,3 @@
+"""The ``gp_smc`` iterator (Paper B): the plugin (``iterator``: ``GpSmcIterator``), its options,
+its result, the record of a run shared by its stages (``run``), the adaptive design
+(``adaptive``, ``adaptive_loop``) and the posterior's statistics and files (``posterior``)."""

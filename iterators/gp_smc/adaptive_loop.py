@@ -1,0 +1,228 @@
+"""The rounds of ``gp_smc``'s adaptive design (the numerics are in :mod:`.gp_adaptive`).
+
+A Sobol start of ``n_initial`` runs (+ ``n_test`` held-out points), then per round: GP on
+the runs so far (L with a soft floor) -> SMC on the GP mean (``round_particles``, a coarse
+tempering) -> stop if the last round converged or the budget ``n_train`` is spent -> a batch
+of runs (posterior draws, draws from the tempered posterior exp(mu / 4) p, the EIV rule)
+through the evaluator in one call (parallel
+workers) -> the surrogate's error at the posterior draws, predicted before they are used; a round
+that looks converged is also checked against the posterior averaged over the GP's sample
+paths (the GP must not be unsure where the posterior ends).
+The last GP is always trained on every run; the final SMC (``n_particles``, ``zeta``, ...)
+and the posterior check are the iterator's.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Generator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...core.iteration import Evaluator
+from ...core.problem import Evaluation
+from ..smc.sampler import SmcResult
+from ..surrogates.design import sobol_design
+from ..surrogates.feasibility import fit_feasibility
+from ..surrogates.residuals import Surrogate
+from ..surrogates.uncertainty import marginalise_surrogate_uncertainty
+from .adaptive import (
+    Moments,
+    floor_depth,
+    posterior_shift,
+    select_batch,
+    soft_floor,
+    validation_error,
+)
+from .options import GpSmcOptions
+from .result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound, DesignRuns
+from .run import GpSmcState, SmcRun, log_prior
+
+FloatArray = NDArray[np.float64]
+
+#: the largest change of log Z between rounds (plus twice its standard error) that counts
+#: as "the evidence stopped changing"
+EVIDENCE_TOL = 0.5
+#: the rounds' SMC: a coarse tempering (its posterior only steers the design)
+ROUND_ZETA = 0.9
+ROUND_REJUVENATION = 5
+#: the tempering of the wide posterior exp(beta mu) p that a quarter of each batch is drawn
+#: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further)
+WIDE_TEMPERATURE = 0.25
+#: fits the surrogate to (x, y) and the runs' records (a residual emulator uses their
+#: residuals), warm-started from earlier hyperparameters when given
+FitGp = Callable[
+    [FloatArray, FloatArray, Mapping[str, Any] | None, Sequence[Evaluation]], Surrogate
+]
+#: SMC on a log-likelihood with a number of particles (the rounds' coarse settings)
+Sample = Callable[[Callable[[FloatArray], FloatArray], int], SmcResult]
+
+
+@dataclass
+class AdaptiveOutcome:
+    """What the rounds leave: every design run, the GP on all of them, the rounds."""
+
+    design: DesignRuns
+    gp: Surrogate | None  # None when fewer than 2 runs succeeded
+    summary: AdaptiveDesign
+
+
+def parallel_slots(evaluator: Evaluator) -> int:
+    """Runs the evaluator makes at once (1 when it does not say)."""
+    executor = getattr(evaluator, "executor", None)
+    slots = getattr(executor, "slots", None)
+    return int(slots) if isinstance(slots, int) and slots > 0 else 1
+
+
+def batch_size(opts: GpSmcOptions, n_runs: int, slots: int) -> int:
+    """The option, or a fifth of the runs so far, at least 4, a multiple of ``slots``."""
+    if opts.batch_size:
+        return opts.batch_size
+    n = max(4, math.ceil(0.2 * n_runs))
+    return slots * math.ceil(n / slots)
+
+
+def adaptive_design(
+    run: SmcRun, opts: GpSmcOptions, fit_gp: FitGp, sample: Sample
+) -> Generator[GpSmcState, None, AdaptiveOutcome]:
+    """The rounds (module docstring); yields a state per stage and round."""
+    n_initial = opts.n_initial or 10 * len(run.inputs)
+    n_initial = min(n_initial, opts.n_train)
+    through_prior = opts.design_space == "prior"
+    start = sobol_design(
+        run.inputs, n_initial + opts.n_test, opts.seed, through_prior=through_prior
+    )
+    yield GpSmcState(
+        "design",
+        f"adaptive: {n_initial} Sobol start runs + {opts.n_test} test points, at most "
+        f"{opts.n_train} runs",
+        run.record("design", design="adaptive", n_initial=n_initial, n_test=opts.n_test),
+    )
+    evaluations = run.evaluate(start)
+    points = start
+    loglik = run.log_likelihoods(evaluations)
+    train = np.arange(len(start)) < n_initial
+    run.evaluations = list(evaluations)
+    run.nfev, run.n_failed = len(evaluations), int((~np.isfinite(loglik)).sum())
+    yield GpSmcState(
+        "forward_runs",
+        f"{len(evaluations)} forward runs, {run.n_failed} failed",
+        run.record("forward_runs", nfev=len(evaluations), n_failed=run.n_failed),
+    )
+    slots = parallel_slots(run.evaluator)
+    rng = np.random.default_rng([opts.seed, 3])
+    rounds: list[AdaptiveRound] = []
+    previous: Moments | None = None
+    hyper: Mapping[str, Any] | None = None
+    log_z: float | None = None
+    converged = False
+    gp: Surrogate | None = None
+    floor = -math.inf
+    while True:
+        t0 = time.perf_counter()
+        use = train & np.isfinite(loglik)
+        if use.sum() < 2:
+            summary = AdaptiveDesign(n_initial, rounds, "failed", floor)
+            return AdaptiveOutcome(_design(points, loglik, run, train), None, summary)
+        l_max = float(loglik[use].max())
+        floor = l_max - floor_depth(l_max, log_z)
+        # a failed design run counts as an unlikely point (at the floor): the models fail at
+        # extreme parameters, and the criterion must not send batch after batch there
+        y = soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
+        records = [run.evaluations[i] for i in np.flatnonzero(train)]
+        gp = fit_gp(points[train], y[train], hyper, records)
+        if opts.failures == "classify":
+            gp.feasibility = fit_feasibility(points[train], np.isfinite(loglik[train]))
+        n_design = int(train.sum())
+        if converged or n_design >= opts.n_train:
+            reason = "converged" if converged else "budget"
+            break
+        post = sample(gp.feasible(gp.predict_mean_guarded), opts.round_particles)
+        evidence_change = math.inf if log_z is None else abs(post.log_evidence - log_z)
+        log_z = post.log_evidence
+        moments = Moments.of(post)
+        moved, spread = (
+            (math.inf, math.inf) if previous is None else posterior_shift(previous, moments)
+        )
+        n_batch = min(batch_size(opts, n_design, slots), opts.n_train - n_design)
+        wide = sample(_tempered(gp, WIDE_TEMPERATURE), opts.round_particles)
+        batch, n_draws = select_batch(
+            gp, post, n_batch, run.inputs, lambda z: log_prior(run.inputs, z), rng, wide
+        )
+        new = run.evaluate(batch)
+        new_loglik = run.log_likelihoods(new)
+        rmse, n_valid = validation_error(gp, batch[:n_draws], new_loglik[:n_draws])
+        run.evaluations.extend(new)
+        run.nfev += len(new)
+        run.n_failed += int((~np.isfinite(new_loglik)).sum())
+        points = np.vstack([points, batch])
+        loglik = np.concatenate([loglik, new_loglik])
+        train = np.concatenate([train, np.ones(len(batch), dtype=bool)])
+        converged = bool(
+            moved < opts.adaptive_tol
+            and spread < math.log1p(opts.adaptive_tol)
+            and evidence_change < EVIDENCE_TOL + 2.0 * post.log_evidence_se
+            and n_valid > 0
+            and rmse < RELIABLE_RMSE
+        )
+        if converged and run.noise is None and opts.uncertainty_check:
+            # and the GP's own uncertainty does not move the posterior either (the final
+            # status's check; with sigma_N inferred the GP models its profile, not L)
+            converged = not _gp_unsure(gp, post, run, opts, rng)
+        entry = AdaptiveRound(
+            round=len(rounds) + 1,
+            n_runs=n_design,
+            n_batch=len(batch),
+            mean=moments.mean,
+            std=moments.std,
+            mean_shift=moved,
+            std_change=spread,
+            validation_rmse=rmse,
+            log_evidence=log_z,
+            evidence_change=evidence_change,
+            floor=floor,
+            seconds=time.perf_counter() - t0,
+        )
+        rounds.append(entry)
+        hyper = gp.hyperparameters()
+        previous = moments
+        yield GpSmcState("round", entry.describe(), run.record("round", **entry.to_record()))
+    summary = AdaptiveDesign(n_initial, rounds, reason, floor)
+    return AdaptiveOutcome(_design(points, loglik, run, train), gp, summary)
+
+
+def _gp_unsure(
+    gp: Surrogate, post: SmcResult, run: SmcRun, opts: GpSmcOptions, rng: np.random.Generator
+) -> bool:
+    """Whether the posterior averaged over the GP's sample paths differs from the round's
+    (gp_smc's uncertainty check, on the round's coarse posterior)."""
+    _, uncertainty = marginalise_surrogate_uncertainty(
+        post,
+        gp,
+        run.priors,
+        rng,
+        smc_options={
+            "n_particles": opts.round_particles,
+            "zeta": ROUND_ZETA,
+            "n_rejuvenation": ROUND_REJUVENATION,
+        },
+    )
+    return uncertainty.moves_posterior
+
+
+def _tempered(gp: Surrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
+    """beta times the guarded mean, where the forward model runs (the factor untempered)."""
+    return gp.feasible(lambda z: beta * gp.predict_mean_guarded(z))
+
+
+def _design(points: FloatArray, loglik: FloatArray, run: SmcRun, train: Any) -> DesignRuns:
+    return DesignRuns(
+        points=points,
+        log_likelihood=loglik,
+        status=[ev.status for ev in run.evaluations],
+        train_mask=np.asarray(train, dtype=bool),
+    )

@@ -1,0 +1,309 @@
+"""Posterior statistics of weighted particles, and the posterior files other tools read.
+
+* :func:`summarise`: the :class:`~fbia.iterators.gp_smc.result.ParticlePosterior` of an SMC
+  run: mean and covariance (the global Gaussian approximation), credible intervals, the MAP
+  (the best particle, or with uncertain inputs the heaviest histogram bin of the x-marginal,
+  Paper B Remark 8) and the Laplace approximation at the MAP;
+* :func:`hpd_mass`: the posterior mass of the highest-density region through a point;
+* :func:`save_posterior` / :func:`load_posterior`: ``posterior.npz`` + ``posterior.json``
+  (format ``fbia-posterior-1``), and :func:`to_inference_data` for arviz.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...core.errors import ConfigError
+from ...core.parameters import Parameter, Prior
+from ...core.problem import jsonable
+from ..smc.sampler import SmcResult, systematic_resample
+from ..surrogates.residuals import restore_surrogate
+from .result import FloatArray, GpSmcResult, LaplaceApproximation, ParticlePosterior
+
+__all__ = [
+    "POSTERIOR_FORMAT",
+    "hpd_mass",
+    "laplace_approximation",
+    "load_posterior",
+    "map_by_binning",
+    "save_posterior",
+    "summarise",
+    "to_inference_data",
+    "write_posterior_files",
+]
+
+#: Version tag of the posterior files written by :func:`save_posterior`.
+POSTERIOR_FORMAT = "fbia-posterior-1"
+
+
+# -- statistics ------------------------------------------------------------------------------------
+def summarise(
+    post: SmcResult,
+    n_x: int,
+    inputs: Sequence[Parameter],
+    map_bins: int,
+    log_posterior: Callable[[FloatArray], FloatArray] | None,
+) -> ParticlePosterior:
+    """The posterior of an SMC run; ``log_posterior`` (L + log p, vectorised) gives the
+    Laplace approximation at the MAP when there are no uncertain inputs (None: no Laplace)."""
+    x = post.particles[:, :n_x]
+    w = post.weights
+    mean = w @ x
+    dx = x - mean
+    cov = (dx * w[:, None]).T @ dx
+    has_theta = post.particles.shape[1] > n_x
+    laplace = None
+    if has_theta:
+        x_map = map_by_binning(x, w, inputs[:n_x], map_bins)
+        method = f"histogram, {map_bins} bins per parameter (Remark 8)"
+    else:
+        x_map = post.map[:n_x]
+        method = "particle of highest posterior in the last SMC step"
+        if log_posterior is not None:
+            laplace = laplace_approximation(log_posterior, x_map, cov)
+    return ParticlePosterior(
+        names=list(post.names),
+        n_x=n_x,
+        particles=post.particles,
+        weights=w,
+        log_likelihood=post.log_likelihood,
+        log_prior=post.log_prior,
+        log_evidence=float(post.log_evidence),
+        log_evidence_se=float(post.log_evidence_se),
+        mean=mean,
+        cov=cov,
+        mean_all=post.mean,
+        cov_all=post.cov,
+        max_likelihood=post.max_likelihood,
+        credible_intervals={
+            name: weighted_quantiles(post.particles[:, j], w, [0.025, 0.5, 0.975])
+            for j, name in enumerate(post.names)
+        },
+        map=np.asarray(x_map),
+        map_method=method,
+        best_particle=post.map if has_theta else None,
+        laplace=laplace,
+    )
+
+
+def weighted_quantiles(values: FloatArray, weights: FloatArray, q: Sequence[float]) -> list[float]:
+    order = np.argsort(values)
+    cdf = np.cumsum(weights[order])
+    cdf /= cdf[-1]
+    return [float(values[order][min(int(np.searchsorted(cdf, qi)), len(cdf) - 1)]) for qi in q]
+
+
+def map_by_binning(
+    x: FloatArray, weights: FloatArray, parameters: Sequence[Parameter], bins: int
+) -> FloatArray:
+    """MAP of the theta-marginal: centre of the heaviest of ``bins`` intervals per parameter
+    (Paper B Remark 8). The box is the parameters' bounds, else the particles' range; only
+    occupied bins are counted, so any dimension works."""
+    lo = np.array(
+        [p.lower if math.isfinite(p.lower) else x[:, j].min() for j, p in enumerate(parameters)]
+    )
+    hi = np.array(
+        [p.upper if math.isfinite(p.upper) else x[:, j].max() for j, p in enumerate(parameters)]
+    )
+    width = np.where(hi > lo, (hi - lo) / bins, 1.0)
+    idx = np.clip(np.floor((x - lo) / width).astype(np.int64), 0, bins - 1)
+    cells, inverse = np.unique(idx, axis=0, return_inverse=True)
+    mass = np.zeros(len(cells))
+    np.add.at(mass, inverse.ravel(), weights)
+    return np.asarray(lo + (cells[int(np.argmax(mass))] + 0.5) * width)
+
+
+def laplace_approximation(
+    log_posterior: Callable[[FloatArray], FloatArray], x_map: FloatArray, scale: FloatArray
+) -> LaplaceApproximation:
+    """Gaussian N(x_MAP, (-H)^-1) from a central finite-difference Hessian H of the
+    log-posterior at the MAP (Paper B, Fig. 9a/c), steps 1e-3 of the posterior std."""
+    d = len(x_map)
+    h = 1e-3 * np.sqrt(np.maximum(np.diag(np.atleast_2d(scale)), 1e-300))
+    pts = [x_map]
+    for i in range(d):
+        for j in range(d):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                z = x_map.copy()
+                z[i] += si * h[i]
+                z[j] += sj * h[j]
+                pts.append(z)
+    vals = log_posterior(np.array(pts))
+    hess = np.empty((d, d))
+    k = 1
+    for i in range(d):
+        for j in range(d):
+            fpp, fpm, fmp, fmm = vals[k : k + 4]
+            hess[i, j] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
+            k += 4
+    hess = 0.5 * (hess + hess.T)
+    eig = np.linalg.eigvalsh(-hess)
+    ok = bool(np.all(eig > 0) and np.all(np.isfinite(vals)))
+    return LaplaceApproximation(
+        mean=x_map,
+        hessian=hess,
+        cov=np.asarray(np.linalg.inv(-hess), dtype=float) if ok else None,
+        negative_definite=ok,
+    )
+
+
+def hpd_mass(result: GpSmcResult, point: Mapping[str, float]) -> float:
+    """Posterior mass of the highest-posterior-density region whose boundary passes through
+    ``point`` (0: the point is the mode; near 1: it lies outside the bulk of the posterior).
+
+    The log-posterior at ``point`` comes from the GP surrogate and the priors; the region's
+    mass from the weighted particles. Defined for results without uncertain parameters.
+    """
+    post, fit = result.posterior, result.surrogate
+    if post is None or fit is None or len(result.names) != result.n_x:
+        raise ConfigError(
+            "hpd_mass needs a surrogate-mode result without uncertain parameters", "hpd_mass"
+        )
+    missing = [n for n in result.names if n not in point]
+    if missing:
+        raise ConfigError(f"no value for {', '.join(missing)}", "hpd_mass")
+    z = np.array([[float(point[n]) for n in result.names]])
+    gp = restore_surrogate(fit.state)
+    log_prior = sum(
+        float(Prior.from_spec(p["prior"]).logpdf(z[0, j])) for j, p in enumerate(result.priors)
+    )
+    level = float(gp.predict_mean(z)[0] + gp.log_feasibility(z)[0]) + log_prior
+    return float(np.sum(post.weights[post.log_posterior > level]))
+
+
+# -- files that other tools read ------------------------------------------------------------------
+def save_posterior(result: GpSmcResult, folder: str | Path) -> tuple[Path, Path]:
+    """Write ``posterior.npz`` (arrays) and ``posterior.json`` (description) into ``folder``.
+
+    posterior.npz (format ``fbia-posterior-1``):
+
+    ``names`` (d,) str: x names then theta names; ``n_x``: number of calibration parameters;
+    ``particles`` (N, d) float; ``weights`` (N,) normalised; ``log_likelihood`` (N,) the
+    (surrogate) L of eq. 5; ``log_prior`` (N,); ``log_posterior`` (N,) = L + log p
+    (unnormalised); ``theta`` (N, d - n_x) the uncertain parameters; ``design`` (n, d) the
+    Sobol design; ``design_log_likelihood`` (n,) L of each run (-inf: failed);
+    ``design_ok`` (n,) bool; ``train_mask`` (n,) bool (False: held-out test point).
+
+    posterior.json: format, names, units, priors, point estimates, log-evidence, GP
+    hyperparameters and errors, SMC history. :func:`load_posterior` reads both back;
+    :func:`to_inference_data` turns them into an ``arviz.InferenceData`` if arviz is installed.
+    """
+    post = result.posterior
+    if post is None:
+        raise ConfigError(f"the result has no posterior ({result.status})", "save_posterior")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, Any] = {
+        "format": np.array(POSTERIOR_FORMAT),
+        "names": np.array(post.names),
+        "n_x": np.array(post.n_x),
+        "particles": post.particles,
+        "weights": post.weights,
+        "log_likelihood": post.log_likelihood,
+        "log_prior": post.log_prior,
+        "log_posterior": post.log_posterior,
+        "theta": post.particles[:, post.n_x :],
+    }
+    if result.design is not None:
+        arrays.update(
+            design=result.design.points,
+            design_log_likelihood=result.design.log_likelihood,
+            design_ok=result.design.ok,
+            train_mask=result.design.train_mask,
+        )
+    npz = folder / "posterior.npz"
+    np.savez_compressed(npz, **arrays)
+    arrays_elsewhere = ("particles", "weights", "log_likelihood", "log_prior")
+    estimates = {k: v for k, v in asdict(post).items() if k not in arrays_elsewhere}
+    meta = {
+        "format": POSTERIOR_FORMAT,
+        "arrays": "posterior.npz",
+        "status": result.status,
+        "message": result.message,
+        "x_map": result.x,
+        "mode": result.mode,
+        "priors": result.priors,
+        **estimates,
+        "gp": None if result.surrogate is None else result.surrogate.summary,
+        "posterior_check": None if result.check is None else asdict(result.check),
+        "smc": None if result.smc is None else asdict(result.smc),
+        "seconds": result.seconds,
+    }
+    js = folder / "posterior.json"
+    js.write_text(json.dumps(jsonable(meta), indent=1, default=str))
+    return npz, js
+
+
+def load_posterior(folder: str | Path) -> dict[str, Any]:
+    """Read :func:`save_posterior`'s files: the npz arrays plus ``"meta"`` (the JSON)."""
+    folder = Path(folder)
+    with np.load(folder / "posterior.npz") as data:
+        out: dict[str, Any] = {k: data[k] for k in data.files}
+    if str(out.get("format")) != POSTERIOR_FORMAT:
+        raise ConfigError(f"not an {POSTERIOR_FORMAT} file", str(folder / "posterior.npz"))
+    out["names"] = [str(n) for n in out["names"]]
+    out["meta"] = json.loads((folder / "posterior.json").read_text())
+    return out
+
+
+def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, seed: int = 0):
+    """An ``arviz.InferenceData`` of equally weighted draws (systematic resampling with the
+    generator of ``seed``) of a :func:`load_posterior` result: groups ``posterior`` (one
+    variable per input, x then theta), ``log_likelihood`` (``L``, the surrogate's or the
+    model's log-likelihood of eq. 5) and ``sample_stats`` (``lp``: log-posterior L + log p up
+    to a constant; ``log_prior``)."""
+    try:
+        with warnings.catch_warnings():  # arviz 0.2x announces its refactor on import
+            warnings.simplefilter("ignore", FutureWarning)
+            import arviz
+    except ImportError:
+        raise ConfigError(
+            "arviz is not installed (pip install arviz)", "to_inference_data"
+        ) from None
+    w = np.asarray(posterior["weights"])
+    rng = np.random.default_rng(seed)
+    idx = systematic_resample(w, rng)
+    if n_draws is not None:
+        idx = idx[rng.permutation(len(idx))[:n_draws]]
+    parts = np.asarray(posterior["particles"])[idx]
+    loglik = np.asarray(posterior["log_likelihood"])[idx][None]
+    log_prior = np.asarray(posterior["log_prior"])[idx][None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        return arviz.from_dict(
+            posterior={n: parts[None, :, j] for j, n in enumerate(posterior["names"])},
+            log_likelihood={"L": loglik},
+            sample_stats={"lp": loglik + log_prior, "log_prior": log_prior},
+        )
+
+
+def write_posterior_files(result: Any, folder: str | Path, seed: int = 0) -> list[Path]:
+    """What ``fbia run`` writes of a ``gp_smc`` posterior: ``posterior.npz`` +
+    ``posterior.json`` (:func:`save_posterior`) and, with arviz installed, ``posterior.nc``:
+    the :func:`to_inference_data` of its particles, which ``arviz.from_netcdf`` reads."""
+    if not isinstance(result, GpSmcResult) or result.posterior is None:
+        return []
+    folder = Path(folder)
+    paths = list(save_posterior(result, folder))
+    post = result.posterior
+    arrays = {  # what load_posterior would read back from the files just written
+        "names": post.names,
+        "particles": post.particles,
+        "weights": post.weights,
+        "log_likelihood": post.log_likelihood,
+        "log_prior": post.log_prior,
+    }
+    try:
+        data = to_inference_data(arrays, seed=seed)
+    except ConfigError:  # arviz is not installed
+        return paths
+    data.to_netcdf(str(folder / "posterior.nc"))
+    return [*paths, folder / "posterior.nc"]

@@ -1,0 +1,391 @@
+"""The typed result of the ``gp_smc`` iterator (Paper B): design, surrogate, posterior.
+
+:class:`GpSmcResult` is a :class:`~fbia.core.problem.Result` whose parts are typed records
+instead of string keys: :class:`DesignRuns` (the design and what its forward runs
+gave), :class:`AdaptiveDesign` (the rounds of the adaptive design), :class:`SurrogateFit`
+(the GP and its errors), :class:`PosteriorCheck` (the surrogate
+against forward runs at posterior draws), :class:`ParticlePosterior` (the weighted
+particles and their summaries) and :class:`SmcSummary` (how the sampler ran).  The plots,
+:func:`fbia.iterators.gp_smc.posterior.save_posterior` and
+:func:`~fbia.iterators.gp_smc.posterior.hpd_mass`
+read these attributes; ``to_dict()`` (``result.json``) writes them under ``"info"``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...core.problem import Result, jsonable
+from ..surrogates.uncertainty import SurrogateUncertainty
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "AdaptiveDesign",
+    "AdaptiveRound",
+    "DesignRuns",
+    "GpSmcResult",
+    "LaplaceApproximation",
+    "ParticlePosterior",
+    "PosteriorCheck",
+    "SmcSummary",
+    "SurrogateFit",
+    "marginal_mode",
+]
+
+
+#: intervals of the weighted histogram whose heaviest one is a marginal's mode
+MODE_BINS = 30
+
+
+def marginal_mode(values: FloatArray, weights: FloatArray, bins: int = MODE_BINS) -> float:
+    """The peak of a 1-D marginal of weighted particles (Paper B Fig. 13): the centre of the
+    heaviest of ``bins`` equal intervals between the smallest and the largest value.
+
+    >>> marginal_mode(np.array([1.0, 2.0, 2.1, 4.0]), np.array([0.1, 0.3, 0.3, 0.3]), bins=3)
+    2.5
+    """
+    lo, hi = float(np.min(values)), float(np.max(values))
+    if hi <= lo:
+        return lo
+    mass, edges = np.histogram(values, bins=bins, range=(lo, hi), weights=weights)
+    k = int(np.argmax(mass))
+    return float(0.5 * (edges[k] + edges[k + 1]))
+
+
+@dataclass(frozen=True)
+class DesignRuns:
+    """The space-filling design and its forward runs (stage 1-2)."""
+
+    points: FloatArray  # (n, d) Sobol points, x then theta
+    log_likelihood: FloatArray  # (n,) L of eq. 5 per run, -inf where the run failed
+    status: list[str]  # evaluation status per run
+    train_mask: NDArray[np.bool_]  # True: training point, False: held-out test point
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return np.isfinite(self.log_likelihood)
+
+
+@dataclass(frozen=True)
+class AdaptiveRound:
+    """One round of the adaptive design: the posterior on the surrogate of ``n_runs`` runs,
+    how far it moved since the last round, and the error of that surrogate at the new batch's
+    posterior draws (predicted before it was trained on them)."""
+
+    round: int
+    n_runs: int  # design runs the round's GP was trained on
+    n_batch: int  # runs the round added
+    mean: FloatArray  # posterior mean of every input (x, theta) on the round's surrogate
+    std: FloatArray
+    mean_shift: float  # largest move of a mean since the last round, in posterior std
+    std_change: float  # largest |log| ratio of a std to the last round's
+    validation_rmse: float  # in L, at the batch's posterior draws
+    log_evidence: float
+    evidence_change: float  # |change of log Z| since the last round
+    floor: float  # the soft floor of the round's training values
+    seconds: float
+
+    def describe(self) -> str:
+        return (
+            f"round {self.round}: GP on {self.n_runs} runs, posterior mean moved "
+            f"{self.mean_shift:.3g} std, std changed {self.std_change:.3g}, log Z changed "
+            f"{self.evidence_change:.3g}, surrogate RMSE "
+            f"{self.validation_rmse:.3g} in L at new posterior draws; {self.n_batch} runs added"
+        )
+
+    def to_record(self) -> dict[str, Any]:
+        return {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in asdict(self).items()
+        }
+
+
+@dataclass(frozen=True)
+class AdaptiveDesign:
+    """How the adaptive design went: its rounds and why it stopped (``converged``: the
+    posterior stopped moving and the surrogate was right at new posterior draws;
+    ``budget``: n_train runs were used first)."""
+
+    n_initial: int
+    rounds: list[AdaptiveRound]
+    stop_reason: str
+    floor: float  # the final GP's soft floor (L below it is compressed)
+
+    @property
+    def converged(self) -> bool:
+        return self.stop_reason == "converged"
+
+    def note(self) -> str:
+        """The design in the result message, with a warning when it ran out of runs."""
+        n = len(self.rounds)
+        if self.converged:
+            return f"; adaptive design converged in {n} rounds"
+        return (
+            f"; the adaptive design did not converge within n_train runs ({n} rounds): "
+            "the posterior may still change with more runs (raise n_train)"
+        )
+
+
+@dataclass(frozen=True)
+class SurrogateFit:
+    """The GP surrogate of L (stage 3): its description and errors, and what rebuilds it."""
+
+    summary: dict[str, Any]  # kernel, hyperparameters, n_train, LOO and held-out errors
+    state: dict[str, Any]  # GpSurrogate.from_state(state) gives the GP back
+    best_x: FloatArray  # the training run of highest L
+    best_log_likelihood: float
+
+
+#: the largest surrogate RMSE in L at posterior draws that counts as "well below 1": an error
+#: of 0.5 changes posterior density ratios by up to a factor e^0.5 = 1.65
+RELIABLE_RMSE = 0.5
+#: the largest share of posterior draws at which the forward model may fail: more (3 or more
+#: of 8) says the posterior holds mass where the model produces no state (for a share of 10 %
+#: in truth, 3 of 8 happens with probability 0.04)
+RELIABLE_FAILED_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class PosteriorCheck:
+    """Forward runs at ``n`` distinct posterior draws: the surrogate's error where the
+    posterior is, in units of L (an error of order 1 changes posterior ratios by e)."""
+
+    n: int
+    n_failed: int
+    x: FloatArray
+    log_likelihood: FloatArray
+    rmse: float
+    max_abs: float
+    mean_error: float
+
+    @property
+    def reliable(self) -> bool:
+        """Whether the surrogate's error at the posterior draws is well below 1 in L
+        (:data:`RELIABLE_RMSE`) and the model ran at all but a few of them
+        (:data:`RELIABLE_FAILED_SHARE`); False when no draw could be checked."""
+        return bool(self.n > 0 and self.rmse < RELIABLE_RMSE and not self.fails_often)
+
+    @property
+    def fails_often(self) -> bool:
+        """Whether more than :data:`RELIABLE_FAILED_SHARE` of the draws failed."""
+        return self.n_failed > RELIABLE_FAILED_SHARE * (self.n + self.n_failed)
+
+    def note(self) -> str:
+        """The check in the result message, with a warning when it failed."""
+        if self.n == 0:
+            return (
+                f"; the surrogate could not be checked: all {self.n_failed} forward runs at "
+                "posterior draws failed (the posterior is not reliable)"
+            )
+        text = f"; surrogate RMSE {self.rmse:.3g} in L at {self.n} posterior draws"
+        if self.fails_often:
+            text += (
+                f"; the forward model failed at {self.n_failed} of {self.n + self.n_failed} "
+                "posterior draws: the posterior holds mass where the model produces no state "
+                "(the posterior is not reliable; failures = 'classify' keeps it where the "
+                "model runs)"
+            )
+        elif not self.reliable:
+            text += (
+                f" (not well below 1, limit {RELIABLE_RMSE:g}: the posterior is not reliable; "
+                "train on more runs)"
+            )
+        return text
+
+
+@dataclass(frozen=True)
+class LaplaceApproximation:
+    """N(mean, cov) from the Hessian of the log-posterior at the MAP (Paper B Fig. 9a/c)."""
+
+    mean: FloatArray
+    hessian: FloatArray
+    cov: FloatArray | None  # None where the Hessian is not negative definite
+    negative_definite: bool
+
+
+def principal_angle(a: FloatArray, b: FloatArray, width: FloatArray) -> float:
+    """The angle [degrees, 0-90] between the principal axes (largest variance) of the 2-D
+    covariances ``a`` and ``b``, in coordinates scaled by ``width`` (the design box: the axes
+    of Paper B Fig. 9a), e.g. the Laplace approximation's against the particles' ("almost
+    orthogonal" in the paper)."""
+    scale = np.diag(1.0 / np.asarray(width, dtype=float))
+    axes = [np.linalg.eigh(scale @ c @ scale)[1][:, -1] for c in (a, b)]
+    cosine = min(1.0, abs(float(axes[0] @ axes[1])))
+    return float(np.degrees(np.arccos(cosine)))
+
+
+@dataclass(frozen=True)
+class ParticlePosterior:
+    """The weighted particles of the last SMC step and their summaries (stage 5)."""
+
+    names: list[str]  # x names, then theta names
+    n_x: int
+    particles: FloatArray  # (N, d)
+    weights: FloatArray  # (N,), normalised
+    log_likelihood: FloatArray  # (N,) L (surrogate or direct)
+    log_prior: FloatArray  # (N,)
+    log_evidence: float
+    log_evidence_se: float
+    mean: FloatArray  # of x
+    cov: FloatArray  # of x
+    mean_all: FloatArray  # of (x, theta)
+    cov_all: FloatArray
+    max_likelihood: FloatArray  # the particle of highest L
+    credible_intervals: dict[str, list[float]]  # 2.5 %, 50 %, 97.5 % per input
+    map: FloatArray  # of x
+    map_method: str
+    best_particle: FloatArray | None = None  # with theta: the particle of highest posterior
+    laplace: LaplaceApproximation | None = None
+
+    @property
+    def std(self) -> FloatArray:
+        return np.asarray(np.sqrt(np.diag(self.cov)))
+
+    @property
+    def log_posterior(self) -> FloatArray:
+        """L + log p, unnormalised."""
+        return np.asarray(self.log_likelihood + self.log_prior)
+
+
+@dataclass(frozen=True)
+class SmcSummary:
+    """How the sampler ran (Algorithm 1)."""
+
+    n_steps: int
+    gammas: list[float]
+    ess: list[float]
+    acceptance: list[float]
+    nfev_log_likelihood: int
+    final_ess: float
+    rejuvenate: str
+    steps_with_moves: int
+    #: the tabulated L's size and error at the final particles (fbia.iterators.smc.table)
+    table: dict[str, Any] | None = None
+
+
+@dataclass
+class GpSmcResult(Result):
+    """:class:`~fbia.core.problem.Result` of ``gp_smc``; ``x`` is the MAP.
+
+    Attributes (besides those of ``Result``; None where the stage did not run)
+    ----------
+    names, n_x
+        Input names (x, then theta) and the number of calibration parameters x.
+    mode
+        ``surrogate`` or ``direct``.
+    priors
+        The inputs' descriptions (name, unit, bounds, prior).
+    design, adaptive, surrogate, check, uncertainty, posterior, smc
+        The stages' records (see the module docstring); ``adaptive`` only with the
+        adaptive design, ``uncertainty`` only with ``surrogate_uncertainty =
+        "expected_posterior"`` (then ``posterior`` is the expected posterior).
+    seconds
+        Wall time of the analysis.
+    """
+
+    names: list[str] = field(default_factory=list)
+    n_x: int = 0
+    mode: str = "surrogate"
+    priors: list[dict[str, Any]] = field(default_factory=list)
+    design: DesignRuns | None = field(default=None, repr=False)
+    adaptive: AdaptiveDesign | None = field(default=None, repr=False)
+    surrogate: SurrogateFit | None = field(default=None, repr=False)
+    check: PosteriorCheck | None = None
+    uncertainty: SurrogateUncertainty | None = field(default=None, repr=False)
+    posterior: ParticlePosterior | None = field(default=None, repr=False)
+    smc: SmcSummary | None = field(default=None, repr=False)
+    seconds: float = 0.0
+
+    def summary(self) -> str:
+        """The status line, the MAP, then per input (x, theta, sigma_N when inferred) the
+        posterior mean, std and 95 % interval, and the adaptive design's rounds."""
+        text = super().summary()
+        post = self.posterior
+        if post is None:
+            return text
+        lines = [text, "  posterior (mean, std, 2.5 % / 50 % / 97.5 %):"]
+        std = np.sqrt(np.maximum(np.diag(post.cov_all), 0.0))
+        for j, name in enumerate(post.names):
+            lo, mid, hi = post.credible_intervals[name]
+            lines.append(
+                f"    {name:<12} {post.mean_all[j]:<12.6g} {std[j]:<12.4g} "
+                f"{lo:.6g} / {mid:.6g} / {hi:.6g}"
+            )
+        if self.surrogate is not None:
+            info = self.surrogate.summary
+            lines.append(
+                f"  surrogate: residual emulator, {info.get('components')} principal "
+                f"components of {info.get('n_residuals')} residuals"
+                if info.get("surrogate") == "residuals"
+                else "  surrogate: GP of L (Paper B)"
+            )
+        if self.adaptive is not None:
+            lines.append(
+                f"  adaptive design: {self.adaptive.n_initial} start runs, "
+                f"{len(self.adaptive.rounds)} rounds, stopped: {self.adaptive.stop_reason}"
+            )
+            for r in self.adaptive.rounds:
+                lines.append(
+                    f"    round {r.round:<3} runs {r.n_runs:<5} +{r.n_batch:<4} mean moved "
+                    f"{r.mean_shift:<8.3g} std changed {r.std_change:<8.3g} RMSE at new draws "
+                    f"{r.validation_rmse:.3g}"
+                )
+        return "\n".join(lines)
+
+    def quantities(self) -> dict[str, float]:
+        """Besides :meth:`Result.quantities` (``x.<name>`` is the MAP): per input of the
+        posterior (x, theta, an inferred sigma_N) ``map.<name>`` (x only), ``pm.<name>``
+        (posterior mean), ``sd.<name>`` (posterior std), ``q2.5.<name>``, ``q97.5.<name>``
+        (95 % interval), ``mode.<name>`` (peak of the 1-D marginal: :func:`marginal_mode`);
+        ``log_evidence``; ``check.rmse`` (the surrogate's error in L at the posterior draws);
+        ``design.n_failed`` and per input ``design.failed_min.<name>``,
+        ``design.failed_max.<name>``: where the design's failed runs lie (NaN if none failed);
+        ``laplace.angle`` (two inputs): the angle between the principal axes of the Laplace
+        approximation and of the particles in the design box's scale (:func:`principal_angle`)."""
+        out = super().quantities()
+        if self.check is not None:
+            out["check.rmse"] = float(self.check.rmse)
+        if self.design is not None:
+            failed = self.design.points[~self.design.ok]
+            out["design.n_failed"] = float(len(failed))
+            for j, name in enumerate(self.names[: self.design.points.shape[1]]):
+                column = failed[:, j]
+                out[f"design.failed_min.{name}"] = float(column.min()) if len(column) else np.nan
+                out[f"design.failed_max.{name}"] = float(column.max()) if len(column) else np.nan
+        post = self.posterior
+        if post is None:
+            return out
+        std = np.sqrt(np.maximum(np.diag(post.cov_all), 0.0))
+        for j, name in enumerate(post.names):
+            if j < len(post.map):
+                out[f"map.{name}"] = float(post.map[j])
+            out[f"pm.{name}"] = float(post.mean_all[j])
+            out[f"sd.{name}"] = float(std[j])
+            lo, _, hi = post.credible_intervals[name]
+            out[f"q2.5.{name}"], out[f"q97.5.{name}"] = float(lo), float(hi)
+            out[f"mode.{name}"] = marginal_mode(post.particles[:, j], post.weights)
+        out["log_evidence"] = float(post.log_evidence)
+        lap = post.laplace
+        if lap is not None and lap.cov is not None and len(post.mean) == 2 and self.design:
+            width = np.ptp(self.design.points[:, :2], axis=0)
+            out["laplace.angle"] = principal_angle(lap.cov, post.cov, width)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        parts: dict[str, Any] = {
+            "names": self.names,
+            "n_x": self.n_x,
+            "mode": self.mode,
+            "priors": self.priors,
+            "seconds": self.seconds,
+        }
+        for name in ("design", "adaptive", "surrogate", "check", "uncertainty", "posterior", "smc"):
+            value = getattr(self, name)
+            parts[name] = None if value is None else asdict(value)
+        out["info"] = {**out["info"], **jsonable(parts)}
+        return out

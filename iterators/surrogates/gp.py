@@ -1,0 +1,560 @@
+"""Gaussian-process surrogate of the log-likelihood (Paper B, appendix eq. 26-29, Remarks 9-10).
+
+>>> import numpy as np
+>>> from fbia.iterators.surrogates.gp import GpSurrogate
+>>> rng = np.random.default_rng(0)
+>>> x = rng.random((60, 2))
+>>> log_lik = -((x[:, 0] - 0.4) ** 2 + 2 * (x[:, 1] - 0.6) ** 2) / 0.05
+>>> gp = GpSurrogate(ard=True).fit(x, log_lik, rng=rng)
+>>> bool(abs(gp.predict_mean(np.array([[0.4, 0.6]]))[0]) < 0.5)   # true maximum 0
+True
+
+The surrogate is a GP with constant prior mean m = min(L) - 1.0 (max(L) - min(L))
+(Remark 10, so that the surrogate falls off far from the data), a Matérn 3/2 kernel (eq. 27)
+with one length scale, or a product of 1-D Matérn 3/2 kernels with one length scale per input
+(Remark 9, "ARD"), inputs standardised with the mean and standard deviation of the training
+inputs, and a fixed nugget variance sigma_n^2 = 1e-5 (max(L) - min(L)) (Paper B, §"Convergence
+over number of training points"). Signal variance and length scales maximise the evidence
+(eq. 29) with GPy's L-BFGS-B (default, with restarts from seeded initial guesses) or scaled
+conjugate gradients.
+
+Only the posterior mean (eq. 28a) is needed inside SMC: :meth:`GpSurrogate.predict_mean`
+evaluates k(x*, X) alpha for all particles at once, with the weight vector
+alpha = (K + sigma_n^2 I)^-1 (y - m) computed once after training; no variances.
+:meth:`GpSurrogate.predict_mean_guarded` caps that mean at the largest training value plus a
+margin (:func:`~fbia.iterators.smc.diagnostics.extrapolation_margin`, chi2_d(0.999) / 2 units
+of L), counts the capped points in ``guard``, and :meth:`GpSurrogate.extrapolated_mass` gives
+the posterior mass an SMC result puts where the cap bites: a sampler cannot be pulled into a
+region where the surrogate invents evidence without it showing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ...core.errors import ConfigError
+from .guard import ExtrapolationGuard, GuardCounts
+from .mean import fused_kernels
+from .trend import QuadraticTrend
+
+#: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
+_BLOCK = 1 << 18
+_SQRT3 = math.sqrt(3.0)
+#: Largest |scaled input| for the exp-free product-kernel loop (e^a e^-b stays far from
+#: overflow and underflow: e^(2 * 300) ~ 1e260).
+_EXP_FREE_RANGE = 300.0
+OPTIMIZERS = ("lbfgsb", "scg")
+#: Bounds of the length scales (standardised inputs) and of the signal variance (in units of
+#: (max L - min L)^2) during training.
+LENGTHSCALE_BOUNDS = (1e-3, 1e2)
+VARIANCE_BOUNDS = (1e-4, 1e4)
+
+
+def blas_single_thread() -> contextlib.AbstractContextManager[Any]:
+    """Limit BLAS to one thread (if ``threadpoolctl`` is installed).
+
+    The matrices here are small to moderate (n_train <= a few thousand) and the machines are
+    shared: threaded BLAS on an oversubscribed machine made GPy's training 10x slower.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _gpy() -> Any:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import GPy
+    return GPy
+
+
+def matern32_cross(
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    lengthscale: NDArray[np.float64],
+    variance: float,
+    product: bool,
+) -> NDArray[np.float64]:
+    """Matérn 3/2 cross-covariance k(a, b) (eq. 27), shape (len(a), len(b)).
+
+    ``product=False``: one kernel of the Euclidean distance scaled by one length scale
+    (``lengthscale`` of length 1). ``product=True``: the product of 1-D Matérn 3/2 kernels,
+    one length scale per dimension (Remark 9):
+    k = sigma^2 prod_j (1 + sqrt3 |r_j|) exp(-sqrt3 sum_j |r_j|), r_j = (a_j - b_j) / l_j.
+    """
+    if not product:
+        sa = a / lengthscale[0]
+        sb = b / lengthscale[0]
+        r2 = (sa * sa).sum(1)[:, None] + (sb * sb).sum(1)[None, :] - 2.0 * (sa @ sb.T)
+        np.maximum(r2, 0.0, out=r2)
+        r = np.sqrt(r2, out=r2)
+        r *= _SQRT3
+        k = 1.0 + r
+        np.negative(r, out=r)
+        np.exp(r, out=r)
+        k *= r
+        k *= variance
+        return k
+    sa = a * (_SQRT3 / lengthscale)
+    sb = b * (_SQRT3 / lengthscale)
+    total = np.zeros((len(a), len(b)))
+    prod = np.ones((len(a), len(b)))
+    t = np.empty((len(a), len(b)))
+    for j in range(a.shape[1]):
+        np.subtract(sa[:, j, None], sb[None, :, j], out=t)
+        np.abs(t, out=t)
+        total += t
+        t += 1.0
+        prod *= t
+    np.negative(total, out=total)
+    np.exp(total, out=total)
+    prod *= total
+    prod *= variance
+    return prod
+
+
+def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    from scipy.linalg import cho_solve
+
+    return np.asarray(cho_solve((chol, True), b))
+
+
+class GpSurrogate(ExtrapolationGuard):
+    """GP regression model of the log-likelihood L(x) (Paper B, eq. 26-29).
+
+    Parameters
+    ----------
+    ard
+        One length scale per input as a product of 1-D Matérn 3/2 kernels (Remark 9) instead
+        of a single length scale for all standardised inputs.
+    optimizer
+        ``"lbfgsb"`` (L-BFGS-B, default) or ``"scg"`` (scaled conjugate gradients).
+    restarts
+        Additional optimisations from random initial guesses around the data-based one (the
+        best evidence wins); 0: only the data-based initial guess.
+    max_iters
+        Iteration limit of each optimisation.
+    nugget_factor
+        sigma_n^2 = nugget_factor (max L - min L) (Paper B: 1e-5), fixed.
+    mean_offset
+        m = min L - mean_offset (max L - min L) (Remark 10: 1.0).
+    gpy_default
+        Train the way GPy does by default (initial variance 1 and length scale 1, one
+        optimisation, no restarts, no bounds); for comparison in benchmarks.
+    subset
+        With more training points than this, the restarts run on the first ``subset`` points
+        (for a Sobol design a space-filling prefix; cost ~ n^3), and the best hyperparameters
+        are refined on all points with at most ``polish_iters`` iterations.
+    polish_iters
+        Iteration limit of that refinement on all points.
+    guard_margin
+        Units of L above the largest training value where :meth:`predict_mean_guarded` caps
+        the mean; ``None``: chi2_d(0.999) / 2 (12.2 for d = 7, see
+        :func:`~fbia.iterators.smc.diagnostics.extrapolation_margin`).
+    """
+
+    def __init__(
+        self,
+        ard: bool = False,
+        optimizer: str = "lbfgsb",
+        restarts: int = 2,
+        max_iters: int = 1000,
+        nugget_factor: float = 1e-5,
+        mean_offset: float = 1.0,
+        gpy_default: bool = False,
+        subset: int = 800,
+        polish_iters: int = 60,
+        guard_margin: float | None = None,
+        trend: str = "constant",
+    ) -> None:
+        if optimizer not in OPTIMIZERS:
+            raise ConfigError(
+                f"unknown GP optimizer {optimizer!r}; valid: {', '.join(OPTIMIZERS)}", "gp"
+            )
+        if restarts < 0 or max_iters < 1:
+            raise ConfigError(f"restarts must be >= 0 and max_iters >= 1, got {restarts}", "gp")
+        if not nugget_factor > 0:
+            raise ConfigError(f"nugget_factor must be positive, got {nugget_factor}", "gp")
+        self.ard = bool(ard)
+        self.optimizer = optimizer
+        self.restarts = int(restarts)
+        self.max_iters = int(max_iters)
+        self.nugget_factor = float(nugget_factor)
+        self.mean_offset = float(mean_offset)
+        self.gpy_default = bool(gpy_default)
+        if subset < 2 or polish_iters < 1:
+            raise ConfigError(f"subset must be >= 2 and polish_iters >= 1, got {subset}", "gp")
+        self.subset = int(subset)
+        self.polish_iters = int(polish_iters)
+        self.model: Any = None
+        self.info: dict[str, Any] = {}
+        self._chol: NDArray[np.float64] | None = None  # set when restored (from_state)
+        if guard_margin is not None and not guard_margin >= 0:
+            raise ConfigError(f"guard_margin must be >= 0, got {guard_margin}", "gp")
+        self.guard_margin = guard_margin
+        if trend not in ("constant", "quadratic"):
+            raise ConfigError(f"unknown GP trend {trend!r}; valid: constant, quadratic", "gp")
+        self.trend_kind = trend
+        self.trend: QuadraticTrend | None = None
+        self.guard = GuardCounts()
+
+    # -- training -------------------------------------------------------------------------
+    def fit(
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        rng: np.random.Generator | int | None = None,
+        start: Mapping[str, Any] | None = None,
+    ) -> GpSurrogate:
+        """Train on inputs ``x`` (n, d) and log-likelihood values ``y`` (n,); returns self.
+
+        ``start``: the :meth:`hyperparameters` of an earlier fit on part of these data (an
+        adaptive design's previous round) as the first initial guess, instead of the data-based
+        one and the search on a subset; ``restarts`` perturb it.
+        """
+        with blas_single_thread():
+            return self._fit(x, y, rng, start)
+
+    def _fit(
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        rng: np.random.Generator | int | None,
+        start: Mapping[str, Any] | None = None,
+    ) -> GpSurrogate:
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        y = np.asarray(y, dtype=float).ravel()
+        if x.ndim != 2 or len(x) != len(y):
+            raise ConfigError(f"GP training data: {x.shape} inputs for {y.shape} outputs", "gp")
+        if len(y) < 2:
+            raise ConfigError(f"the GP needs at least 2 training points, got {len(y)}", "gp")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+            raise ConfigError("GP training data must be finite", "gp")
+        rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        t0 = time.perf_counter()
+        self.info = {}
+        self.x_train, self.y_train = x, y
+        self.x_mean = x.mean(axis=0)
+        self.x_std = x.std(axis=0)
+        self.x_std[self.x_std == 0] = 1.0
+        # the prior mean: Remark 10's constant, or a concave quadratic (gp_trend) plus 0
+        self.trend = QuadraticTrend.fit(x, y) if self.trend_kind == "quadratic" else None
+        y_fit = y if self.trend is None else y - self.trend(x)
+        y_range = float(y_fit.max() - y_fit.min())
+        # Output scale: the data are fitted as (y - m) / scale; the nugget stays
+        # nugget_factor * range in units of L^2 (Paper B), i.e. nugget_factor * range / scale^2.
+        self.scale = y_range if y_range > 0 else max(1.0, abs(float(y_fit.max())))
+        self.mean_value = float(y.min() - self.mean_offset * y_range) if self.trend is None else 0.0
+        self.nugget = self.nugget_factor * (y_range if y_range > 0 else self.scale)
+        xs = self._standardise(x)
+        ys = ((y_fit - self.mean_value) / self.scale)[:, None]
+        gpy = _gpy()
+        d = x.shape[1]
+        if self.ard:
+            from .kernels import Matern32Product
+
+            kern = Matern32Product(d)
+        else:
+            kern = gpy.kern.Matern32(d, ARD=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = gpy.models.GPRegression(xs, ys, kern, noise_var=self.nugget / self.scale**2)
+            model.Gaussian_noise.variance.fix()
+            if not self.gpy_default:
+                # Bounds keep the evidence maximisation away from the degenerate limit
+                # l -> inf, sigma^2 -> inf that a nearly noise-free smooth L invites.
+                kern.lengthscale.constrain_bounded(*LENGTHSCALE_BOUNDS, warning=False)
+                kern.variance.constrain_bounded(*VARIANCE_BOUNDS, warning=False)
+        self.model = model
+        max_iters = self.max_iters
+        starts: list[Any]
+        if self.gpy_default:
+            starts = [None]
+        elif start is not None:
+            starts = self._warm_starts(start, rng)
+            if len(y) > self.subset:
+                max_iters = self.polish_iters
+        elif len(y) > self.subset:
+            # Hyperparameter search on a prefix of the design, then a refinement on all points.
+            pre = GpSurrogate(
+                ard=self.ard,
+                optimizer=self.optimizer,
+                restarts=self.restarts,
+                max_iters=self.max_iters,
+                nugget_factor=self.nugget_factor,
+                mean_offset=self.mean_offset,
+                subset=self.subset,
+                trend=self.trend_kind,
+            ).fit(x[: self.subset], y[: self.subset], rng)
+            hp = pre.hyperparameters()
+            ratio = np.asarray(hp["x_std"]) / self.x_std
+            ells = np.asarray(hp["lengthscales"]) * (ratio if self.ard else ratio.mean())
+            var = float(np.clip(hp["signal_variance"] / self.scale**2, *VARIANCE_BOUNDS))
+            starts = [(var, np.clip(ells, *LENGTHSCALE_BOUNDS))]
+            max_iters = self.polish_iters
+            self.info["subset_search"] = pre.describe()
+        else:
+            starts = self._initial_guesses(xs, ys, rng)
+        best, best_obj, runs = None, math.inf, []
+        for guess in starts:
+            if guess is not None:
+                self._set_hyper(*guess)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    model.optimize(self.optimizer, max_iters=max_iters, messages=False)
+                except np.linalg.LinAlgError as exc:
+                    runs.append({"start": guess, "error": str(exc)})
+                    continue
+            obj = float(model.objective_function())
+            runs.append({"start": guess, "neg_log_evidence": obj})
+            if math.isfinite(obj) and obj < best_obj:
+                best, best_obj = model.param_array.copy(), obj
+        if best is None:
+            raise ConfigError("GP training failed from every initial guess", "gp")
+        model[:] = best
+        self._precompute()
+        self.info = {
+            **self.info,
+            "seconds": time.perf_counter() - t0,
+            "n_train": len(y),
+            "neg_log_evidence": best_obj,
+            "optimizer": self.optimizer,
+            "restarts": len(runs),
+            "runs": runs,
+            **self.hyperparameters(),
+        }
+        return self
+
+    def _standardise(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return (np.asarray(x, dtype=float) - self.x_mean) / self.x_std
+
+    def _initial_guesses(self, xs, ys, rng) -> list[tuple[float, NDArray[np.float64]]]:
+        """A data-based guess (signal variance = mean square of y - m, length scale = median
+        distance to the nearest neighbour times 4, in standardised units), then log-uniform
+        perturbations of it (a factor up to 10 either way)."""
+        d = xs.shape[1]
+        sub = xs[rng.choice(len(xs), size=min(len(xs), 500), replace=False)]
+        dist = np.sqrt(((sub[:, None, :] - sub[None, :, :]) ** 2).sum(-1))
+        np.fill_diagonal(dist, np.inf)
+        nn = float(np.median(dist.min(axis=1)))
+        ell0 = float(np.clip(4.0 * nn, 0.05, 10.0))
+        var0 = float(np.clip(np.mean(ys**2), 1e-3, 1e3))
+        n_ell = d if self.ard else 1
+        guesses = [(var0, np.full(n_ell, ell0))]
+        for _ in range(self.restarts):
+            f_var = 10.0 ** rng.uniform(-1.0, 1.0)
+            f_ell = 10.0 ** rng.uniform(-0.7, 0.7, size=n_ell)
+            guesses.append((var0 * f_var, ell0 * f_ell))
+        return guesses
+
+    def _warm_starts(
+        self, hp: Mapping[str, Any], rng: np.random.Generator
+    ) -> list[tuple[float, NDArray[np.float64]]]:
+        """Earlier hyperparameters in this fit's units (the input and output scales moved
+        with the data), then ``restarts`` log-uniform perturbations of them."""
+        ratio = np.asarray(hp["x_std"]) / self.x_std
+        ells = np.asarray(hp["lengthscales"]) * (ratio if self.ard else ratio.mean())
+        var = float(np.clip(hp["signal_variance"] / self.scale**2, *VARIANCE_BOUNDS))
+        guesses = [(var, np.clip(ells, *LENGTHSCALE_BOUNDS))]
+        for _ in range(self.restarts):
+            f_ell = 10.0 ** rng.uniform(-0.5, 0.5, size=len(ells))
+            guesses.append((var * 10.0 ** rng.uniform(-1.0, 1.0), guesses[0][1] * f_ell))
+        return guesses
+
+    def _set_hyper(self, variance: float, lengthscale: NDArray[np.float64]) -> None:
+        self.model.kern.variance[:] = variance
+        self.model.kern.lengthscale[:] = lengthscale
+
+    def hyperparameters(self) -> dict[str, Any]:
+        """Signal variance (in L^2), length scales (standardised inputs), nugget, prior mean."""
+        variance = float(self.model.kern.variance[0])
+        ells = [float(v) for v in np.atleast_1d(self.model.kern.lengthscale)]
+        return {
+            "kernel": "matern32_product" if self.ard else "matern32",
+            "signal_variance": variance * self.scale**2,
+            "lengthscales": ells,
+            "nugget_variance": self.nugget,
+            "prior_mean": self.mean_value,
+            "x_mean": self.x_mean.tolist(),
+            "x_std": self.x_std.tolist(),
+        }
+
+    def _precompute(self) -> None:
+        """alpha = (K + sigma_n^2 I)^-1 (y - m) / scale and the kernel constants (eq. 28a)."""
+        hp = self.hyperparameters()
+        self._alpha = np.asarray(self.model.posterior.woodbury_vector, dtype=float).ravel()
+        self._ell = np.asarray(hp["lengthscales"], dtype=float)
+        self._var = hp["signal_variance"] / self.scale**2
+        self._xs = self._standardise(self.x_train)
+
+    # -- prediction -----------------------------------------------------------------------
+    def predict_mean(self, x: ArrayLike, fused: bool | None = None) -> NDArray[np.float64]:
+        """Posterior mean of L at the rows of ``x`` (M, d) (eq. 28a), all points at once.
+
+        ``fused``: compiled numba loops (:mod:`.gp_mean`; ``None``: from 64 points on;
+        ``True``: always) or numpy blocks (``False``).
+        """
+        if not hasattr(self, "_alpha"):
+            raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
+        xs = self._standardise(np.atleast_2d(x))
+        if fused is not False and (fused or len(xs) >= 64):
+            kernels = fused_kernels()
+            scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
+            xt_t = np.ascontiguousarray((self._xs * scale).T)
+            a = np.ascontiguousarray(xs * scale)
+            if not self.ard:
+                raw = kernels[1](a, xt_t, self._alpha, 32)
+                return self._prior_mean(x) + self.scale * self._var * raw
+            # Scaled inputs too far out for e^a (tiny length scales): the numpy blocks below.
+            if max(np.abs(a).max(), np.abs(xt_t).max()) < _EXP_FREE_RANGE:
+                raw = kernels[0](
+                    a, xt_t, np.exp(a), np.exp(-a), np.exp(xt_t), np.exp(-xt_t), self._alpha, 32
+                )
+                return self._prior_mean(x) + self.scale * self._var * raw
+        out = np.empty(len(xs))
+        rows = max(1, _BLOCK // max(1, len(self._xs)))
+        for i in range(0, len(xs), rows):
+            k = matern32_cross(xs[i : i + rows], self._xs, self._ell, self._var, self.ard)
+            out[i : i + rows] = k @ self._alpha
+        return self._prior_mean(x) + self.scale * out
+
+    __call__ = predict_mean
+
+    def _prior_mean(self, x: ArrayLike) -> NDArray[np.float64]:
+        """The GP's prior mean of L at the rows of ``x``: constant, or the quadratic trend."""
+        if self.trend is None:
+            return np.full(len(np.atleast_2d(x)), self.mean_value)
+        return self.trend(np.atleast_2d(np.asarray(x, dtype=float)))
+
+    def predict(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Posterior mean and variance of L (eq. 28a-b), through GPy (for plots, checks)."""
+        xs = self._standardise(np.atleast_2d(x))
+        if self.model is None and self._chol is not None:  # restored from a state: numpy only
+            k = matern32_cross(xs, self._xs, self._ell, self._var, self.ard)
+            v = np.linalg.solve(self._chol, k.T)
+            var_s = self._var - np.sum(v * v, axis=0)
+            return self.predict_mean(x), np.maximum(var_s, 0.0) * self.scale**2
+        mean, var = self.model.predict(xs, include_likelihood=False)
+        return (
+            self._prior_mean(x) + self.scale * mean.ravel(),
+            np.maximum(var.ravel(), 0.0) * self.scale**2,
+        )
+
+    def posterior_covariance(self, a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+        """Posterior covariance of L between the rows of ``a`` (M, d) and ``b`` (P, d)
+        (eq. 28b off the diagonal), in units of L^2: what conditioning on a new run at a
+        point of ``b`` removes from the variance at ``a`` (an adaptive design's criterion)."""
+        from scipy.linalg import solve_triangular
+
+        xa = self._standardise(np.atleast_2d(a))
+        xb = self._standardise(np.atleast_2d(b))
+        # k(a, b) - v_a^T v_b with v = L^-1 k(X, .), L the Cholesky factor of K + sigma_n^2 I:
+        # the triangular solves keep the small variances near the data accurate, where the
+        # explicit inverse loses them to cancellation
+        chol = (
+            np.asarray(self.model.posterior.woodbury_chol, dtype=float)
+            if self.model is not None
+            else self._chol
+        )
+        assert chol is not None
+        kab = matern32_cross(xa, xb, self._ell, self._var, self.ard)
+        v_a = solve_triangular(
+            chol, matern32_cross(self._xs, xa, self._ell, self._var, self.ard), lower=True
+        )
+        v_b = (
+            v_a
+            if b is a
+            else solve_triangular(
+                chol, matern32_cross(self._xs, xb, self._ell, self._var, self.ard), lower=True
+            )
+        )
+        return np.asarray((kab - v_a.T @ v_b) * self.scale**2)
+
+    def predict_joint(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Posterior mean (M,) and full covariance (M, M) of the latent L at the rows of ``x``
+        (eq. 28a-b with x* a set of points), in units of L; for joint sample paths."""
+        return self.predict_mean(x), self.posterior_covariance(x, x)
+
+    # -- quality --------------------------------------------------------------------------
+    def loo(self) -> dict[str, float]:
+        """Leave-one-out errors (:meth:`loo_predictions`)."""
+        return self._errors(self.y_train - self.loo_predictions(), self.y_train, prefix="loo")
+
+    def loo_predictions(self) -> NDArray[np.float64]:
+        """Leave-one-out predictions in closed form: y_i - alpha_i / [(K + sigma_n^2 I)^-1]_ii."""
+        kinv_diag = np.diag(np.asarray(self.model.posterior.woodbury_inv))
+        return np.asarray(self.y_train - self.scale * self._alpha / kinv_diag)
+
+    def test_error(self, x: ArrayLike, y: ArrayLike) -> dict[str, float]:
+        """Errors of the posterior mean at held-out points (Paper B Remark 9, Fig. 12)."""
+        y = np.asarray(y, dtype=float).ravel()
+        return self._errors(self.predict_mean(x) - y, y, prefix="test")
+
+    @staticmethod
+    def _errors(res: NDArray[np.float64], y: NDArray[np.float64], prefix: str) -> dict[str, float]:
+        spread = float(np.linalg.norm(y - y.mean())) or 1.0
+        return {
+            f"{prefix}_n": len(res),
+            f"{prefix}_l2": float(np.linalg.norm(res)),
+            f"{prefix}_rmse": float(np.sqrt(np.mean(res**2))),
+            f"{prefix}_max_abs": float(np.max(np.abs(res))),
+            f"{prefix}_relative_l2": float(np.linalg.norm(res)) / spread,
+        }
+
+    # -- persistence ----------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """Everything needed to rebuild the trained surrogate without GPy (arrays + floats)."""
+        hp = self.hyperparameters()
+        return {
+            "ard": self.ard,
+            "x_train": self.x_train,
+            "y_train": self.y_train,
+            "x_mean": self.x_mean,
+            "x_std": self.x_std,
+            "lengthscales": np.asarray(hp["lengthscales"]),
+            "signal_variance": hp["signal_variance"],
+            "nugget_variance": self.nugget,
+            "prior_mean": self.mean_value,
+            "scale": self.scale,
+            "trend": None if self.trend is None else self.trend.state(),
+        }
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, Any]) -> GpSurrogate:
+        """Rebuild a trained surrogate from :meth:`state` (conditioning by Cholesky in numpy)."""
+        gp = cls(ard=bool(state["ard"]))
+        gp.x_train = np.asarray(state["x_train"], dtype=float)
+        gp.y_train = np.asarray(state["y_train"], dtype=float)
+        gp.x_mean = np.asarray(state["x_mean"], dtype=float)
+        gp.x_std = np.asarray(state["x_std"], dtype=float)
+        gp.scale = float(state["scale"])
+        gp.mean_value = float(state["prior_mean"])
+        if state.get("trend") is not None:
+            gp.trend = QuadraticTrend.from_state(state["trend"])
+            gp.trend_kind = "quadratic"
+        gp.nugget = float(state["nugget_variance"])
+        gp._ell = np.asarray(state["lengthscales"], dtype=float)
+        gp._var = float(state["signal_variance"]) / gp.scale**2
+        gp._xs = gp._standardise(gp.x_train)
+        k = matern32_cross(gp._xs, gp._xs, gp._ell, gp._var, gp.ard)
+        k[np.diag_indices_from(k)] += gp.nugget / gp.scale**2
+        chol = np.asarray(np.linalg.cholesky(k), dtype=np.float64)
+        gp._chol = chol
+        ys = (gp.y_train - gp._prior_mean(gp.x_train)) / gp.scale
+        gp._alpha = _cho_solve(chol, ys)
+        gp.info = {"n_train": len(ys), "restored": True}
+        return gp
+
+    def describe(self) -> Mapping[str, Any]:
+        return {k: v for k, v in self.info.items() if k != "runs"}

@@ -1,0 +1,392 @@
+"""Gaussian-process emulator of the forward runs' residual vectors, and L from it.
+
+Paper B's surrogate is a GP of the log-likelihood L itself. L = C - |r|^2 / (2 sigma_N^2)
+(eq. 5) is a sharply peaked function of the parameters when the noise is small: along a
+weakly identified direction (E against the inflow rate) its ridge is long and thin, and a
+stationary GP of L needs many runs to follow it. The residuals r(x) of the measure are smooth
+functions of the parameters (the interface moves smoothly with E, nu and the load), so a GP
+emulator of r and L computed from the emulated residuals is far more accurate for the same
+runs: "output emulation" with a principal-component basis (Higdon, Gattiker, Williams &
+Rightley 2008; see docs/references.md).
+
+Here u = r / sigma_N (dimensionless; L = C - |u|^2 / 2, with C = -n/2 log(2 pi sigma_N^2)),
+or u = r [mm] when sigma_N is inferred (then the quantity emulated for the posterior is the
+profile log-likelihood L^ = -n/2 (log(2 pi |u|^2 / n) + 1), see fbia.core.likelihood). The
+centred training vectors u_i - mean are decomposed by SVD; the leading k components (until
+the mean squared truncation error is below :data:`TRUNCATION`, at most
+:data:`MAX_COMPONENTS`) each get a :class:`~fbia.iterators.surrogates.gp.GpSurrogate` of
+their scores. The mean of L is the plug-in L(u^), u^ the emulated mean; variances and
+covariances of L (for the adaptive design and the GP-uncertainty check) are first order in
+the scores' GP uncertainty (delta method) plus the exact second-order variance term.
+
+:class:`ResidualSurrogate` has the methods of ``GpSurrogate`` that gp_smc uses (mean,
+guarded mean, variance, joint covariance, LOO and held-out errors, state), so the adaptive
+design, the checks and the result work on either.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ...core.errors import ConfigError
+from ...core.likelihood import MIN_SQUARED_DISTANCE
+from ...core.problem import Evaluation
+from .feasibility import Feasibility
+from .gp import GpSurrogate
+from .guard import ExtrapolationGuard, GuardCounts
+
+FloatArray = NDArray[np.float64]
+
+#: the mean squared truncation error of u (per run, in units of sigma_N^2) below which no
+#: more principal components are added: an error delta u changes L by about |u| |delta u|,
+#: 0.05 near a posterior with 20 measurement points
+TRUNCATION = 1e-4
+#: at most this many components (each one GP)
+MAX_COMPONENTS = 20
+#: nugget of the component GPs, relative to the range of their scores (nearly interpolating)
+COMPONENT_NUGGET = 1e-6
+#: |r|^2 must equal sum_k D_k^2 to this relative tolerance; ray and cpp meet it exactly, the
+#: rkhs measure's residual vector only as far as its truncated eigen-decomposition reaches
+#: (1e-9 with sigma_W = 0.05 mm on the stand-in; off by 0.5 % median, up to 14 %, with
+#: sigma_W = 0.005 mm on ale_fsi's interfaces, where "auto" falls back to the GP of L)
+DISTANCE_TOL = 1e-6
+#: at least this many successful runs per component GP
+MIN_RUNS = 3
+
+
+def residual_vectors(evaluations: Sequence[Evaluation]) -> tuple[FloatArray, str]:
+    """The residual vector r of every record, NaN rows for failed runs; and why
+    the residuals cannot stand for L ("" when they can): eq. 5 needs sum_k D_k^2 = |r|^2
+    and a residual vector of one length for every run."""
+    rows: list[FloatArray | None] = []
+    length: int | None = None
+    for ev in evaluations:
+        if not ev.ok or ev.residuals is None or ev.distances is None:
+            rows.append(None)
+            continue
+        r = np.asarray(ev.residuals, dtype=float).ravel()
+        if length is None:
+            length = len(r)
+        if len(r) != length:
+            return np.empty((0, 0)), (
+                f"the residual vectors differ in length between runs ({length}, {len(r)})"
+            )
+        if not np.all(np.isfinite(r)):
+            return np.empty((0, 0)), "a residual vector holds NaN or infinite entries"
+        s = float(np.sum(np.asarray(ev.distances, dtype=float) ** 2))
+        if not math.isclose(float(r @ r), s, rel_tol=DISTANCE_TOL, abs_tol=1e-300):
+            return np.empty((0, 0)), "the measure's distance is not the norm of its residuals"
+        rows.append(r)
+    if length is None:
+        return np.empty((len(evaluations), 0)), ""
+    out = np.full((len(evaluations), length), np.nan)
+    for i, row in enumerate(rows):
+        if row is not None:
+            out[i] = row
+    return out, ""
+
+
+@dataclass(frozen=True)
+class ResidualLink:
+    """How the residual vectors r of the runs give what the surrogate stands for: u = r /
+    ``sigma``; L = ``constant`` - |u|^2 / 2 (sigma_N known), or with ``constant`` None the
+    profile over sigma_N, L^ = -n/2 (log(2 pi sigma^2 |u|^2 / n) + 1), n = ``count`` (sigma
+    is then only a scale: the rms residual of the best run)."""
+
+    sigma: float
+    constant: float | None
+    count: int | None
+
+
+def residual_link(
+    records: Sequence[Evaluation],
+    sigmas: Sequence[float] | None,
+    count: int | None,
+) -> tuple[ResidualLink | None, FloatArray, str]:
+    """The link for runs ``records`` with noise ``sigmas`` per observation (None: sigma_N is
+    inferred) and n of eq. 5 ``count`` (None: the residual count), and the runs' residual
+    vectors (:func:`residual_vectors`, what the emulator is fitted to); or None and why the
+    residuals cannot stand for L."""
+    none = np.empty((0, 0))
+    if sigmas is not None and any(s != sigmas[0] for s in sigmas):
+        return None, none, "the observations have different sigma_N"
+    r, why = residual_vectors(records)
+    if why:
+        return None, none, why
+    ok = np.all(np.isfinite(r), axis=1) if r.size else np.zeros(len(r), dtype=bool)
+    if not ok.any():
+        return None, none, "no successful run"
+    n = count if count is not None else r.shape[1]
+    if sigmas is not None:
+        sigma = float(sigmas[0])
+        return ResidualLink(sigma, -0.5 * n * math.log(2.0 * math.pi * sigma**2), None), r, ""
+    best = float(np.min(np.sum(r[ok] ** 2, axis=1)))
+    scale = math.sqrt(max(best / max(n, 1), MIN_SQUARED_DISTANCE))
+    return ResidualLink(scale, None, n), r, ""
+
+
+class ResidualSurrogate(ExtrapolationGuard):
+    """L of eq. 5 (or its profile over sigma_N) from a GP emulator of the residuals.
+
+    Parameters
+    ----------
+    link
+        What the residuals give (:class:`ResidualLink`).
+    ard, optimizer, restarts, max_iters, subset, polish_iters
+        Of each component's :class:`GpSurrogate`.
+    guard_margin
+        As for ``GpSurrogate``: units of L above the best run where the guarded mean is capped.
+    """
+
+    kind = "residuals"
+
+    def __init__(
+        self,
+        link: ResidualLink,
+        ard: bool = False,
+        optimizer: str = "lbfgsb",
+        restarts: int = 2,
+        max_iters: int = 1000,
+        subset: int = 800,
+        polish_iters: int = 60,
+        guard_margin: float | None = None,
+    ) -> None:
+        if link.constant is None and not link.count:
+            raise ConfigError("the profile log-likelihood needs the count n of eq. 5", "gp")
+        self.link = link
+        self.ard = bool(ard)
+        self._optimizer = optimizer
+        self._restarts = int(restarts)
+        self._max_iters = int(max_iters)
+        self._subset = int(subset)
+        self._polish_iters = int(polish_iters)
+        self.guard_margin = guard_margin
+        self.guard = GuardCounts()
+        self.components: list[GpSurrogate] = []
+        self.info: dict[str, Any] = {}
+        #: the nugget of L for the adaptive design's criterion (a run at a point leaves
+        #: essentially no variance there)
+        self.nugget = 1e-8
+
+    # -- L from u -------------------------------------------------------------------------
+    def log_likelihood(self, half_sq: FloatArray) -> FloatArray:
+        """L (or L^) from Q = |u|^2 / 2."""
+        if self.link.constant is not None:
+            return np.asarray(self.link.constant - half_sq)
+        n = float(self.link.count or 1)
+        s = np.maximum(2.0 * half_sq * self.link.sigma**2, n * MIN_SQUARED_DISTANCE)
+        return np.asarray(-0.5 * n * (np.log(2.0 * math.pi * s / n) + 1.0))
+
+    def _slope(self, half_sq: FloatArray) -> FloatArray:
+        """dL / dQ."""
+        if self.link.constant is not None:
+            return np.full_like(half_sq, -1.0)
+        n = float(self.link.count or 1)
+        return np.asarray(-0.5 * n / np.maximum(half_sq, 1e-300))
+
+    # -- training -------------------------------------------------------------------------
+    def fit(
+        self,
+        x: ArrayLike,
+        r: ArrayLike,
+        rng: np.random.Generator | int | None = None,
+        start: Mapping[str, Any] | None = None,
+    ) -> ResidualSurrogate:
+        """Train on inputs ``x`` (n, d) and residual vectors ``r`` (n, m) (rows with NaN:
+        failed runs, left out); ``start``: an earlier fit's :meth:`hyperparameters`."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        u = np.atleast_2d(np.asarray(r, dtype=float)) / self.link.sigma
+        ok = np.all(np.isfinite(u), axis=1) if u.size else np.zeros(len(x), dtype=bool)
+        if ok.sum() < MIN_RUNS:
+            raise ConfigError(
+                f"the residual emulator needs at least {MIN_RUNS} successful runs, "
+                f"got {int(ok.sum())}",
+                "gp",
+            )
+        x, u = x[ok], u[ok]
+        rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        self.x_train = x
+        self.u_mean = u.mean(axis=0)
+        centred = u - self.u_mean
+        _, sing, vt = np.linalg.svd(centred, full_matrices=False)
+        tail = np.append(np.cumsum((sing**2)[::-1])[::-1], 0.0) / len(u)
+        k = next((j for j in range(len(sing) + 1) if tail[j] < TRUNCATION), len(sing))
+        k = int(min(max(k, 1), MAX_COMPONENTS, len(sing)))
+        self.basis = np.asarray(vt[:k])  # (k, m), orthonormal rows
+        self._set_mean_parts()
+        scores = centred @ self.basis.T
+        starts = list((start or {}).get("components", []))
+        self.components = []
+        for j in range(k):
+            warm = starts[j] if j < len(starts) else None
+            gp = self._component()
+            self.components.append(gp.fit(x, scores[:, j], rng=rng, start=warm))
+        self.y_train = self.log_likelihood(0.5 * np.sum(u * u, axis=1))
+        self.truncation = float(tail[k])
+        self.info = {
+            "surrogate": "residuals",
+            "kernel": "matern32_product" if self.ard else "matern32",  # of each component
+            "n_train": len(x),
+            "n_residuals": u.shape[1],
+            "components": k,
+            "truncation_mse": self.truncation,
+            "seconds": float(sum(gp.info.get("seconds", 0.0) for gp in self.components)),
+        }
+        return self
+
+    def _component(self) -> GpSurrogate:
+        """An untrained GP of one component's scores (prior mean mid-range, tiny nugget)."""
+        return GpSurrogate(
+            ard=self.ard,
+            optimizer=self._optimizer,
+            restarts=self._restarts,
+            max_iters=self._max_iters,
+            nugget_factor=COMPONENT_NUGGET,
+            mean_offset=-0.5,
+            subset=self._subset,
+            polish_iters=self._polish_iters,
+        )
+
+    def hyperparameters(self) -> dict[str, Any]:
+        return {"components": [gp.hyperparameters() for gp in self.components]}
+
+    # -- prediction -----------------------------------------------------------------------
+    def _scores(self, x: ArrayLike) -> FloatArray:
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        return np.column_stack([gp.predict_mean(x) for gp in self.components])
+
+    def _set_mean_parts(self) -> None:
+        """The mean vector's coordinates in the basis and its squared part outside it."""
+        self._mean_coef = self.basis @ self.u_mean
+        sq = float(self.u_mean @ self.u_mean - self._mean_coef @ self._mean_coef)
+        self._mean_perp_sq = max(sq, 0.0)
+
+    def _half_sq(self, t: FloatArray) -> FloatArray:
+        """|u^|^2 / 2 for scores t (rows), u^ = mean + t basis, without forming u^:
+        |mean_perp|^2 + |mean_coef + t|^2 (orthonormal basis)."""
+        return np.asarray(0.5 * (self._mean_perp_sq + np.sum((self._mean_coef + t) ** 2, axis=1)))
+
+    def predict_mean(self, x: ArrayLike) -> FloatArray:
+        """L at the emulated mean residuals (plug-in), all rows of ``x`` at once."""
+        return self.log_likelihood(self._half_sq(self._scores(x)))
+
+    __call__ = predict_mean
+
+    def _gradients(
+        self, x: ArrayLike, t: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """The plug-in L and dL / dt_j (M, k) at the rows of ``x`` (``t``: their scores,
+        when already predicted)."""
+        t = self._scores(x) if t is None else t
+        half_sq = self._half_sq(t)
+        # dQ / dt_j = u^ . v_j = (mean . v_j) + t_j (orthonormal basis)
+        dq = self._mean_coef[None, :] + t
+        return self.log_likelihood(half_sq), self._slope(half_sq)[:, None] * dq
+
+    def predict(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Mean (plug-in) and variance of L: sum_j (dL/dt_j)^2 s_j^2 + sum_j s_j^4 / 2 (the
+        second-order term, exact for L = C - Q)."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        per_component = [gp.predict(x) for gp in self.components]
+        t = np.column_stack([m for m, _ in per_component])
+        var = np.column_stack([v for _, v in per_component])
+        mean, grad = self._gradients(x, t)
+        return mean, np.asarray(np.sum(grad**2 * var + 0.5 * var**2, axis=1))
+
+    def posterior_covariance(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
+        """Covariance of L between the rows of ``a`` and ``b`` (first order in the scores)."""
+        _, ga = self._gradients(a)
+        gb = ga if b is a else self._gradients(b)[1]
+        out = np.zeros((len(ga), len(gb)))
+        for j, gp in enumerate(self.components):
+            out += ga[:, j, None] * gp.posterior_covariance(a, b) * gb[None, :, j]
+        return out
+
+    def predict_joint(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Mean (M,) and covariance (M, M) of L at the rows of ``x``; the diagonal carries
+        the second-order variance of :meth:`predict` too."""
+        mean, grad = self._gradients(x)
+        cov = np.zeros((len(mean), len(mean)))
+        second = np.zeros(len(mean))
+        for j, gp in enumerate(self.components):
+            c = gp.posterior_covariance(x, x)
+            cov += grad[:, j, None] * c * grad[None, :, j]
+            second += 0.5 * np.diag(c) ** 2
+        cov[np.diag_indices_from(cov)] += second
+        return mean, cov
+
+    # -- quality --------------------------------------------------------------------------
+    def loo(self) -> dict[str, float]:
+        """Leave-one-out errors in L: each score's closed-form LOO prediction, L from them."""
+        t = np.column_stack([gp.loo_predictions() for gp in self.components])
+        res = self.log_likelihood(self._half_sq(t)) - self.y_train
+        return GpSurrogate._errors(res, self.y_train, prefix="loo")
+
+    def test_error(self, x: ArrayLike, y: ArrayLike) -> dict[str, float]:
+        y = np.asarray(y, dtype=float).ravel()
+        return GpSurrogate._errors(self.predict_mean(x) - y, y, prefix="test")
+
+    def describe(self) -> Mapping[str, Any]:
+        return dict(self.info)
+
+    # -- persistence ----------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """Everything needed to rebuild the emulator without GPy."""
+        return {
+            "kind": "residuals",
+            "sigma": self.link.sigma,
+            "constant": self.link.constant,
+            "count": self.link.count,
+            "ard": self.ard,
+            "x_train": self.x_train,
+            "y_train": self.y_train,
+            "u_mean": self.u_mean,
+            "basis": self.basis,
+            "truncation": self.truncation,
+            "components": [gp.state() for gp in self.components],
+        }
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, Any]) -> ResidualSurrogate:
+        count, constant = state.get("count"), state.get("constant")
+        link = ResidualLink(
+            float(state["sigma"]),
+            None if constant is None else float(constant),
+            None if count is None else int(count),
+        )
+        out = cls(link, ard=bool(state["ard"]))
+        out.x_train = np.asarray(state["x_train"], dtype=float)
+        out.y_train = np.asarray(state["y_train"], dtype=float)
+        out.u_mean = np.asarray(state["u_mean"], dtype=float)
+        out.basis = np.atleast_2d(np.asarray(state["basis"], dtype=float))
+        out.truncation = float(state["truncation"])
+        out._set_mean_parts()
+        out.components = [GpSurrogate.from_state(s) for s in state["components"]]
+        out.info = {
+            "surrogate": "residuals",
+            "n_train": len(out.x_train),
+            "components": len(out.components),
+            "restored": True,
+        }
+        return out
+
+
+Surrogate = GpSurrogate | ResidualSurrogate
+
+
+def restore_surrogate(state: Mapping[str, Any]) -> Surrogate:
+    """The trained surrogate of a result's ``SurrogateFit.state``, whichever kind."""
+    surrogate: Surrogate = (
+        ResidualSurrogate.from_state(state)
+        if state.get("kind") == "residuals"
+        else GpSurrogate.from_state(state)
+    )
+    if state.get("feasibility") is not None:
+        surrogate.feasibility = Feasibility.from_state(state["feasibility"])
+    return surrogate

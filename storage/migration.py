@@ -1,0 +1,168 @@
+"""Opening a study store of an earlier format: migrated in place, with a copy of the original.
+
+Format ``fbia-store-1`` keyed every run by a hash of the whole problem (model, measure,
+observations and the likelihood's σ_N) and kept no interfaces.  Its runs become format-2 runs
+keyed by what a forward run depends on (:func:`fbia.storage.fingerprints.run_key`, computed from
+the stored problem fingerprint), each with its comparison under the stored measure and
+observations; the stored log-likelihoods are dropped (the likelihood is computed on read).  So
+after the migration a change of σ_N reuses every run.  A change of the measure or of the
+observations reruns the migrated runs, since format 1 kept no interfaces to compare anew.
+
+The original file is copied first (``VACUUM INTO <name>.v1.sqlite``); the migration is one
+transaction, so an interrupted migration leaves the format-1 store as it was.
+
+:func:`rekey` carries a store's runs over to a model part written without the options at
+their defaults (a store written before a defaulted option existed, or before fbia keyed
+options by their difference from the defaults): same runs, new keys.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import ConfigError
+from .fingerprints import (
+    canonical,
+    comparison_key,
+    comparison_part,
+    coordinates_of,
+    describe_change,
+    model_key,
+    model_part,
+    run_key,
+    without_defaults,
+)
+
+__all__ = ["code_change", "comparison_rekey", "migrate", "model_change", "rekey"]
+
+_V1_COLUMNS = (
+    "key, idx, session, attempt, x, uncertain, status, message, residuals, distances, "
+    "time, worker, workdir, artifacts, diagnostics, finished"
+)
+
+
+def migrate(db: sqlite3.Connection, path: Path, found: str, target: str, schema: str) -> int:
+    """Bring the store at ``path`` (open as ``db``) from format ``found`` to ``target``;
+    returns the number of runs carried over."""
+    if found != "fbia-store-1" or target != "fbia-store-2":
+        raise ConfigError(f"store format {found!r}, this fbia reads {target!r}", str(path))
+    backup = path.with_name(f"{path.stem}.v1{path.suffix}")
+    if not backup.exists():
+        db.execute("VACUUM INTO ?", (str(backup),))
+    db.execute("BEGIN IMMEDIATE")
+    try:
+        n = _v1_to_v2(db, schema)
+    except BaseException:
+        db.execute("ROLLBACK")
+        raise
+    db.execute("COMMIT")
+    return n
+
+
+def _v1_to_v2(db: sqlite3.Connection, schema: str) -> int:
+    row = db.execute("SELECT value FROM meta WHERE key = 'problem'").fetchone()
+    rows = db.execute(f"SELECT {_V1_COLUMNS} FROM evaluations ORDER BY id").fetchall()
+    db.execute("ALTER TABLE evaluations RENAME TO evaluations_v1")
+    for statement in schema.split(";"):
+        if statement.strip():
+            db.execute(statement)
+    if row is not None:
+        fingerprint = json.loads(row[0])
+        model = model_part(fingerprint)
+        coordinates = coordinates_of(fingerprint)
+        comparison = comparison_key(comparison_part(fingerprint))
+        db.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (model_key(model),))
+        db.execute("INSERT OR REPLACE INTO meta VALUES ('model', ?)", (canonical(model),))
+        for (_, idx, session, attempt, x, uncertain, status, message, residuals, distances,
+             time, worker, workdir, artifacts, diagnostics, finished) in rows:  # fmt: skip
+            key = run_key(model, coordinates, json.loads(x))
+            solved = status in ("ok", "measure_failed")
+            db.execute(
+                "INSERT INTO runs (key, idx, session, attempt, x, uncertain, status, message, "
+                "time, worker, workdir, artifacts, diagnostics, finished, interfaces) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, NULL)",
+                (key, idx, session, attempt, x, uncertain, "ok" if solved else status,
+                 "" if solved else message, time, worker, workdir, artifacts, diagnostics,
+                 finished),
+            )  # fmt: skip
+            if solved:
+                db.execute(
+                    "INSERT INTO comparisons VALUES (?, ?, ?, ?, ?, ?)",
+                    (key, comparison, status, message, residuals, distances),
+                )
+    db.execute("DELETE FROM meta WHERE key = 'problem_hash'")
+    db.execute("UPDATE meta SET value = 'fbia-store-2' WHERE key = 'format'")
+    db.execute("DROP TABLE evaluations_v1")
+    return len(rows)
+
+
+def rekey(
+    db: sqlite3.Connection,
+    old_model: dict[str, Any],
+    coordinates: list[dict[str, Any]],
+    new_model: dict[str, Any],
+    comparisons: tuple[str, str] | None = None,
+) -> int:
+    """Give every run stored under ``old_model`` (at ``coordinates``) its key under
+    ``new_model``, and the comparisons stored under the comparison key ``comparisons[0]``
+    the key ``comparisons[1]``, in the caller's transaction; runs stored under other
+    coordinates keep their keys.  Returns the number of runs re-keyed."""
+    n = 0
+    for key, x in db.execute("SELECT key, x FROM runs").fetchall():
+        values = json.loads(x)
+        if run_key(old_model, coordinates, values) != key:
+            continue
+        new = run_key(new_model, coordinates, values)
+        db.execute("UPDATE runs SET key = ? WHERE key = ?", (new, key))
+        db.execute("UPDATE comparisons SET run_key = ? WHERE run_key = ?", (new, key))
+        n += 1
+    if comparisons is not None and comparisons[0] != comparisons[1]:
+        db.execute(
+            "UPDATE OR IGNORE comparisons SET comparison = ? WHERE comparison = ?",
+            (comparisons[1], comparisons[0]),
+        )
+    db.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (model_key(new_model),))
+    db.execute("INSERT OR REPLACE INTO meta VALUES ('model', ?)", (canonical(new_model),))
+    return n
+
+
+def comparison_rekey(
+    old: dict[str, Any], new: dict[str, Any], measure: Any
+) -> tuple[str, str] | None:
+    """(old, new) comparison key when the stored problem fingerprint ``old`` compares as
+    ``new`` does once the ``measure``'s options at their defaults are left out; else None."""
+    if not old:
+        return None
+    stored = comparison_part(old)
+    target = comparison_key(comparison_part(new))
+    if comparison_key(without_defaults(stored, measure, "measure")) != target:
+        return None
+    return comparison_key(stored), target
+
+
+def code_change(old: dict[str, Any], code: dict[str, str], n: int) -> str | None:
+    """Why a store's ``n`` runs, made by the model code ``old`` (a :func:`code_digest`), are
+    not reused by the code ``code`` (None: they are)."""
+    if n == 0 or old.get("class") != code["class"] or old.get("sha256") == code["sha256"]:
+        return None
+    released = old.get("version") is not None and old.get("version") != code.get("version")
+    if released and code.get("numerics") is not None and old.get("numerics") == code["numerics"]:
+        return None  # another release of the package, same declared numerics: its author's word
+    return (
+        f"the store holds {n} run{'s' if n != 1 else ''} made by other code of the model "
+        f"plugin {code['class']} (its source changed since: {code['files']}); they are not "
+        "reused silently: run with --fresh to start over, or with --reuse-changed-code if "
+        "the change leaves the results as they were"
+    )
+
+
+def model_change(old: dict[str, Any], new: dict[str, Any], n: int) -> str:
+    """Why a store's ``n`` runs of the problem fingerprint ``old`` are not reused for ``new``."""
+    return (
+        f"the store holds {n} run{'s' if n != 1 else ''} of a different model "
+        f"(changed: {'; '.join(describe_change(old, new))}); they cannot be "
+        "reused: run with --fresh to start over, or write to another --output"
+    )

@@ -1,0 +1,600 @@
+"""The persistent study store: one SQLite file that holds every forward run of a study.
+
+>>> import fbia, tempfile, pathlib
+>>> from fbia.storage.store import StudyStore
+>>> model = fbia.forward_model("analytic_mound_2d")
+>>> obs = fbia.synthetic_observations(model, {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}],
+...                                   noise_std=0.0, seed=0)
+>>> problem = fbia.InverseProblem(model=model, measure=fbia.measure("cpp"), observations=obs,
+...     parameters=[fbia.Parameter("E", bounds=(100, 800)),
+...                 fbia.Parameter("nu", bounds=(-0.8, 0.5))], noise_std=0.01)
+>>> folder = pathlib.Path(tempfile.mkdtemp())
+>>> with StudyStore(folder / "store.sqlite") as store:
+...     _ = store.bind(problem)
+...     with fbia.SerialEvaluator(store=store) as ev:
+...         first = ev.evaluate(problem, [{"E": 300.0, "nu": 0.2}])
+...     with fbia.SerialEvaluator(store=store) as ev:     # a later session: nothing recomputed
+...         again = ev.evaluate(problem, [{"E": 300.0, "nu": 0.2}])
+...     len(store), again[0].distance == first[0].distance, ev.reused
+(1, True, {0})
+
+Two layers (:mod:`fbia.storage.fingerprints`): a **forward run** is keyed by what it depends on
+(model class, version and options, fixed inputs, requested coordinates, input values) and
+stored with the interfaces it gave; its **comparison** with the observations (residuals and
+distances) is keyed by the measure and the observed data.  The likelihood is not stored: it is
+computed from the distances when a run is read (:mod:`fbia.core.likelihood`).  So a change of
+σ_N, bounds, priors, iterator or executor reuses every stored run, and a change of the measure
+or the observations reuses every forward run and recomputes only its comparison (from the
+stored interfaces).  A store holds the runs of one model: binding it to another model, other
+model options or other fixed inputs is an error that says what changed.
+
+Every run is written in its own transaction the moment it finishes (WAL journal,
+``synchronous=NORMAL``: a killed process loses nothing that was committed).  Tables: ``meta``
+(format, model key and fingerprint, the last problem bound, creation time), ``sessions`` (one
+row per ``fbia run``: start and end, host, pid, fbia version, study file hash, executor,
+status), ``runs`` (key, index, session, attempt, x, uncertain, status, message, wall time,
+worker, working folder, artifacts, diagnostics, finish time, interfaces as an ``.npz``) and
+``comparisons`` (run key, comparison key, status, message, residuals as float64 bytes,
+distances).  Read it with any SQLite client, e.g.
+``sqlite3 output/store.sqlite "select status, count(*) from runs group by status"``.  Stores of
+the first format (``fbia-store-1``) are migrated when opened (:mod:`fbia.storage.migration`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import io
+import json
+import os
+import socket
+import sqlite3
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from ..core.errors import ConfigError, MeasureError, StoreError
+from ..core.interface import Interface
+from ..core.observation import CoordinateKey, Solution, coordinate_key
+from ..core.problem import Evaluation, InverseProblem
+from .db import connect
+from .fingerprints import (
+    canonical,
+    code_digest,
+    comparison_key,
+    comparison_part,
+    coordinates_of,
+    model_key,
+    model_part,
+    problem_fingerprint,
+    run_key,
+    without_defaults,
+)
+from .migration import code_change, comparison_rekey, migrate, model_change, rekey
+from .output_folder import LockHeld, is_fbia_store, lock_file, this_process
+
+__all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
+
+#: Written into ``meta``; a store of an unknown format is refused, not misread.
+STORE_FORMAT = "fbia-store-2"
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS sessions (
+    id INTEGER PRIMARY KEY,
+    started TEXT NOT NULL,
+    finished TEXT,
+    status TEXT NOT NULL,
+    host TEXT NOT NULL,
+    pid INTEGER NOT NULL,
+    fbia TEXT NOT NULL,
+    study_sha256 TEXT,
+    executor TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS runs (
+    id INTEGER PRIMARY KEY,
+    key TEXT NOT NULL UNIQUE,
+    idx INTEGER NOT NULL,
+    session INTEGER,
+    attempt INTEGER NOT NULL DEFAULT 1,
+    x TEXT NOT NULL,
+    uncertain TEXT NOT NULL,
+    status TEXT NOT NULL,
+    message TEXT NOT NULL,
+    time REAL NOT NULL,
+    worker TEXT,
+    workdir TEXT,
+    artifacts TEXT NOT NULL,
+    diagnostics TEXT NOT NULL,
+    finished TEXT NOT NULL,
+    interfaces BLOB
+);
+CREATE TABLE IF NOT EXISTS comparisons (
+    run_key TEXT NOT NULL,
+    comparison TEXT NOT NULL,
+    status TEXT NOT NULL,
+    message TEXT NOT NULL,
+    residuals BLOB,
+    distances TEXT,
+    PRIMARY KEY (run_key, comparison)
+);
+"""
+_RUN_COLUMNS = (
+    "key, idx, session, attempt, x, uncertain, status, message, time, worker, workdir, "
+    "artifacts, diagnostics, finished"
+)
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
+
+
+def _floats(array: np.ndarray | None) -> bytes | None:
+    return None if array is None else np.ascontiguousarray(array, dtype="<f8").tobytes()
+
+
+# -- interfaces as bytes ---------------------------------------------------------------------------
+def pack_interfaces(interfaces: Mapping[CoordinateKey, Interface]) -> bytes:
+    """The interfaces of a run as an ``.npz`` (no pickles): coordinate, vertices, cells."""
+    arrays: dict[str, np.ndarray] = {}
+    keys = []
+    for k, (coordinate, gamma) in enumerate(sorted(interfaces.items())):
+        keys.append([[name, value] for name, value in coordinate])
+        arrays[f"vertices_{k}"] = np.asarray(gamma.vertices, dtype="<f8")
+        arrays[f"cells_{k}"] = np.asarray(gamma.cells, dtype="<i8")
+    arrays["coordinates"] = np.array(json.dumps(keys))
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)  # type: ignore[arg-type]
+    return buffer.getvalue()
+
+
+def unpack_interfaces(blob: bytes) -> Solution:
+    """The :class:`Solution` (interfaces only) of :func:`pack_interfaces`."""
+    with np.load(io.BytesIO(blob), allow_pickle=False) as data:
+        keys = json.loads(str(data["coordinates"]))
+        interfaces = {
+            coordinate_key(dict(pairs)): Interface(data[f"vertices_{k}"], data[f"cells_{k}"])
+            for k, pairs in enumerate(keys)
+        }
+    return Solution(interfaces)
+
+
+# -- the store ---------------------------------------------------------------------------------
+class StoreMismatchError(ConfigError):
+    """The store holds runs of another model (class, version, options or fixed inputs)."""
+
+
+@dataclass(frozen=True)
+class StoredRun:
+    """A finished run as read from the store: the record and what the store adds to it."""
+
+    record: Evaluation
+    key: str
+    session: int | None
+    attempt: int
+    worker: str | None
+    artifacts: dict[str, str]
+    finished: str
+
+
+@dataclass(frozen=True)
+class _Binding:
+    """What :meth:`StudyStore.bind` derives from the problem."""
+
+    problem: InverseProblem
+    model: dict[str, Any]
+    coordinates: list[dict[str, Any]]
+    comparison: str
+    uncertain: list[str]
+
+
+class StudyStore:
+    """One SQLite file with every forward run of a study (see the module docstring).
+
+    Parameters
+    ----------
+    path
+        The database file (created with its folder if missing).
+    lock
+        Take an exclusive lock (a hidden file ``.<name>.lock`` beside it) so that two
+        ``fbia run`` cannot write into one study at once; released when the store is closed
+        or the process ends.
+    fresh
+        Delete what the file holds first (``fbia run --fresh``).
+    """
+
+    def __init__(self, path: str | Path, lock: bool = True, fresh: bool = False) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock: IO[str] | None = self._take_lock() if lock else None
+        if fresh and self.path.exists():  # under the lock: no other run is using the file
+            if not is_fbia_store(self.path):
+                self._release_lock()
+                raise ConfigError(
+                    "--fresh deletes only an fbia study store, and this file is none (or is "
+                    "damaged): move it away yourself",
+                    str(self.path),
+                )
+            for suffix in ("", "-wal", "-shm"):
+                Path(f"{self.path}{suffix}").unlink(missing_ok=True)
+        try:
+            self._db = connect(self.path)  # SQLite errors are one-line StoreErrors
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._open_format()
+        except BaseException:
+            self.close()
+            raise
+        #: the model key the store is tied to (None until the first :meth:`bind`)
+        self.hash: str | None = self._meta("model_key")
+        self.session: int | None = None
+        self._binding: _Binding | None = None
+
+    # -- opening ---------------------------------------------------------------------------
+    def _take_lock(self) -> IO[str] | None:
+        try:
+            lock = self.path.with_name(f".{self.path.name}.lock")
+            return lock_file(lock, f"fbia run {this_process()}")
+        except LockHeld as held:
+            raise ConfigError(
+                f"the study store is in use by {held.holder}: two runs cannot write one study "
+                "at once (wait for it, or give this run another --output)",
+                str(self.path),
+            ) from None
+
+    def _release_lock(self) -> None:
+        if self._lock is not None:
+            self._lock.close()  # closing the file releases the flock
+            self._lock = None
+
+    def _open_format(self) -> None:
+        self._db.execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT)")
+        fmt = self._meta("format")
+        if fmt is not None and fmt != STORE_FORMAT:
+            migrate(self._db, self.path, fmt, STORE_FORMAT, SCHEMA)
+            return
+        self._db.executescript(SCHEMA)
+        if fmt is None:
+            with self._transaction() as db:
+                db.execute("INSERT OR IGNORE INTO meta VALUES ('format', ?)", (STORE_FORMAT,))
+                db.execute("INSERT OR IGNORE INTO meta VALUES ('created', ?)", (_now(),))
+
+    @contextlib.contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield self._db
+            self._db.execute("COMMIT")  # may fail too (a full disk): then roll back
+        except BaseException:
+            if self._db.in_transaction:
+                with contextlib.suppress(StoreError):
+                    self._db.execute("ROLLBACK")
+            raise
+
+    def _meta(self, key: str) -> str | None:
+        row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else str(row[0])
+
+    def bind(self, problem: InverseProblem, reuse_changed_code: bool = False) -> str:
+        """Tie the store to ``problem``: the first time, record its model; later, check it.
+
+        Returns the model key.  Raises :class:`StoreMismatchError` (a ConfigError) naming
+        what changed when the store holds runs of another model, or runs made by other code
+        of the model plugin (its source files changed, :func:`code_digest`) unless
+        ``reuse_changed_code``.  A store whose model part differs only by options that are at
+        their defaults now (written before a defaulted option existed) is re-keyed.  The
+        measure, the observations and the likelihood may differ from earlier sessions.
+        """
+        if self._binding is not None and self._binding.problem is problem:
+            assert self.hash is not None
+            return self.hash
+        fingerprint = problem_fingerprint(problem)
+        model = model_part(fingerprint)
+        key = model_key(model)
+        code = code_digest(problem.model)
+        if self.hash is None:
+            with self._transaction() as db:
+                db.execute("INSERT INTO meta VALUES ('model_key', ?)", (key,))
+                db.execute("INSERT INTO meta VALUES ('model', ?)", (canonical(model),))
+            self.hash = key
+        elif key != self.hash:
+            self._rekey_or_refuse(fingerprint, model, problem)
+        self._check_code(code, reuse_changed_code)
+        with self._transaction() as db:
+            db.execute(
+                "INSERT OR REPLACE INTO meta VALUES ('problem', ?)", (canonical(fingerprint),)
+            )
+            db.execute("INSERT OR REPLACE INTO meta VALUES ('code', ?)", (canonical(code),))
+        self._binding = _Binding(
+            problem=problem,
+            model=model,
+            coordinates=coordinates_of(fingerprint),
+            comparison=comparison_key(comparison_part(fingerprint)),
+            uncertain=list(problem.uncertain_names),
+        )
+        return key
+
+    def _rekey_or_refuse(
+        self, fingerprint: dict[str, Any], model: dict[str, Any], problem: InverseProblem
+    ) -> None:
+        stored = json.loads(self._meta("model") or "{}")
+        old = json.loads(self._meta("problem") or "{}")
+        if not stored or model_key(without_defaults(stored, problem.model)) != model_key(model):
+            raise StoreMismatchError(model_change(old, fingerprint, len(self)), str(self.path))
+        pair = comparison_rekey(old, fingerprint, problem.measure)
+        with self._transaction() as db:
+            rekey(db, stored, coordinates_of(old), model, pair)
+        self.hash = model_key(model)
+
+    def _check_code(self, code: dict[str, str], reuse: bool) -> None:
+        text = self._meta("code")
+        message = None if text is None or reuse else code_change(json.loads(text), code, len(self))
+        if message is not None:
+            raise StoreMismatchError(message, str(self.path))
+
+    @property
+    def fingerprint(self) -> dict[str, Any] | None:
+        """The fingerprint of the problem last bound (None before the first :meth:`bind`)."""
+        text = self._meta("problem")
+        return None if text is None else dict(json.loads(text))
+
+    def _bound(self) -> _Binding:
+        if self._binding is None:
+            raise RuntimeError("bind the store to a problem first")
+        return self._binding
+
+    def key(self, x: Mapping[str, float]) -> str:
+        """The key of a forward run at ``x`` (the store must be bound to a problem)."""
+        b = self._bound()
+        return run_key(b.model, b.coordinates, x)
+
+    # -- sessions --------------------------------------------------------------------------
+    def begin_session(self, executor: Mapping[str, Any], study_sha256: str | None = None) -> int:
+        """Start a session (one ``fbia run``); rows written from now on carry its id."""
+        from ..core.version import __version__
+
+        with self._transaction() as db:
+            cur = db.execute(
+                "INSERT INTO sessions (started, status, host, pid, fbia, study_sha256, executor) "
+                "VALUES (?, 'running', ?, ?, ?, ?, ?)",
+                (
+                    _now(),
+                    socket.gethostname(),
+                    os.getpid(),
+                    __version__,
+                    study_sha256,
+                    canonical(dict(executor)),
+                ),
+            )
+        self.session = int(cur.lastrowid or 0)
+        return self.session
+
+    def end_session(self, status: str) -> None:
+        """Close the current session with ``status`` (done, interrupted, error)."""
+        if self.session is None:
+            return
+        with self._transaction() as db:
+            db.execute(
+                "UPDATE sessions SET finished = ?, status = ? WHERE id = ?",
+                (_now(), status, self.session),
+            )
+        self.session = None
+
+    def sessions(self) -> list[dict[str, Any]]:
+        """Every session, oldest first (a killed one keeps status ``running``)."""
+        cur = self._db.execute("SELECT * FROM sessions ORDER BY id")
+        names = [d[0] for d in cur.description]
+        out = []
+        for row in cur.fetchall():
+            entry = dict(zip(names, row, strict=True))
+            entry["executor"] = json.loads(entry["executor"])
+            entry["evaluations"] = self._db.execute(
+                "SELECT count(*) FROM runs WHERE session = ?", (entry["id"],)
+            ).fetchone()[0]
+            out.append(entry)
+        return out
+
+    # -- writing ---------------------------------------------------------------------------
+    def put(
+        self,
+        record: Evaluation,
+        key: str | None = None,
+        worker: str | None = None,
+        artifacts: Mapping[str, str] | None = None,
+        interfaces: Mapping[CoordinateKey, Interface] | None = None,
+    ) -> None:
+        """Write one finished run and its comparison in one transaction (a repeated key is a
+        retry: the row is replaced and its ``attempt`` counted up).  ``interfaces``: what the
+        forward model gave, kept so that another measure can be applied later; with them the
+        run counts as solved and its status is the comparison's."""
+        b = self._bound()
+        key = key if key is not None else self.key(record.x)
+        solved = interfaces is not None or record.ok or record.status == "measure_failed"
+        row = (
+            key,
+            record.index,
+            self.session,
+            1,
+            canonical(record.x),
+            canonical({n: record.x[n] for n in b.uncertain if n in record.x}),
+            "ok" if solved else record.status,
+            "" if solved else record.message,
+            float(record.time),
+            worker,
+            record.workdir,
+            canonical(dict(artifacts or {})),
+            canonical(record.diagnostics),
+            _now(),
+        )
+        blob = None if interfaces is None else pack_interfaces(interfaces)
+        with self._transaction() as db:
+            db.execute(
+                f"INSERT INTO runs ({_RUN_COLUMNS}, interfaces) "
+                f"VALUES ({', '.join('?' * (len(row) + 1))}) ON CONFLICT(key) DO UPDATE SET "
+                + ", ".join(
+                    f"{c} = excluded.{c}"
+                    for c in [*_RUN_COLUMNS.split(", "), "interfaces"]
+                    if c not in ("key", "attempt")
+                )
+                + ", attempt = runs.attempt + 1",
+                (*row, blob),
+            )
+            db.execute("DELETE FROM comparisons WHERE run_key = ?", (key,))
+            if solved:
+                self._put_comparison(db, key, record.status, record.message, record)
+
+    def _put_comparison(
+        self, db: sqlite3.Connection, key: str, status: str, message: str, record: Evaluation
+    ) -> None:
+        db.execute(
+            "INSERT OR REPLACE INTO comparisons VALUES (?, ?, ?, ?, ?, ?)",
+            (
+                key,
+                self._bound().comparison,
+                status,
+                message,
+                _floats(record.residuals),
+                None if record.distances is None else canonical(record.distances),
+            ),
+        )
+
+    # -- reading ---------------------------------------------------------------------------
+    def lookup(self, keys: Iterable[str]) -> dict[str, StoredRun]:
+        """The stored runs among ``keys`` with their comparison under the bound problem.
+
+        A solved run without that comparison is compared now, from its stored interfaces,
+        and the comparison is stored; one without interfaces (migrated from the first store
+        format) is left out, so it runs again.
+        """
+        wanted = list(dict.fromkeys(keys))
+        out: dict[str, StoredRun] = {}
+        for start in range(0, len(wanted), 500):
+            chunk = wanted[start : start + 500]
+            for run in self._select(f"r.key IN ({', '.join('?' * len(chunk))})", chunk):
+                out[run.key] = run
+        return out
+
+    def runs(self) -> list[StoredRun]:
+        """Every stored run with its comparison under the bound problem (unbound: the problem
+        bound last), in the order first written."""
+        return self._select("1", [])
+
+    def _comparison(self) -> str | None:
+        if self._binding is not None:
+            return self._binding.comparison
+        fingerprint = self.fingerprint
+        return None if fingerprint is None else comparison_key(comparison_part(fingerprint))
+
+    def _select(self, where: str, args: Sequence[Any]) -> list[StoredRun]:
+        cur = self._db.execute(
+            f"SELECT {', '.join('r.' + c for c in _RUN_COLUMNS.split(', '))}, "
+            "r.interfaces IS NOT NULL, c.status, c.message, c.residuals, c.distances "
+            "FROM runs r LEFT JOIN comparisons c ON c.run_key = r.key AND c.comparison = ? "
+            f"WHERE {where} ORDER BY r.id",
+            [self._comparison(), *args],
+        )
+        out = []
+        for row in cur.fetchall():
+            run = self._run(row)
+            if run is None and row[6] == "ok" and row[14] and self._binding is not None:
+                run = self._compare_stored(row)
+            if run is not None:
+                out.append(run)
+        return out
+
+    def _compare_stored(self, row: Sequence[Any]) -> StoredRun | None:
+        """Compare a stored solved run with the bound problem's observations and keep it."""
+        blob = self._db.execute("SELECT interfaces FROM runs WHERE key = ?", (row[0],)).fetchone()
+        solution = unpack_interfaces(blob[0])
+        record = Evaluation(
+            index=int(row[1]), x={k: float(v) for k, v in json.loads(row[4]).items()}
+        )
+        try:
+            record.residuals, record.distances = self._bound().problem.discrepancy(solution)
+            if not (
+                np.all(np.isfinite(record.residuals)) and np.all(np.isfinite(record.distances))
+            ):
+                raise ValueError("the measure returned NaN or infinite values")
+        except MeasureError as exc:
+            record.status, record.message = "measure_failed", str(exc)
+            record.residuals = record.distances = None
+        except Exception as exc:  # a plugin bug, recorded as the evaluation would record it
+            record.status, record.message = "error", f"{type(exc).__name__}: {exc}"
+            record.residuals = record.distances = None
+        with self._transaction() as db:
+            self._put_comparison(db, str(row[0]), record.status, record.message, record)
+        row = (*row[:15], record.status, record.message, _floats(record.residuals),
+               None if record.distances is None else canonical(record.distances))  # fmt: skip
+        return self._run(row)
+
+    @staticmethod
+    def _run(row: Sequence[Any]) -> StoredRun | None:
+        """A stored run from a joined row; None for a solved run without its comparison."""
+        (key, idx, session, attempt, x, _unc, status, message, time, worker, workdir,
+         artifacts, diagnostics, finished, _has_interfaces, c_status, c_message, residuals,
+         distances) = row  # fmt: skip
+        if status == "ok" and c_status is None:
+            return None
+        solved = status == "ok"
+        record = Evaluation(
+            index=int(idx),
+            x={k: float(v) for k, v in json.loads(x).items()},
+            status=str(c_status if solved else status),
+            message=str(c_message if solved else message),
+            residuals=None if residuals is None else np.frombuffer(residuals, dtype="<f8").copy(),
+            distances=None if distances is None else [float(d) for d in json.loads(distances)],
+            time=float(time),
+            workdir=workdir,
+            diagnostics=json.loads(diagnostics),
+        )
+        return StoredRun(
+            record=record,
+            key=str(key),
+            session=session,
+            attempt=int(attempt),
+            worker=worker,
+            artifacts=json.loads(artifacts),
+            finished=str(finished),
+        )
+
+    def workdir_taken(self, workdir: str | Path) -> bool:
+        """Whether a stored run owns this working folder."""
+        row = self._db.execute(
+            "SELECT 1 FROM runs WHERE workdir = ? LIMIT 1", (str(workdir),)
+        ).fetchone()
+        return row is not None
+
+    def counts(self) -> dict[str, int]:
+        """Number of stored forward runs per status (``ok``: the model gave interfaces)."""
+        cur = self._db.execute("SELECT status, count(*) FROM runs GROUP BY status")
+        return {str(s): int(n) for s, n in cur.fetchall()}
+
+    def __len__(self) -> int:
+        return int(self._db.execute("SELECT count(*) FROM runs").fetchone()[0])
+
+    def describe(self) -> dict[str, Any]:
+        """For provenance: path, format, model key, counts per status, sessions."""
+        return {
+            "path": str(self.path),
+            "format": STORE_FORMAT,
+            "model_key": self.hash,
+            "evaluations": len(self),
+            "by_status": self.counts(),
+            "sessions": self.sessions(),
+        }
+
+    # -- closing ---------------------------------------------------------------------------
+    def close(self) -> None:
+        if getattr(self, "_db", None) is not None:
+            self._db.close()
+            self._db = None  # type: ignore[assignment]
+        self._release_lock()
+
+    def __enter__(self) -> StudyStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

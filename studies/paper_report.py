@@ -1,0 +1,529 @@
+"""``report.md`` and ``paper.json`` of a study with a ``[paper]`` table, and the summary page.
+
+:func:`write_paper_report` is called by :func:`fbia.studies.runner.run_study` when the study has
+a ``[paper]`` table (:mod:`fbia.studies.paper`): it writes into the output folder
+
+* ``report.md``: the table **quantity | paper | fbia | difference | rel. | agrees? | why**,
+  the measured times (this session's wall time and the summed wall time of the forward runs,
+  which stays meaningful when a session reused stored runs), the settings (model, measure,
+  iterator options, synthetic data, executor), links to the figures and the result's summary;
+* ``paper.json``: the same rows and times, typed (:class:`PaperRecord`), for the summary.
+
+Each row is judged by the rule of its kind (:data:`fbia.studies.paper.KINDS`); both pages state
+the rules once, generated from that table (:func:`rules_table`), so text and code cannot
+drift.  A result flagged unreliable (or without success) agrees with nothing.
+
+:func:`write_summary` (``fbia reproductions OUT.md DIR ...``) collects every ``paper.json``
+below the given folders into one page (``docs/reproductions.md``): the rules, per study the
+source, the verdict (rows that agree of rows judged), the times and the full table, so that
+the page reads on its own where the output folders are not checked in; and per example the
+section ``## Measured times`` of its README (the wall time of a fresh run, which a session
+that took its runs from the store cannot measure).  A ``paper.json`` written before the rules
+by kind (its rows carry their own ``rule`` and ``tolerance``) is listed as *stale*, without
+its verdicts: run its study again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tomllib
+import typing
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import ConfigError
+from ..core.options import plugin_options
+from ..core.problem import Result
+from .paper import DRAWS_RULE, KINDS, Comparison, compare, verdict
+from .study import Study
+
+__all__ = ["PaperRecord", "rules_table", "write_paper_report", "write_summary"]
+
+RECORD_NAME = "paper.json"
+REPORT_NAME = "report.md"
+#: the section of an example's README that the summary page copies (fresh-run wall times)
+TIMES_HEADING = "Measured times"
+
+
+@dataclass(frozen=True)
+class PaperRecord:
+    """What ``paper.json`` holds: one study's comparison with the paper, and its times."""
+
+    study: str
+    study_file: str
+    source: str
+    note: str
+    status: str
+    wall_time: float  # s, this session (start to the end of the extras)
+    forward_time: float  # s, summed wall time of the result's forward runs (stored ones too)
+    nfev: int
+    finished: str
+    rows: tuple[Comparison, ...]
+    reused: int = 0  # runs this session took from the store instead of running them
+    stale: str = ""  # why the rows are not shown (set on reading a record of an older fbia)
+
+    def to_dict(self) -> dict[str, Any]:
+        skip = ("rows", "stale")
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in skip}
+        out["rows"] = [r.to_dict() for r in self.rows]
+        return out
+
+    @classmethod
+    def read(cls, path: Path) -> PaperRecord:
+        """The record in ``path``; one written under the per-row rules before ``KINDS``
+        comes back stale, without its rows (their verdicts were lenient)."""
+        if not path.is_file():  # a FIFO or a device would block the reader
+            raise ConfigError("not a regular file", str(path))
+        if path.stat().st_size > MAX_RECORD_BYTES:
+            raise ConfigError(f"larger than {MAX_RECORD_BYTES} bytes: not a paper.json", str(path))
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            if not isinstance(data, dict):
+                raise TypeError("not a JSON object")
+            raw_rows = data.pop("rows")
+            _check_types(data)
+            if any("rule" in r["value"] for r in raw_rows):
+                return cls(**data, rows=(), stale=STALE)
+            rows = tuple(Comparison.from_dict(r) for r in raw_rows)
+            return cls(**data, rows=rows)
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"not UTF-8 (byte {exc.start})", str(path)) from None
+        except RecursionError:
+            raise ConfigError("nested too deeply: not a paper.json", str(path)) from None
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ConfigError(f"not a paper.json of fbia: {exc}", str(path)) from None
+
+
+#: the largest paper.json read (a record is a few kB)
+MAX_RECORD_BYTES = 10_000_000
+
+
+def _check_types(data: dict[str, Any]) -> None:
+    """TypeError naming the first field of a record with the wrong type (or a non-finite
+    time), before anything formats it."""
+    hints = typing.get_type_hints(PaperRecord)
+    for name, value in data.items():
+        hint = hints.get(name)
+        if hint not in (str, int, float):
+            continue
+        kinds: tuple[type, ...] = (int, float) if hint is float else (hint,)
+        if isinstance(value, bool) or not isinstance(value, kinds):
+            raise TypeError(f"{name} is {value!r}, not {' or '.join(k.__name__ for k in kinds)}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise TypeError(f"{name} is {value!r}, not a finite number")
+
+
+#: what the summary says of a paper.json written before the rules by kind
+STALE = (
+    "written by an older fbia, whose [paper] rows chose their own rules and tolerances: its "
+    "verdicts are not shown; run the study again to judge it by the rules above"
+)
+
+
+def write_paper_report(
+    study: Study,
+    result: Result,
+    out: Path,
+    wall_time: float,
+    files: Sequence[str] = (),
+    reused: int = 0,
+    rows: Sequence[Comparison] | None = None,
+    forward_time: float | None = None,
+) -> Path:
+    """Compare ``result`` with ``study.paper``; write ``report.md`` and ``paper.json``
+    (``reused``: how many runs the session took from the store; ``rows``: the comparison
+    when made otherwise, e.g. over noise draws; ``forward_time``: the summed time of the
+    forward runs when ``result`` does not hold them)."""
+    spec = study.paper
+    assert spec is not None
+    if rows is None:
+        rows = compare(spec, result.quantities(), result.status, result.success)
+    rows = tuple(rows)
+    forward = forward_time
+    if forward is None:
+        forward = sum(e.time for e in result.evaluations if math.isfinite(e.time))
+    record = PaperRecord(
+        study=study.name,
+        study_file=str(study.path.resolve()),
+        source=spec.source,
+        note=spec.note,
+        status=result.status,
+        wall_time=wall_time,
+        forward_time=forward,
+        nfev=result.nfev,
+        finished=str(result.provenance.get("finished", "")),
+        rows=rows,
+        reused=reused,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / RECORD_NAME).write_text(json.dumps(record.to_dict(), indent=1), encoding="utf-8")
+    figures = sorted({Path(f) for f in files if str(f).endswith(".png")})
+    text = _report(study, result, record, out, figures)
+    path = out / REPORT_NAME
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _report(
+    study: Study, result: Result, record: PaperRecord, out: Path, figures: Sequence[Path]
+) -> str:
+    good, judged = verdict(record.rows)
+    flagged = next((r.reason for r in record.rows if r.reason), "")
+    lines = [
+        f"# {study.name}: fbia beside {record.source}",
+        "",
+        f"Study file `{study.path.name}`; result: **{result.status}** ({result.message}).",
+        f"{good} of {judged} published numbers agree by the rule of their kind"
+        + (
+            f" over {record.rows[0].n_draws} noise draws"
+            if record.rows and record.rows[0].n_draws
+            else ""
+        )
+        + (f" ({flagged}: every judged row counts as no)." if flagged else "."),
+        "",
+        _times(record),
+        "",
+    ]
+    if record.note:
+        lines += [record.note, ""]
+    lines += ["## Paper and fbia", "", *comparison_table(record.rows), ""]
+    lines += ["## Rules", "", *rules_table(), ""]
+    lines += ["## Settings", "", *_settings(study), ""]
+    if figures:
+        lines += ["## Figures", ""]
+        lines += [f"- [{_rel(f, out)}]({_rel(f, out)})" for f in figures]
+        lines.append("")
+    lines += ["## Result", "", "```", result.summary(), "```", ""]
+    return "\n".join(lines)
+
+
+def _times(record: PaperRecord) -> str:
+    reused = f" ({record.reused} runs taken from the store, not run again)" if record.reused else ""
+    return (
+        f"Measured: {record.wall_time:.1f} s wall time of this session{reused}; the "
+        f"{record.nfev} forward runs of the result took {record.forward_time:.1f} s together "
+        "(runs taken from the store count with the time they took when they ran)."
+    )
+
+
+def rules_table() -> list[str]:
+    """The rules, one per kind of quantity, as a markdown table (from ``KINDS``)."""
+    out = [
+        "Every published number is judged by the one rule of its kind (f: fbia, p: the paper). "
+        "A result whose status is `unreliable`, or that is not a success, agrees with "
+        "nothing: every judged row of its study counts as no.",
+        "",
+        "| kind | for | agrees when |",
+        "|---|---|---|",
+    ]
+    for name, kind in KINDS.items():
+        formula = kind.formula.replace("|", "\\|")
+        out.append(f"| `{name}` | {kind.covers} | {kind.criterion}: {formula} |")
+    out += [
+        "",
+        f"Noisy data are judged {DRAWS_RULE}; the table then gives fbia's median and "
+        "[2.5 %, 97.5 %] range.",
+    ]
+    return out
+
+
+def comparison_table(rows: Sequence[Comparison]) -> list[str]:
+    """The markdown table of a comparison: quantity | paper | fbia | difference | rel. |
+    agrees? | why (rel.: f/p for kind ``scale``)."""
+    out = [
+        "| quantity | paper | fbia | difference | rel. | agrees? | why |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        v = r.value
+        unit = f" {v.unit}" if v.unit else ""
+        paper = f"{_num(v.paper)}{unit}" if v.paper is not None else "-"
+        if v.than is not None:
+            ref = f" ({_num(r.reference)})" if r.reference is not None else ""
+            paper = f"{v.criterion()}{ref}"
+        fbia = f"{_num(r.fbia)}{unit}"
+        if r.n_draws and v.than is not None:  # over draws: the share that holds
+            fbia = f"{_num(r.fbia)} (holds in {100 * (r.high or 0.0):.0f} % of {r.n_draws} draws)"
+        elif r.n_draws:  # over draws: the median and the central 95 % range
+            fbia = f"{_num(r.fbia)} [{_num(r.low)}, {_num(r.high)}]{unit} ({r.n_draws} draws)"
+        diff = "" if r.abs_diff is None else _num(r.abs_diff)
+        rel = "" if r.rel_diff is None else f"{100 * r.rel_diff:+.3g} %"
+        if v.kind == "scale" and r.rel_diff is not None:
+            rel = f"f/p = {1 + r.rel_diff:.3g}"
+        mark = {True: "yes", False: "**no**", None: "-"}[r.agrees]
+        agrees = mark
+        if r.agrees is not None:
+            rule = v.criterion()
+            if r.n_draws:
+                rule = "holds in half the draws" if v.than is not None else "inside the range"
+            agrees = f"{mark}: {r.reason}" if r.reason else f"{mark} ({rule})"
+        why = v.why.replace("|", "\\|")
+        out.append(f"| {v.name} | {paper} | {fbia} | {diff} | {rel} | {agrees} | {why} |")
+    return out
+
+
+def _num(x: float | None) -> str:
+    if x is None or not math.isfinite(x):
+        return "no result" if x is not None else "-"
+    return f"{x:.4g}"
+
+
+def _settings(study: Study) -> list[str]:
+    def opts(obj: Any, section: str) -> str:
+        """The options the study file sets (also where they equal the default), then those
+        that differ from the default for another reason (e.g. a seed from the study)."""
+        raw = study.raw.get(section, {})
+        written = dict(raw.get("options", {})) if isinstance(raw, dict) else {}
+        given = {**written, **plugin_options(obj, exclude_defaults=True)}
+        text = ", ".join(f"{k} = {v!r}" for k, v in given.items())
+        return f"{text}; the other options at their defaults" if text else "defaults"
+
+    lines = [
+        f"- model `{study.model_name}`: {opts(study.model, 'model')}",
+        f"- measure `{study.measure_name}`: {opts(study.measure, 'measure')}",
+    ]
+    if study.iterator is not None:
+        lines.append(f"- iterator `{study.iterator_name}`: {opts(study.iterator, 'iterator')}")
+    params = "; ".join(
+        f"{p.name} in [{p.bounds[0]:g}, {p.bounds[1]:g}]" if p.bounds else p.name
+        for p in study.parameters
+    )
+    lines.append(f"- parameters: {params}")
+    if study.synthetic is not None:
+        s = study.synthetic
+        truth = ", ".join(f"{k} = {v:g}" for k, v in s.truth.items())
+        pts = f", {s.points} measurement points" if s.points else ""
+        lines.append(
+            f"- synthetic data: truth {truth}; noise {s.noise_std:g} mm ({s.noise}, seed "
+            f"{s.seed}){pts}; states {s.coordinates}"
+        )
+    if study.fixed:
+        lines.append(f"- fixed: {study.fixed}")
+    lines.append(f"- executor: {study.executor.label()}; seed {study.seed}")
+    return lines
+
+
+def _rel(path: Path, start: Path) -> str:
+    return Path(os.path.relpath(path, start)).as_posix()
+
+
+def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Path, int]:
+    """Collect every ``paper.json`` below ``folders`` into the markdown page ``target``.
+
+    Returns the page and the number of studies on it.  Study files with a ``[paper]`` table
+    below ``folders`` that have no ``paper.json`` are listed as not run, records whose study
+    file has no ``[paper]`` table any more are left out (and listed); no record at all is an
+    error (a summary of nothing would hide that the examples were not run).
+    """
+    target = Path(target)
+    records: list[tuple[Path, PaperRecord]] = []
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise ConfigError("not a folder", str(folder))
+        records += [(p, PaperRecord.read(p)) for p in sorted(folder.rglob(RECORD_NAME))]
+    if not records:
+        raise ConfigError(
+            f"no {RECORD_NAME} below them: run the examples first (make reproduce)",
+            ", ".join(str(f) for f in folders),
+        )
+    records, left_out = _current(records)
+    not_run = _not_run(folders, records)
+    lines = [
+        "# Reproductions of the papers' examples",
+        "",
+        "Generated by `fbia reproductions` from the `paper.json` files that `fbia run` writes "
+        "beside `report.md` for every study with a `[paper]` table (`make reproduce` runs "
+        "them all and regenerates this page). Each table puts the published number beside "
+        "fbia's, with the verdict by the rule of its kind and, where they differ, the "
+        'measured cause or "cause not found" and what was measured.',
+        "",
+        "## Rules",
+        "",
+        *rules_table(),
+        "",
+        "## Studies",
+        "",
+        "| study | source | agree | status | wall time of the last session | forward runs "
+        "(their summed time) |",
+        "|---|---|---|---|---|---|",
+    ]
+    root = target.parent.resolve()
+    for _, rec in records:
+        good, judged = verdict(rec.rows)
+        agree = "stale" if rec.stale else f"{good} / {judged}"
+        lines.append(
+            f"| [{rec.study}](#{_anchor(rec.study)}) | {rec.source} | {agree} | "
+            f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
+            f"{rec.nfev} ({rec.forward_time:.0f} s) |"
+        )
+    good_all = sum(verdict(rec.rows)[0] for _, rec in records)
+    judged_all = sum(verdict(rec.rows)[1] for _, rec in records)
+    if judged_all:
+        by_paper: dict[str, list[int]] = {}
+        for _, rec in records:  # "Paper A, Table 2, ..." -> "Paper A"
+            paper = rec.source.split(",")[0].strip() or "other"
+            good, judged = verdict(rec.rows)
+            tally = by_paper.setdefault(paper, [0, 0])
+            tally[0] += good
+            tally[1] += judged
+        parts = [
+            f"{paper}: {g} of {j} ({100 * g / j:.0f} %)"
+            for paper, (g, j) in sorted(by_paper.items())
+            if j
+        ]
+        lines += [
+            "",
+            f"In all: {good_all} of {judged_all} judged published numbers agree "
+            f"({100 * good_all / judged_all:.0f} %)"
+            + (f"; {'; '.join(parts)}." if len(parts) > 1 else "."),
+        ]
+    if not_run:
+        lines += ["", "Studies with a `[paper]` table that have no `paper.json` (not run yet):", ""]
+        lines += [f"- `{_rel_or_abs(f, root)}`" for f in not_run]
+    if left_out:
+        lines += [
+            "",
+            "Left out: `paper.json` files whose study file has no `[paper]` table (any more):",
+            "",
+        ]
+        lines += [f"- `{_rel_or_abs(f, root)}`" for f in left_out]
+    lines += _measured_times([path for path, _ in records], [Path(f) for f in folders], root)
+    for path, rec in records:
+        study_file = _rel_or_abs(Path(rec.study_file), root)
+        report = _rel_or_abs(path.parent / REPORT_NAME, root)
+        lines += [
+            "",
+            f"## {rec.study}",
+            "",
+            f"{rec.source}. Study file [{study_file}]({study_file}); full report "
+            f"`{report}` (written by the run, not checked in). Result status: {rec.status}; "
+            f"finished {rec.finished}.",
+            "",
+            _times(rec),
+            "",
+        ]
+        if rec.stale:
+            lines.append(f"This `paper.json` is stale: {rec.stale}.")
+            continue
+        if rec.note:
+            lines += [rec.note, ""]
+        lines += comparison_table(rec.rows)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return target, len(records)
+
+
+def _has_paper(study_file: Path) -> bool:
+    """Whether a study file (still) has a ``[paper]`` table."""
+    try:
+        return "paper" in tomllib.loads(study_file.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+
+
+def _current(
+    records: list[tuple[Path, PaperRecord]],
+) -> tuple[list[tuple[Path, PaperRecord]], list[Path]]:
+    """The records whose study file still has a ``[paper]`` table, and the others' paths."""
+    keep: list[tuple[Path, PaperRecord]] = []
+    left_out: list[tuple[Path, PaperRecord]] = []
+    for path, rec in records:
+        (keep if _has_paper(Path(rec.study_file)) else left_out).append((path, rec))
+    return keep, [path for path, _ in left_out]
+
+
+def _not_run(folders: Sequence[str | Path], records: list[tuple[Path, PaperRecord]]) -> list[Path]:
+    """Study files with a ``[paper]`` table below ``folders`` that no record comes from."""
+    done = {Path(rec.study_file).resolve() for _, rec in records}
+    files = sorted({f.resolve() for d in folders for f in Path(d).rglob("study*.toml")})
+    return [f for f in files if f not in done and _has_paper(f)]
+
+
+def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path) -> list[str]:
+    """Per example (the nearest folder above a ``paper.json`` that holds a README.md, within
+    ``folders``) its README's section ``## Measured times``: the wall time of a fresh run,
+    which a session that took its runs from the store cannot measure. Links rebased to
+    ``root``."""
+    tops = [f.resolve() for f in folders]
+    examples: list[Path] = []
+    for path in records:
+        folder = path.resolve().parent
+        while not (folder / "README.md").is_file() and folder not in tops:
+            if folder.parent == folder:
+                break
+            folder = folder.parent
+        if (folder / "README.md").is_file() and folder not in examples:
+            examples.append(folder)
+    lines: list[str] = []
+    for folder in examples:
+        section = _section(folder / "README.md", TIMES_HEADING)
+        if section:
+            link, name = _rel_or_abs(folder, root), _rel_or_abs(folder, Path.cwd().resolve())
+            rebased = [_rebase_links(line, folder, root) for line in section]
+            lines += ["", f"### [{name}]({link}/README.md)", "", *rebased]
+    if lines:
+        lines = [
+            "",
+            f"## {TIMES_HEADING} per example",
+            "",
+            "The wall time of a fresh run of each example, as its README states it (the table "
+            "above gives each study's last session, which may have taken its runs from the "
+            "store).",
+            *lines,
+        ]
+    return lines
+
+
+def _section(readme: Path, heading: str) -> list[str]:
+    """The body of the ``## heading`` section of a markdown file (empty if it has none)."""
+    body: list[str] | None = None
+    try:
+        text = readme.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 (byte {exc.start})", str(readme)) from None
+    for line in text.splitlines():
+        if body is not None and line.startswith("## "):
+            break
+        if body is not None:
+            body.append(line)
+        elif line.strip() == f"## {heading}":
+            body = []
+    while body and not body[0].strip():
+        body.pop(0)
+    while body and not body[-1].strip():
+        body.pop()
+    return body or []
+
+
+def _rebase_links(line: str, start: Path, root: Path) -> str:
+    """``line`` with its relative markdown links, written from ``start``, made relative to
+    ``root``."""
+
+    def rebase(match: re.Match[str]) -> str:
+        link = match.group(1)
+        if "://" in link or link.startswith(("#", "/", "mailto:")):
+            return match.group(0)
+        path, _, anchor = link.partition("#")
+        new = _rel(Path(os.path.normpath(start / path)), root)
+        return f"]({new}{'#' + anchor if anchor else ''})"
+
+    return re.sub(r"\]\(([^)\s]+)\)", rebase, line)
+
+
+def _anchor(title: str) -> str:
+    """GitHub's anchor of a heading."""
+    keep = "".join(c for c in title.lower() if c.isalnum() or c in " -_")
+    return keep.replace(" ", "-")
+
+
+def _rel_or_abs(path: Path, root: Path) -> str:
+    try:
+        return _rel(path.resolve(), root)
+    except ValueError:
+        return path.as_posix()

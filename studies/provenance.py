@@ -1,0 +1,71 @@
+"""Provenance: what a result records about how it was made (versions, seeds, machine)."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+import socket
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.registry import plugin_versions
+
+__all__ = ["now", "provenance"]
+
+
+def now() -> str:
+    """The current time as an ISO 8601 string in UTC (for provenance)."""
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+# -- provenance --------------------------------------------------------------------------------
+def provenance(
+    *,
+    study_path: Path | None = None,
+    study_text: str | None = None,
+    study_sha256: str | None = None,
+    seed: int | None = None,
+    seeds: Mapping[str, Any] | None = None,
+    executor: Mapping[str, Any] | None = None,
+    plugins: Sequence[Any] = (),
+    started: str | None = None,
+    finished: str | None = None,
+    store: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Everything needed to tell later how a result was made.
+
+    fbia, Python, numpy and scipy versions; the plugins used (registry name, class,
+    distribution, version); the study file's path, text and SHA-256; the study's seed and
+    every seed derived from it (``seeds``); the executor and its settings; host, platform,
+    command line; start and end time (UTC); the store (path, model key, runs per status,
+    the sessions that made them: a resumed result tells which runs came from which session).
+    """
+    import scipy
+
+    from ..core.version import __version__
+
+    return {
+        "fbia": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "plugins": plugin_versions(*plugins),
+        "study_file": None if study_path is None else str(study_path),
+        "study_sha256": study_sha256,
+        "study_text": study_text,
+        "seed": seed,
+        "seeds": dict(seeds or {}),
+        "executor": dict(executor or {}),
+        "host": socket.gethostname(),
+        "platform": platform.platform(),
+        "pid": os.getpid(),
+        "command": [Path(sys.argv[0]).name, *sys.argv[1:]] if sys.argv else [],
+        "started": started,
+        "finished": finished,
+        "store": None if store is None else dict(store),
+    }

@@ -1,0 +1,574 @@
+"""Running a study: the stages of ``fbia run`` (session, evaluator, iterator, files).
+
+:func:`run_study` runs the iterator of a :class:`~fbia.studies.study.Study` (or one forward run
+when it has none) and writes the output folder, resuming from its store;
+:func:`forward_study` makes one forward run and writes its files.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import ConfigError, Terminated
+from ..core.iteration import drain
+from ..core.problem import Evaluation, InverseProblem, Result
+from ..storage.output_folder import OutputLock, clear_runs
+from ..storage.store import StudyStore
+from . import report
+from .evaluation_log import EvaluationLog
+from .plots import plot_evaluations, plot_interfaces
+from .progress import RunProgress, log_to_file
+from .provenance import now
+from .provenance import provenance as make_provenance
+from .study import ExecutorSpec, Study
+from .tables import discrepancy_rows
+
+__all__ = ["STORE_NAME", "forward_study", "run_study", "study_seeds"]
+
+#: The study store's file name in the output folder.
+STORE_NAME = "store.sqlite"
+
+
+# -- running -----------------------------------------------------------------------------------
+Echo = Callable[[str], None]
+
+
+def forward_study(
+    study: Study,
+    values: Mapping[str, float] | None = None,
+    output: str | Path | None = None,
+    echo: Echo = print,
+) -> Result:
+    """One forward run at ``study.start_point(values)``, compared with every observation.
+
+    Writes to ``output`` (default ``<study output>/forward``): ``evaluations.jsonl``, the
+    model's working folder ``run/`` (with any field files), ``interfaces/`` (observed and
+    simulated, CSV for 2-D and VTU), ``plots/interfaces.png`` (2-D), ``result.json`` and
+    ``report.txt``; echoes the discrepancy table (measure, D, number of residuals, max |r|).
+    """
+    out = Path(output) if output is not None else study.output / "forward"
+    return _forward(study, values, out, echo, started=now())
+
+
+def _forward(
+    study: Study, values: Mapping[str, float] | None, out: Path, echo: Echo, started: str
+) -> Result:
+    x = study.start_point(values)
+    if (out / STORE_NAME).exists():
+        raise ConfigError(
+            f"holds a study ({STORE_NAME}): a forward run writes its own evaluations.jsonl "
+            "and result.json and would replace the study's; give --output another folder",
+            str(out),
+        )
+    with OutputLock(out, "fbia forward"):
+        return _forward_locked(study, x, out, echo, started)
+
+
+def _forward_locked(
+    study: Study, x: dict[str, float], out: Path, echo: Echo, started: str
+) -> Result:
+    problem = study.problem
+    with EvaluationLog(out / "evaluations.jsonl") as log:
+        ev = problem.evaluate(x, workdir=out / "run", index=0, keep_solution=True)
+        log.append(ev)
+    echo(f"forward run of {study.model_name} at {_point(ev.x)}: {ev.status} ({ev.time:.3g} s)")
+    result = Result(
+        status="forward" if ev.ok else ev.status,
+        success=ev.ok,
+        message=(
+            "one forward run and its discrepancy (the study has no iterator)"
+            if ev.ok
+            else f"the forward run {_failure_word(ev)}: {ev.message}"
+        ),
+        x={n: ev.x[n] for n in problem.names if n in ev.x},
+        nfev=1,
+        n_failed=0 if ev.ok else 1,
+        iterator="",
+        evaluations=[ev],
+    )
+    if ev.ok and ev.solution is not None:
+        rows = discrepancy_rows(problem, ev.solution, study.measure_name)
+        result.info["discrepancy"] = rows
+        files = result.info["files"] = _write_solution(study, ev.solution, out, "forward run")
+        result.info["inputs"] = ev.x
+        echo(f"interfaces: {len(files['interfaces'])} files in {out / 'interfaces'}")
+        for name, path in files.get("fields", {}).items():
+            echo(f"field {name}: {path}")
+    _finish(study, result, out, started, echo)
+    return result
+
+
+def run_study(
+    study: Study,
+    output: str | Path | None = None,
+    workers: int | None = None,
+    echo: Echo = print,
+    *,
+    fresh: bool = False,
+    retry_failed: bool = False,
+    address: str | None = None,
+    reuse_changed_code: bool = False,
+) -> Result:
+    """Run a study and write its output folder (default: the study's ``output``).
+
+    With an iterator: opens the study store, ``<output>/store.sqlite`` or the file that
+    ``[study] store`` names (studies of one model may share it) (resuming: every run
+    stored there for the same problem is reused, never run again), builds the evaluator from
+    ``[executor]`` (``workers`` and ``address`` override it), drives the iterator step by step
+    with a progress display, stores every evaluation the moment it finishes (and appends it to
+    ``evaluations.jsonl``; ``fbia.log`` gets every line), then solves once more at the
+    result's ``x`` and writes ``interfaces/``, ``plots/``, ``result.json`` (with provenance)
+    and ``report.txt``.  Without an iterator: what :func:`forward_study` does, in ``output``.
+
+    Parameters
+    ----------
+    fresh
+        Delete the store (and the run folders) first and start over.
+    retry_failed
+        Run stored failed runs again (once) instead of reusing their failure.
+    reuse_changed_code
+        Reuse the stored runs although the model plugin's source changed since they were
+        made (without it such a store is refused: :meth:`StudyStore.bind`).
+    address
+        Send the runs to the Dask scheduler at this address.
+
+    Raises
+    ------
+    ConfigError
+        The store holds runs of a different model (the message says what changed), or is
+        in use by another run.
+
+    On Ctrl-C or an error the evaluations finished so far are already stored; a
+    ``result.json`` with status ``"interrupted"`` or ``"error"`` is written and the exception
+    goes on to the caller.
+    """
+    out = Path(output) if output is not None else study.output
+    started = now()
+    if study.iterator is None:
+        echo("the study has no [iterator]: one forward run at the start point")
+        return _forward(study, None, out, echo, started)
+    store_path = study.store if study.store is not None else out / STORE_NAME
+    if study.synthetic is not None and study.synthetic.draws > 1:  # fbia.studies.draws
+
+        def run_one(sub: Study, k: int) -> Result:
+            again = {
+                "fresh": fresh and k == 0,
+                "retry_failed": retry_failed,
+                "reuse_changed_code": reuse_changed_code,
+            }
+            return run_study(sub, sub.output, workers, echo, address=address, **again)
+
+        return _run_draws(study, out, store_path, run_one, echo, started)
+    problem = study.problem
+    executor = study.executor.with_workers(workers).with_address(address)
+    with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh) as store:
+        if fresh:
+            clear_runs(out / "runs")
+        store.bind(problem, reuse_changed_code=reuse_changed_code)
+        with log_to_file(out / "fbia.log") as logger:
+
+            def say(line: str) -> None:
+                echo(line)
+                logger.info(line)
+
+            return _run_stored(
+                study, problem, executor, store, out, started, say, retry_failed, fresh
+            )
+
+
+def _run_draws(
+    study: Study,
+    out: Path,
+    store: Path,
+    run_one: Callable[[Study, int], Result],
+    echo: Echo,
+    started: str,
+) -> Result:
+    """A study over noise draws (:mod:`fbia.studies.draws`): every draw, then the result over
+    them and its comparison with the paper, judged over the draws."""
+    from .draws import judge_draws, run_draws
+
+    t0 = time.perf_counter()
+    with OutputLock(out, "fbia run"):
+        result = run_draws(study, out, store, run_one, echo)
+        _finish(study, result, out, started, echo)
+        if study.paper is not None:
+            from .paper_report import write_paper_report
+
+            wall = time.perf_counter() - t0
+            rows = judge_draws(study.paper, result)
+            report_md = write_paper_report(
+                study, result, out, wall, rows=rows, forward_time=result.forward_time
+            )
+            echo(f"comparison with {study.paper.source}: {report_md}")
+    return result
+
+
+@dataclass
+class _Session:
+    """What the stages of one ``fbia run`` session share."""
+
+    study: Study
+    problem: InverseProblem
+    store: StudyStore
+    out: Path
+    started: str
+    echo: Echo
+    executor_info: dict[str, Any] = field(default_factory=dict)
+    t0: float = field(default_factory=time.perf_counter)
+
+    def finish(self, result: Result, quiet: bool = False) -> None:
+        _finish(
+            self.study,
+            result,
+            self.out,
+            self.started,
+            self.echo,
+            self.executor_info,
+            quiet=quiet,
+            store=self.store,
+        )
+
+
+def _run_stored(
+    study: Study,
+    problem: InverseProblem,
+    executor: ExecutorSpec,
+    store: StudyStore,
+    out: Path,
+    started: str,
+    echo: Echo,
+    retry_failed: bool,
+    fresh: bool,
+) -> Result:
+    """The stages of a session: announce, evaluate (saving what was computed on Ctrl-C or an
+    error), check the result, save it, add the extra files, save it again."""
+    _announce_resume(study, store, echo, retry_failed, fresh)
+    session = _Session(study, problem, store, out, started, echo, executor.describe())
+    log = EvaluationLog(out / "evaluations.jsonl")
+    listener = RunProgress(log, echo)
+    echo(
+        f"running {study.iterator_name} on {study.model_name} with the {study.measure_name} "
+        f"measure ({executor.label()}); evaluations go to {store.path}"
+    )
+    store.begin_session(session.executor_info, study.sha256)
+    try:
+        result = _evaluate(session, executor, log, listener, retry_failed)
+    except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
+        _save_partial(session, log, exc)
+        raise
+    store.end_session("done")
+    log.close()
+    totals = listener.totals
+    echo(
+        f"{totals['runs'] + totals['reused']} evaluations: {totals['runs']} run now "
+        f"({totals['failed']} failed), {totals['reused']} taken from the store"
+    )
+    result = _checked(study, result, log)
+    # The result is saved before the extras, which only add files to it: a plot that fails
+    # is reported (echoed and kept in result.info["warnings"]), never fatal.
+    session.finish(result, quiet=True)
+    files, warnings = _extras(session, result, log)
+    if warnings:
+        result.info["warnings"] = warnings
+    result.info.setdefault("files", files)
+    session.finish(result)
+    if study.paper is not None:  # published numbers beside the result: report.md
+        from .paper_report import write_paper_report
+
+        pngs = [f for v in files.values() for f in (v if isinstance(v, list) else [v])]
+        wall = time.perf_counter() - session.t0
+        report_md = write_paper_report(
+            study, result, out, wall, [str(f) for f in pngs], reused=totals["reused"]
+        )
+        echo(f"comparison with {study.paper.source}: {report_md}")
+    return result
+
+
+def _save_partial(session: _Session, log: EvaluationLog, exc: BaseException) -> None:
+    """After Ctrl-C or an error: close the session and write the partial result, as far as
+    the machine lets us (a full disk may refuse each step); never raises, so the first
+    error is the one the user sees."""
+    interrupted = isinstance(exc, KeyboardInterrupt)
+    status = "interrupted" if interrupted else "error"
+    if isinstance(exc, Terminated):
+        message = "stopped by SIGTERM (e.g. a batch system's wall-time limit)"
+    elif interrupted:
+        message = "stopped by the user (Ctrl-C)"
+    else:
+        message = f"the iterator stopped with {type(exc).__name__}: {exc}"
+    steps: list[tuple[str, Callable[[], None]]] = [
+        ("closing the session in the store", lambda: session.store.end_session(status)),
+        ("closing the evaluation log", log.close),
+        (
+            "writing the partial result",
+            lambda: session.finish(_partial(session.study, log, status, message), quiet=True),
+        ),
+    ]
+    for what, step in steps:
+        try:
+            step()
+        except Exception as err:
+            session.echo(f"warning: {what} failed: {' '.join(str(err).split())}")
+
+
+def _evaluate(
+    session: _Session,
+    executor: ExecutorSpec,
+    log: EvaluationLog,
+    listener: RunProgress,
+    retry_failed: bool,
+) -> Any:
+    """Make the evaluator (say where a Dask cluster is) and drive the iterator with it."""
+    study, echo, info = session.study, session.echo, session.executor_info
+    progress = _Progress(echo, log, session.problem.names)
+    evaluator = executor.make(
+        session.out, store=session.store, listener=listener, retry_failed=retry_failed
+    )
+    try:
+        info.update(evaluator.describe())
+        if executor.kind == "dask":
+            where = (
+                f"the Dask scheduler at {info['scheduler']}"
+                if info["cluster"] == "scheduler"
+                else f"a Dask {info['cluster']} cluster ({info['scheduler']})"
+            )
+            echo(
+                f"{where}: {info['workers']} worker thread(s), ready after "
+                f"{info['startup_seconds']:.3g} s"
+            )
+        assert study.iterator is not None
+        result = _drive(study.iterator, session.problem, evaluator, progress)
+    finally:
+        evaluator.close()
+    progress.last()
+    return result
+
+
+def _checked(study: Study, result: Any, log: EvaluationLog) -> Result:
+    """The iterator's result, with its name and (if it kept none) the session's records."""
+    if not isinstance(result, Result):
+        raise TypeError(
+            f"iterator {study.iterator_name!r} returned {type(result).__name__}, not fbia.Result"
+        )
+    result.iterator = result.iterator or study.iterator_name or ""
+    if not result.evaluations:
+        result.evaluations = list(log.records)
+    return result
+
+
+def _extras(
+    session: _Session, result: Result, log: EvaluationLog
+) -> tuple[dict[str, Any], list[str]]:
+    """The files beside the result: the interfaces and discrepancy at the result's x (one
+    more forward run), the iterator's own plots, the evaluations plot; what failed."""
+    study, problem, out, echo = session.study, session.problem, session.out, session.echo
+    files: dict[str, Any] = {}
+    warnings: list[str] = []
+
+    def extra(what: str, make: Callable[[], Any]) -> Any:
+        try:
+            return make()
+        except Exception as exc:  # a plugin's plotting or the last run: keep the result
+            warnings.append(f"{what} failed: {type(exc).__name__}: {exc}")
+            echo(f"warning: {warnings[-1]}")
+            return None
+
+    if result.x and all(n in result.x for n in problem.names):
+        best = problem.evaluate(dict(result.x), workdir=out / "best", keep_solution=True)
+        if best.ok and best.solution is not None:
+            solution = best.solution
+            result.info.setdefault(
+                "discrepancy", discrepancy_rows(problem, solution, study.measure_name)
+            )
+            title = f"{study.iterator_name} result"
+            written = extra(
+                "writing the interfaces", lambda: _write_solution(study, solution, out, title)
+            )
+            files.update(written or {})
+        else:
+            warnings.append(f"the forward run at the result's x {best.status}: {best.message}")
+            echo(f"warning: {warnings[-1]}")
+    if not study.figures:  # e.g. one noise draw of many (fbia.studies.draws)
+        return files, warnings
+    write_plots = getattr(study.iterator, "write_plots", None)
+    if callable(write_plots):  # an iterator's own plots: write_plots(result, problem, folder)
+        made = extra("the iterator's plots", lambda: write_plots(result, problem, out / "plots"))
+        if made:
+            files["iterator plots"] = [str(p) for p in made]
+    names, units = problem.names, [p.unit for p in problem.parameters]
+    made_ev = extra(
+        "the evaluations plot",
+        lambda: plot_evaluations(
+            out / "plots" / "evaluations.png", log.records, names, units, problem.truth
+        ),
+    )
+    if made_ev is not None:
+        files["evaluations plot"] = str(made_ev)
+    return files, warnings
+
+
+def _announce_resume(
+    study: Study, store: StudyStore, echo: Echo, retry_failed: bool, fresh: bool
+) -> None:
+    """Say what the store already holds and what will be done with it."""
+    if fresh:
+        echo(f"starting over (--fresh): the store {store.path} was emptied")
+    n = len(store)
+    if not n:
+        return
+    failed = n - store.counts().get("ok", 0)
+    again = " (failed ones run again: --retry-failed)" if retry_failed and failed else ""
+    echo(
+        f"resuming: {store.path} holds {n} forward runs of this model ({failed} failed); "
+        f"each is reused, not run again{again}"
+    )
+    sessions = store.sessions()
+    last = sessions[-1] if sessions else None
+    if last is not None and last["study_sha256"] != study.sha256:
+        echo(
+            "note: the study file changed since the last run; its model did not, so the "
+            "stored forward runs stay valid (compared anew if the measure or data changed)"
+        )
+    if last is not None and last["status"] == "running":
+        echo(f"note: the last run (started {last['started']}) was stopped without a word")
+
+
+def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Progress) -> Any:
+    """Step a steppable iterator (``steps()`` generator), else call its ``run()``."""
+    steps = getattr(iterator, "steps", None)
+    if not callable(steps):
+        return iterator.run(problem, evaluator)
+    return drain(steps(problem, evaluator), progress, type(iterator).__name__)
+
+
+class _Progress:
+    """One line per iterator step, at most one a second: evaluations, failures, best D."""
+
+    def __init__(self, echo: Echo, log: EvaluationLog, names: Sequence[str]) -> None:
+        self.echo, self.log, self.names = echo, log, list(names)
+        self.t0 = self.shown = time.perf_counter()
+        self.steps = 0
+        self.pending = False
+
+    def __call__(self, state: Any) -> None:
+        self.steps += 1
+        self.pending = True
+        if time.perf_counter() - self.shown >= 1.0:
+            self.show()
+
+    def show(self) -> None:
+        best = self.log.best()
+        at = f", best D = {best.distance:.4g} at {_point(best.x, self.names)}" if best else ""
+        self.echo(
+            f"  step {self.steps:4d}  {time.perf_counter() - self.t0:7.1f} s  "
+            f"{len(self.log.records)} evaluations ({self.log.n_failed} failed){at}"
+        )
+        self.shown = time.perf_counter()
+        self.pending = False
+
+    def last(self) -> None:
+        if self.pending:
+            self.show()
+
+
+def _partial(study: Study, log: EvaluationLog, status: str, message: str) -> Result:
+    best = log.best()
+    names = [p.name for p in study.parameters]
+    return Result(
+        status=status,
+        success=False,
+        message=f"{message} after {len(log.records)} evaluations"
+        + (" (x is the best evaluation so far)" if best else ""),
+        x={n: best.x[n] for n in names if n in best.x} if best else None,
+        nfev=len(log.records),
+        n_failed=log.n_failed,
+        iterator=study.iterator_name or "",
+        evaluations=list(log.records),
+    )
+
+
+def _write_solution(study: Study, solution: Any, out: Path, title: str) -> dict[str, Any]:
+    problem = study.problem
+    files: dict[str, Any] = {
+        "interfaces": [
+            str(p) for p in report.write_interfaces(out / "interfaces", problem, solution)
+        ]
+    }
+    fields = report.copy_fields(solution, out / "fields", root=out)
+    if fields:
+        files["fields"] = {k: str(v) for k, v in fields.items()}
+    if not study.figures:
+        return files
+    png = plot_interfaces(out / "plots" / "interfaces.png", problem, solution, title)
+    if png is not None:
+        files["interfaces plot"] = str(png)
+    return files
+
+
+def _finish(
+    study: Study,
+    result: Result,
+    out: Path,
+    started: str,
+    echo: Echo,
+    executor: Mapping[str, Any] | None = None,
+    quiet: bool = False,
+    store: StudyStore | None = None,
+) -> None:
+    """Provenance, ``result.json`` and ``report.txt``; echo the report unless ``quiet``."""
+    problem = study.problem
+    result.provenance = make_provenance(
+        study_path=study.path.resolve(),
+        study_text=study.text,
+        study_sha256=study.sha256,
+        seed=study.seed,
+        seeds=study_seeds(study),
+        executor=executor or {"kind": "serial", "workers": 1},
+        plugins=[problem.model, problem.measure, study.iterator],
+        started=started,
+        finished=now(),
+        store=None if store is None else store.describe(),
+    )
+    result.info.setdefault("problem", problem.describe())
+    result.save(out / "result.json")
+    write_files = getattr(study.iterator, "write_files", None)
+    if callable(write_files):
+        for path in write_files(result, out):
+            echo(f"wrote {path}")
+    truth = study.synthetic.truth if study.synthetic is not None else None
+    text = report.result_report(study.name, result, out, truth)
+    for folder in (out / "run", out / "best", out / "runs"):  # left empty: not worth a folder
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+    (out / "report.txt").write_text(text + "\n", encoding="utf-8")
+    if not quiet:
+        echo(text)
+
+
+def study_seeds(study: Study) -> dict[str, int | None]:
+    """The study's seed and those derived from it: of the synthetic data and the iterator."""
+    options = getattr(study.iterator, "options", None)
+    seed = getattr(options, "seed", None)
+    return {
+        "study": study.seed,
+        "synthetic": study.synthetic.seed if study.synthetic is not None else None,
+        "iterator": seed if isinstance(seed, int) else None,
+    }
+
+
+def _point(x: Mapping[str, float], names: Sequence[str] | None = None) -> str:
+    keys = list(names) if names is not None else list(x)
+    return ", ".join(f"{k} = {x[k]:.6g}" for k in keys if k in x)
+
+
+def _failure_word(ev: Evaluation) -> str:
+    return {
+        "failed": "failed",
+        "measure_failed": "could not be compared (measure failed)",
+        "error": "raised an error",
+    }.get(ev.status, ev.status)
