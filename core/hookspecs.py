@@ -38,4 +38,4 @@ def register_measures(register: Register) -> None:
 
 @hookspec
 def register_iterators(register: Register) -> None:
-    """Register iterator classes (protocol :class:`fbia.core.iteration.InverseIterator`)."""
+    """Register iterator classes (protocol :class:`fbia.core.protocols.InverseIterator`)."""

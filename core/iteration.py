@@ -7,17 +7,22 @@ caller can watch progress, checkpoint or stop early) and *returns* its :class:`R
     for state in (gen := it.steps(problem, evaluator)):
         print(state)                      # or break: LM's it.stop(gen) gives the partial result
     result = it.result
+
+:func:`drive` is how the framework runs one (``IteratorBase.run``, ``fbia run``, the
+conformance kit): it hands ``steps`` an evaluator that keeps the books (:class:`RunBook`) and
+stamps ``iterator``, ``nfev``, ``n_failed`` and ``evaluations`` on the result, so no iterator
+counts its runs by hand.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Generator, Iterator, Mapping, Sequence
-from pathlib import Path
+from collections.abc import Callable, Generator, Mapping, Sequence
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from .options import Configurable
 from .problem import Evaluable, Evaluation, InverseProblem, Result
+from .registry import default_registry
 
 logger = logging.getLogger(__name__)
 
@@ -71,20 +76,59 @@ def drain(
         gen.close()
 
 
-@runtime_checkable
-class InverseIterator(Protocol):
-    """An inverse-analysis algorithm (registry kind ``iterator``): ``steps`` yields after
-    every iteration, ``run`` drains it."""
+class RunBook:
+    """The evaluator an iterator's ``steps`` receives from :func:`drive`: it passes every
+    batch to ``evaluator`` and keeps the records it returns, in order (the framework's books:
+    ``records``, ``nfev``, ``n_failed``).  Other attributes are the wrapped evaluator's."""
 
-    def steps(self, problem: InverseProblem, evaluator: Evaluator) -> Iterator[Any]: ...
+    def __init__(self, evaluator: Evaluator) -> None:
+        self.evaluator = evaluator
+        self.records: list[Evaluation] = []
 
-    def write_files(self, result: Result, folder: Path) -> list[Path]:
-        """Files of ``result`` beside its ``result.json`` that other tools read (``fbia run``
-        calls it; ``gp_smc``: the posterior as npz + JSON and as an ArviZ netCDF file);
-        returns the paths written (none by default)."""
-        return []
+    def evaluate(
+        self, problem: Evaluable, points: Sequence[Mapping[str, float]]
+    ) -> list[Evaluation]:
+        out = list(self.evaluator.evaluate(problem, points))
+        self.records.extend(out)
+        return out
 
-    def run(self, problem: InverseProblem, evaluator: Evaluator | None = None) -> Result: ...
+    @property
+    def nfev(self) -> int:
+        return len(self.records)
+
+    @property
+    def n_failed(self) -> int:
+        return sum(not e.ok for e in self.records)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.evaluator, name)
+
+
+def drive(
+    iterator: Any,
+    problem: Any,
+    evaluator: Evaluator,
+    on_state: Callable[[Any], None] | None = None,
+    name: str = "",
+) -> Result:
+    """Run ``iterator.steps(problem, ...)`` to its end (:func:`drain`) on ``evaluator`` through
+    a :class:`RunBook`, and stamp the books on the result it returns: ``iterator`` (``name``,
+    the name a study registered it under; else its name in the default registry; else what it
+    set; else its class name), ``nfev``, ``n_failed`` and ``evaluations`` (every run the
+    evaluator returned during ``steps``, in order)."""
+    book = RunBook(evaluator)
+    result: Result = drain(iterator.steps(problem, book), on_state, type(iterator).__name__)
+    return stamp(result, iterator, book, name)
+
+
+def stamp(result: Result, iterator: Any, book: RunBook, name: str = "") -> Result:
+    """Write the framework's books on ``result`` (see :func:`drive`) and return it."""
+    entry = None if name else default_registry().entry_for(iterator)
+    registered = name or (entry.name if entry is not None else "")
+    result.iterator = registered or result.iterator or type(iterator).__name__
+    result.nfev, result.n_failed = book.nfev, book.n_failed
+    result.evaluations = list(book.records)
+    return result
 
 
 class IteratorBase(Configurable):
@@ -107,7 +151,7 @@ class IteratorBase(Configurable):
                 raise RuntimeError("no default evaluator: pass one, e.g. fbia.SerialEvaluator()")
             evaluator = _default_evaluator()
         try:
-            self.result = drain(self.steps(problem, evaluator), name=type(self).__name__)
+            self.result = drive(self, problem, evaluator)
             return self.result
         finally:
             if own:

@@ -93,6 +93,10 @@ class Configurable:
     #: modules the plugin needs beyond fbia's core (checked before it is built:
     #: :mod:`fbia.core.extras`), e.g. ``("ngsolve", "netgen")``
     requires: tuple[str, ...] = ()
+    #: True: pickling (process pools, Dask workers) ships the options only, and the copy is
+    #: built anew from them (caches, meshes and solver state stay behind, as they should for
+    #: a model whose state is a cache of what its options determine)
+    pickle_options_only: bool = False
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         require(type(self).requires, type(self).__name__)
@@ -103,6 +107,17 @@ class Configurable:
         elif not isinstance(options, self.Options):
             raise TypeError(f"expected {self.Options.__qualname__}, got {type(options).__name__}")
         self.options = options
+
+    def __getstate__(self) -> Any:
+        if type(self).pickle_options_only:
+            return {"options": self.options}
+        return super().__getstate__()
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        if type(self).pickle_options_only:
+            self.__init__(state["options"])  # type: ignore[misc]
+        else:
+            self.__dict__.update(state)
 
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options.model_dump().items())

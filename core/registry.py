@@ -23,16 +23,12 @@ from . import hookspecs
 from .errors import PluginError
 from .extras import missing, require
 from .options import PluginOptions
+from .protocols import required_methods
 
 KINDS: dict[str, str] = {
     "forward_model": "register_forward_models",
     "measure": "register_measures",
     "iterator": "register_iterators",
-}
-_REQUIRED_METHODS: dict[str, tuple[str, ...]] = {
-    "forward_model": ("parameter_names", "solve"),
-    "measure": ("residuals", "distance"),
-    "iterator": ("run",),
 }
 ENTRY_POINT_GROUP = "fbia"
 
@@ -120,7 +116,7 @@ class Registry:
             raise PluginError(
                 f"{kind} {name!r} has no Options schema (a subclass of fbia.PluginOptions)", where
             )
-        missing = [m for m in _REQUIRED_METHODS[kind] if not callable(getattr(factory, m, None))]
+        missing = [m for m in required_methods(kind) if not callable(getattr(factory, m, None))]
         if missing:
             raise PluginError(f"{kind} {name!r} lacks method(s) {', '.join(missing)}", where)
         table = self._entries[kind]

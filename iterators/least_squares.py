@@ -10,13 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import ConfigError, ForwardModelError
-from ..core.iteration import Evaluator, drain
+from ..core.iteration import Evaluator, drive
 from ..core.parameters import Parameter
 from ..core.problem import Evaluation
 from ..execution.local_executors import SerialEvaluator
@@ -144,9 +144,9 @@ def least_squares(
     )
     problem = ResidualFunctionProblem(fun, labels, lower, upper, args, kwargs)
     if evaluator is not None:
-        return drain(iterator.steps(problem, evaluator))
+        return cast(LMResult, drive(iterator, problem, evaluator))
     with SerialEvaluator() as own:
-        return drain(iterator.steps(problem, own))
+        return cast(LMResult, drive(iterator, problem, own))
 
 
 def _bounds(bounds: tuple[ArrayLike, ArrayLike] | None, n: int) -> tuple[FloatArray, FloatArray]:

@@ -21,7 +21,7 @@ The stages (``fbia.iterator("sobol_indices", ...)``):
    mean: no forward runs beyond the design.
 
 :func:`sobol_indices` does stage 3 for any vectorised function (a check against closed-form
-indices, e.g. the Ishigami function, in tests/test_sobol_indices.py).
+indices, e.g. the Ishigami function, in tests/iterators/test_sobol_indices.py).
 
 >>> import fbia
 >>> it = fbia.iterator("sobol_indices", n_train=64, n_base=512, seed=0)
@@ -231,10 +231,6 @@ class SobolIndicesIterator(IteratorBase):
                 status="all_failed",
                 success=False,
                 message=f"{n_failed} of {len(evaluations)} forward runs failed: too few to train",
-                nfev=len(evaluations),
-                n_failed=n_failed,
-                iterator="sobol_indices",
-                evaluations=evaluations,
                 quantity=o.quantity,
             )
         gp = GpSurrogate(ard=o.ard).fit(x[train], y[train], rng=o.seed)
@@ -274,10 +270,6 @@ class SobolIndicesIterator(IteratorBase):
             surrogate=dict(gp.describe()),
             test_relative_rmse=rel,
             info={"seconds": time.perf_counter() - t0},
-            nfev=len(evaluations),
-            n_failed=n_failed,
-            iterator="sobol_indices",
-            evaluations=evaluations,
             quantity=o.quantity,
         )
 

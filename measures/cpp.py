@@ -48,6 +48,7 @@ class CppMeasure(Configurable):
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
+    pickle_options_only = True  # process pools and Dask rebuild it from its options
 
     class Options(PluginOptions):
         region: list[tuple[float, float]] | None = Field(
@@ -81,12 +82,6 @@ class CppMeasure(Configurable):
         super().__init__(options, **kwargs)
         # search data (KD-tree, pseudo-normals) of each observed interface, built once
         self._observed: IdentityCache[ElementGeometry] = IdentityCache(maxsize=64)
-
-    def __getstate__(self) -> dict[str, object]:
-        return {"options": self.options}
-
-    def __setstate__(self, state: dict[str, object]) -> None:
-        self.__init__(state["options"])  # type: ignore[misc]
 
     def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray:
         """Signed closest-point distances of the simulated vertices [mm] (eq. 7)."""

@@ -74,6 +74,7 @@ class RayMeasure(Configurable):
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
+    pickle_options_only = True  # process pools and Dask rebuild it from its options
 
     class Options(PluginOptions):
         max_distance: float | None = Field(
@@ -96,12 +97,6 @@ class RayMeasure(Configurable):
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: object) -> None:
         super().__init__(options, **kwargs)
         self._rays: IdentityCache[Rays] = IdentityCache(maxsize=64)
-
-    def __getstate__(self) -> dict[str, object]:
-        return {"options": self.options}
-
-    def __setstate__(self, state: dict[str, object]) -> None:
-        self.__init__(state["options"])  # type: ignore[misc]
 
     # -- protocol ----------------------------------------------------------------------------
     def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray:

@@ -222,6 +222,7 @@ class RkhsMeasure(Configurable):
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
+    pickle_options_only = True  # process pools and Dask rebuild it from its options
 
     class Options(PluginOptions):
         sigma_w: float = Field(
@@ -310,12 +311,6 @@ class RkhsMeasure(Configurable):
         super().__init__(options, **kwargs)
         self._observed: IdentityCache[tuple[Current, float]] = IdentityCache(maxsize=64)
         self._grids: IdentityCache[TestGrid] = IdentityCache(maxsize=64)
-
-    def __getstate__(self) -> dict[str, object]:
-        return {"options": self.options}
-
-    def __setstate__(self, state: dict[str, object]) -> None:
-        self.__init__(state["options"])  # type: ignore[misc]
 
     # -- protocol ----------------------------------------------------------------------------
     def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray:

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import ConfigError, Terminated
-from ..core.iteration import drain
+from ..core.iteration import drive
 from ..core.problem import Evaluation, InverseProblem, Result
 from ..storage.output_folder import OutputLock, clear_runs
 from ..storage.store import StudyStore
@@ -268,7 +268,7 @@ def _run_stored(
         f"{totals['runs'] + totals['reused']} evaluations: {totals['runs']} run now "
         f"({totals['failed']} failed), {totals['reused']} taken from the store"
     )
-    result = _checked(study, result, log)
+    result = _checked(study, result)
     # The result is saved before the extras, which only add files to it: a plot that fails
     # is reported (echoed and kept in result.info["warnings"]), never fatal.
     session.finish(result, quiet=True)
@@ -342,22 +342,20 @@ def _evaluate(
                 f"{info['startup_seconds']:.3g} s"
             )
         assert study.iterator is not None
-        result = _drive(study.iterator, session.problem, evaluator, progress)
+        name = study.iterator_name or ""
+        result = _drive(study.iterator, session.problem, evaluator, progress, name)
     finally:
         evaluator.close()
     progress.last()
     return result
 
 
-def _checked(study: Study, result: Any, log: EvaluationLog) -> Result:
-    """The iterator's result, with its name and (if it kept none) the session's records."""
+def _checked(study: Study, result: Any) -> Result:
+    """The iterator's result (its books are the framework's: :func:`drive`)."""
     if not isinstance(result, Result):
         raise TypeError(
             f"iterator {study.iterator_name!r} returned {type(result).__name__}, not fbia.Result"
         )
-    result.iterator = result.iterator or study.iterator_name or ""
-    if not result.evaluations:
-        result.evaluations = list(log.records)
     return result
 
 
@@ -438,12 +436,12 @@ def _announce_resume(
         echo(f"note: the last run (started {last['started']}) was stopped without a word")
 
 
-def _drive(iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Progress) -> Any:
-    """Step a steppable iterator (``steps()`` generator), else call its ``run()``."""
-    steps = getattr(iterator, "steps", None)
-    if not callable(steps):
-        return iterator.run(problem, evaluator)
-    return drain(steps(problem, evaluator), progress, type(iterator).__name__)
+def _drive(
+    iterator: Any, problem: InverseProblem, evaluator: Any, progress: _Progress, name: str
+) -> Any:
+    """Step the iterator's ``steps()`` generator to its end; the books are the framework's
+    (:func:`fbia.core.iteration.drive`)."""
+    return drive(iterator, problem, evaluator, progress, name)
 
 
 class _Progress:

@@ -16,12 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import ConfigError, ForwardModelError
-from ..core.iteration import InverseIterator
 from ..core.observation import Observation
 from ..core.options import plugin_options
 from ..core.parameters import Parameter, Prior
 from ..core.problem import Evaluation, InverseProblem
-from ..core.protocols import Discrepancy, ForwardModel
+from ..core.protocols import Discrepancy, ForwardModel, InverseIterator
 from ..execution.executors import make_evaluator
 from .paper import PaperSpec
 

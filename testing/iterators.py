@@ -12,8 +12,10 @@ from typing import Any
 
 import numpy as np
 
+from ..core.iteration import RunBook, stamp
 from ..core.parameters import Parameter
-from ..core.problem import Evaluation, InverseProblem, Result
+from ..core.problem import Evaluable, Evaluation, InverseProblem, Result
+from ..core.protocols import required_methods
 from ..core.registry import forward_model
 from ..core.registry import measure as make_measure
 from ..core.synthetic import synthetic_observations
@@ -32,7 +34,7 @@ class CountingEvaluator:
         self.batches = 0
 
     def evaluate(
-        self, problem: InverseProblem, points: Sequence[Mapping[str, float]]
+        self, problem: Evaluable, points: Sequence[Mapping[str, float]]
     ) -> list[Evaluation]:
         out = self.inner.evaluate(problem, points)
         self.batches += 1
@@ -69,10 +71,12 @@ def check_iterator(
 
     * ``steps(problem, evaluator)`` is a generator that yields at least once and returns a
       :class:`fbia.Result` (so a caller can watch, checkpoint and stop);
+    * it has the methods its contract requires (:data:`fbia.core.protocols.ITERATOR`);
     * the result says why it stopped: ``status`` and ``message`` are non-empty strings,
-      ``success`` is a bool, ``iterator`` names the iterator;
-    * ``nfev`` and ``n_failed`` equal the points the evaluator was given and the runs that
-      failed (failed runs are outcomes, not exceptions);
+      ``success`` is a bool;
+    * the framework's books (:func:`fbia.core.iteration.stamp`: ``iterator``, ``nfev``,
+      ``n_failed``, ``evaluations``) match the points the evaluator was given and the runs that
+      failed (failed runs are outcomes, not exceptions; the iterator does not count them);
     * ``x`` is None or a finite value for each parameter of the problem within its bounds;
     * ``to_dict()`` is plain JSON (no NaN), and :meth:`fbia.Result.save` writes the same;
     * ``run()`` reproduces the result (same status, nfev and x), and neither run touches
@@ -83,9 +87,13 @@ def check_iterator(
 
     global_state = _global_rng_state()
     it = iterator_factory()
+    lacking = [m for m in required_methods("iterator") if not callable(getattr(it, m, None))]
+    if lacking:
+        raise _fail(it, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     ev = CountingEvaluator()
+    book = RunBook(ev)
     try:
-        gen = it.steps(problem, ev)
+        gen = it.steps(problem, book)
         if not inspect.isgenerator(gen):
             raise _fail(it, f"steps() must be a generator, got {type(gen).__name__}")
         yields = 0
@@ -102,6 +110,7 @@ def check_iterator(
         ev.close()
     if not isinstance(result, Result):
         raise _fail(it, f"steps() must return fbia.Result, got {type(result).__name__}")
+    stamp(result, it, book)
     for attr in ("status", "message", "iterator"):
         value = getattr(result, attr)
         if not (isinstance(value, str) and value.strip()):

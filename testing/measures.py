@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from ..core.interface import Interface
 from ..core.observation import Observation
+from ..core.protocols import required_methods
 from .errors import _fail
 from .samples import circle_2d, mound_2d, sphere_3d, square_3d, straight_line_2d
 
@@ -135,16 +136,18 @@ def _measure_values(
 
 def check_measure(
     measure: Any,
-    dims: Iterable[int] = (2, 3),
+    dims: Iterable[int] | None = None,
     cases: Sequence[MeasureCase] | None = None,
     rtol: float = 0.03,
     residual_rtol: float = 0.15,
     zero_tol: float = 1e-5,
-    mesh_dependent: bool = False,
+    mesh_dependent: bool | None = None,
 ) -> dict[str, dict[str, float]]:
     """Prove that ``measure`` behaves like a distance between interfaces, in 2-D and 3-D.
 
-    For every case of :func:`measure_cases` (or ``cases``) it checks that
+    It checks that it has the methods its contract requires
+    (:data:`fbia.core.protocols.MEASURE`), and for every case of :func:`measure_cases` (or
+    ``cases``) that
 
     * the residuals are a finite 1-D array and the distance a finite float >= 0;
     * the observed interface is at distance zero from itself (``distance`` and the residual
@@ -160,14 +163,23 @@ def check_measure(
       depends on the mesh, hence the looser bound);
     * repeated calls give identical values.
 
-    A measure whose residuals belong to the simulated mesh (one per simulated vertex, like the
+    ``dims`` and ``mesh_dependent`` default to what the measure declares (its contract's
+    optional members ``dims``, default ``(2, 3)``, and ``mesh_dependent``, default False). A
+    measure whose residuals belong to the simulated mesh (one per simulated vertex, like the
     closest-point-projection distances of Paper B eq. 7) is declared with
-    ``mesh_dependent=True``: the residual-length and re-meshing checks are then left out and
+    ``mesh_dependent = True``: the residual-length and re-meshing checks are then left out and
     all others kept.
 
     Returns ``{case: {"identical": D0, "simulated": D1, "refined": D1r, "farther": D2}}``.
     """
 
+    lacking = [m for m in required_methods("measure") if not callable(getattr(measure, m, None))]
+    if lacking:
+        raise _fail(measure, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
+    if dims is None:
+        dims = tuple(getattr(measure, "dims", (2, 3)))
+    if mesh_dependent is None:
+        mesh_dependent = bool(getattr(measure, "mesh_dependent", False))
     cases = measure_cases(dims) if cases is None else list(cases)
     out: dict[str, dict[str, float]] = {}
     for case in cases:

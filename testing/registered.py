@@ -59,9 +59,5 @@ def check_registered(entry: PluginEntry, tmp_path: str | Path) -> Any:
         return check_forward_model(model, params, coords, tmp_path, failing_parameters=fail[1])
     instance = cls(cls.Options.parse(opts))
     if entry.kind == "measure":
-        return check_measure(
-            instance,
-            dims=getattr(cls, "dims", (2, 3)),
-            mesh_dependent=bool(getattr(cls, "mesh_dependent", False)),
-        )
+        return check_measure(instance)
     return instance

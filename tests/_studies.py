@@ -1,4 +1,5 @@
-"""A small valid study file and its data, for tests/test_study.py and tests/test_cli.py.
+"""A small valid study file and its data, for tests/studies/test_study.py and
+tests/studies/test_cli.py.
 
 ``write_study(folder)`` writes ``study.toml`` and ``data/`` (the exact analytic 2-D mound at
 E = 400 Pa, nu = 0.3, inflow 100 mm^2/s, 41 vertices, with 8 measurement points, plus a 3-D

@@ -26,8 +26,10 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
    ``design_space="prior"`` (Remark 7), goes through its prior's inverse CDF). A larger
    ``n_train`` with the same seed extends the design by the next points of the same
    sequence, and :meth:`GpSmcIterator.reuse` keeps an earlier result's runs so only the new
-   points run. Failed runs are excluded from training (the adaptive design keeps them at its
-   floor) and kept in the result (``Result.evaluations``, ``result.design.status``); with
+   points run (``Result.evaluations`` holds the runs of this run, ``result.design`` every
+   design point with its status). Failed runs are excluded from training (the adaptive design
+   keeps them at its floor) and kept in the result (``Result.evaluations``,
+   ``result.design.status``); with
    ``failures = "classify"`` (default) a GP classifier of them multiplies the SMC target by
    min(1, 2 P_ok), so the posterior stays where the forward model runs
    (:mod:`fbia.iterators.surrogates.feasibility`).
@@ -47,7 +49,7 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
    ``surrogate = "log_likelihood"`` always uses that GP (to reproduce the paper).
    ``mode="direct"`` skips the surrogate and runs the forward model inside SMC (cheap models;
    every SMC batch goes to the evaluator, failed runs count as zero likelihood; the records
-   stay in the evaluator, not in ``Result.evaluations``).
+   are ``Result.evaluations``, as every run of every iterator).
 4. **SMC** (:mod:`fbia.iterators.smc.sampler`, Algorithm 1) on exp(gamma L(x, theta)) p(x) p(theta).
    The posterior under uncertainty q(x | Y) (eq. 3b) is the theta-marginal of the particles.
 5. **Summaries**: MAP (best particle of the last step when there is no theta; the heaviest bin
@@ -243,11 +245,7 @@ class GpSmcIterator(IteratorBase):
                 )
             ),
             x=dict(zip(problem.names, map(float, posterior.map), strict=True)),
-            nfev=run.nfev,
-            n_failed=run.n_failed,
-            iterator="gp_smc",
             history=run.history,
-            evaluations=run.evaluations,
             names=run.sampled_names,
             n_x=run.n_x,
             mode=opts.mode,
@@ -506,11 +504,7 @@ class GpSmcIterator(IteratorBase):
                 f"{n_bad} of {len(evaluations)} forward runs failed: fewer than 2 training "
                 f"points for the GP (e.g. {'; '.join(messages)})"
             ),
-            nfev=run.nfev,
-            n_failed=run.n_failed,
-            iterator="gp_smc",
             history=run.history,
-            evaluations=evaluations,
             names=run.names,
             n_x=run.n_x,
             mode=self.options.mode,
@@ -572,7 +566,7 @@ class GpSmcIterator(IteratorBase):
         figures: Sequence[str] | None = None,
     ) -> list[Path]:
         """Paper B's figures of a gp_smc result into ``folder`` (see :mod:`.smc_plots`)."""
-        from ..smc.plots import plot_gp_smc_result
+        from .plots import plot_gp_smc_result
 
         assert isinstance(result, GpSmcResult)
         return plot_gp_smc_result(result, problem, folder, figures)

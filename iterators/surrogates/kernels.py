@@ -82,7 +82,7 @@ class Matern32Product(Kern):
     """sigma^2 prod_j Matérn 3/2 (|a_j - b_j|; l_j): one signal variance, d length scales.
 
     Same values as GPy's product of 1-D ``Matern32`` kernels with the variances of all factors
-    but the first fixed to 1 (checked in ``tests/test_gp_surrogate.py``).
+    but the first fixed to 1 (checked in ``tests/iterators/surrogates/test_gp_surrogate.py``).
     """
 
     def __init__(

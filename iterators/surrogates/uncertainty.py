@@ -13,7 +13,8 @@ A, E_f[pi_f(A)], is at most eps plus the probability that a sample path puts mor
 of its posterior into A. The expected likelihood E_f[exp f] = exp(mu + sigma^2 / 2),
 normalised after the expectation, has no such bound: far from the training points sigma^2
 is the GP's prior variance, huge for an L spanning thousands, and that posterior goes to the
-corners of the box (tests/test_gp_uncertainty.py shows both on the same points).
+corners of the box (tests/iterators/surrogates/test_gp_uncertainty.py shows both on the same
+points).
 
 Literature: Stuart & Teckentrup (2018, Math. Comp. 87, 721-753) bound the error of three
 GP-based posteriors, the mean-based one, the random one pi_f ("sample") and the "marginal"

@@ -89,6 +89,7 @@ class AleFsiForwardModel(Configurable):
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
+    pickle_options_only = True  # process pools and Dask rebuild it from its options
 
     Options = AleFsiOptions
 
@@ -101,13 +102,6 @@ class AleFsiForwardModel(Configurable):
         self._store: list[tuple[dict[str, float], float, NDArray[np.float64]]] = []
         self._regions: list[str] | None = None
         self._given_rate = False
-
-    # pickling (process pools): ship the options, rebuild the mesh in the worker
-    def __getstate__(self) -> dict[str, Any]:
-        return {"options": self.options}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["options"])  # type: ignore[misc]
 
     # -- protocol ----------------------------------------------------------------------------
     @classmethod

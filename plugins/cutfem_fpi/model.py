@@ -68,6 +68,7 @@ class CutFemFpiForwardModel(Configurable):
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
+    pickle_options_only = True  # process pools and Dask rebuild it from its options
 
     dim = 2
 
@@ -206,12 +207,6 @@ class CutFemFpiForwardModel(Configurable):
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         super().__init__(options, **kwargs)
         self._solver: Any = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {"options": self.options}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["options"])  # type: ignore[misc]
 
     # -- protocol ----------------------------------------------------------------------------
     @classmethod

@@ -151,6 +151,7 @@ class GrowthForwardModel(Configurable):
     #: bumped when a change alters its numbers (the store keys runs by it, not by the
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
+    pickle_options_only = True  # process pools and Dask rebuild it from its options
 
     Options = GrowthOptions
 
@@ -160,12 +161,6 @@ class GrowthForwardModel(Configurable):
         super().__init__(options, **kwargs)
         # the FSI + transport state of one growth step, by the inputs it depends on
         self._states: dict[tuple[Any, ...], _StepState] = {}
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {"options": self.options}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["options"])  # type: ignore[misc]
 
     # -- protocol ----------------------------------------------------------------------------
     @classmethod

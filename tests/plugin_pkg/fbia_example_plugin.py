@@ -1,4 +1,4 @@
-"""fbia-example-plugin: a tiny third-party fbia plugin, used by tests/test_plugins.py.
+"""fbia-example-plugin: a tiny third-party fbia plugin, used by tests/core/test_plugins.py.
 
 It is *not* installed: the test writes a ``fbia_example_plugin-1.2.3.dist-info`` whose
 ``entry_points.txt`` declares ``[fbia] example = fbia_example_plugin`` and puts it, and this

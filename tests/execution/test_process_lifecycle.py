@@ -19,10 +19,9 @@ from pathlib import Path
 
 import pytest
 from _models import _alive, toy_problem
+from _paths import TESTS
 
 from fbia.execution.isolation import _recv, _send
-
-TESTS = Path(__file__).resolve().parent
 
 _POOL_DRIVER = """
 import sys

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from _paths import ROOT
 
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood as log_likelihood_of
@@ -202,7 +203,7 @@ def test_direct_mode_agrees_with_the_surrogate():
     problem = _problem(noise_std=0.05, failure_region={"E": (100.0, 120.0)})
     opts = {"n_particles": 100, "n_rejuvenation": 1, "zeta": 0.5, "seed": 1}
     direct = fbia.iterator("gp_smc", mode="direct", **opts).run(problem)
-    assert direct.success and direct.nfev >= 100 and direct.evaluations == []
+    assert direct.success and direct.nfev >= 100 and len(direct.evaluations) == direct.nfev
     # Every forward run SMC asked for is counted; the prior draws with E <= 120 Pa failed.
     assert direct.nfev == direct.smc.nfev_log_likelihood and direct.n_failed > 0
     surrogate = fbia.iterator("gp_smc", n_train=128, **{**opts, "n_particles": 1000}).run(problem)
@@ -280,13 +281,16 @@ def test_design_extends_reusing_the_earlier_runs():
     first = fbia.iterator("gp_smc", n_train=32, n_check=0, **FAST).run(problem)
     more = fbia.iterator("gp_smc", n_train=64, n_test=8, n_check=0, **FAST).reuse(first)
     more = more.run(problem)
-    # Only the 32 + 8 new points of the same Sobol sequence ran.
-    assert more.nfev == 40 and len(more.evaluations) == 72
+    # Only the 32 + 8 new points of the same Sobol sequence ran: they are the result's
+    # evaluations (the framework's books); the design holds all 72 with their status.
+    assert more.nfev == len(more.evaluations) == 40 and len(more.design.status) == 72
     np.testing.assert_array_equal(more.design.points[:32], first.design.points)
-    assert more.evaluations[:32] == first.evaluations
-    new_failed = sum(not ev.ok for ev in more.evaluations[32:])
-    assert more.n_failed == new_failed
-    assert more.surrogate.summary["n_train"] == 64 - sum(not ev.ok for ev in more.evaluations[:64])
+    assert more.design.status[:32] == first.design.status
+    assert [ev.x for ev in more.evaluations] == [
+        dict(zip(problem.names, map(float, x), strict=True)) for x in more.design.points[32:]
+    ]
+    assert more.n_failed == sum(not ev.ok for ev in more.evaluations)
+    assert more.surrogate.summary["n_train"] == 64 - sum(s != "ok" for s in more.design.status[:64])
     other = fbia.iterator("gp_smc", n_train=64, **{**FAST, "seed": 5})
     with pytest.raises(fbia.ConfigError, match="not a prefix of this one"):
         other.reuse(first).run(problem)
@@ -299,11 +303,10 @@ def test_fsi_bayes_example_posterior_band_contains_the_truth(tmp_path):
     The ground truth lies inside the posterior bulk, the band follows the E-nu coupling and
     the failed soft runs are reported, not fatal.
     """
-    from pathlib import Path
 
     from fbia.iterators.gp_smc.posterior import hpd_mass
 
-    example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_bayes.toml"
+    example = ROOT / "examples" / "flow_cell" / "study_bayes.toml"
     result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
     assert result.success and result.adaptive.converged and 0 < result.n_failed < 20
     assert result.nfev <= 128 + 16 + 8  # the budget, the held-out points, the check

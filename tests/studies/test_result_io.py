@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _paths import ROOT
 from _studies import edit
 
 import fbia
@@ -16,7 +16,7 @@ from fbia.iterators.gp_smc.result import GpSmcResult
 from fbia.iterators.lm.result import LMResult
 from fbia.studies.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = ROOT
 
 BAYES = edit(
     "options = { x0 = { E = 350.0, nu = 0.25 }, max_iter = 30 }",

@@ -87,7 +87,7 @@ def test_a_dome_given_as_a_surface_deflects_like_dome_3d(tmp_path):
     """Same duct, load and element sizes: the largest interface displacement of the colony
     meshed from the cap's PLY surface is within 3 % of dome_3d's (observed 0.7 %: 0.02909 vs
     0.02889 mm); the dome's own discretisation error at this size is 7 % (0.02685 mm at
-    interface size 0.1, tests/test_ale_fsi_3d.py)."""
+    interface size 0.1, tests/plugins/test_ale_fsi_3d.py)."""
     path = cap_surface().write(tmp_path / "dome.ply")
     rate = [{"inflow_rate": 100.0}]
     colony = AleFsiForwardModel(geometry="colony_3d", colony_surface=path, **COARSE)

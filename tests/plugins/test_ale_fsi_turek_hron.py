@@ -15,12 +15,14 @@ import json
 from pathlib import Path
 
 import pytest
+from _paths import TESTS
 
 pytest.importorskip("ngsolve")
 
+
 from fbia.plugins.ale_fsi import turek_hron  # noqa: E402
 
-DATA = json.loads((Path(__file__).parent / "data" / "fsi" / "turek_hron_2006.json").read_text())
+DATA = json.loads((TESTS / "data" / "fsi" / "turek_hron_2006.json").read_text())
 TOL = 0.02
 
 

@@ -13,17 +13,17 @@ import inspect
 import sys
 import tomllib
 import types
-from pathlib import Path
 
 import pytest
+from _paths import ROOT, TESTS
 
 import fbia
 from fbia import testing as ft
 from fbia.core import hookspecs
 from fbia.core.registry import KINDS, Registry, default_registry
 
-ROOT = Path(__file__).resolve().parents[1]
-PLUGIN_PKG = Path(__file__).resolve().parent / "plugin_pkg"
+ROOT = ROOT
+PLUGIN_PKG = TESTS / "plugin_pkg"
 TEMPLATE = ROOT / "examples" / "third_party_plugin"
 
 

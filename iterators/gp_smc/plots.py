@@ -41,10 +41,10 @@ from ...core.likelihood import noise_parameter
 from ...core.parameters import Parameter
 from ...core.problem import InverseProblem
 from ...imaging.figures import legend
-from ..gp_smc.result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
+from ..smc.sampler import systematic_resample
 from ..surrogates.gp import GpSurrogate
 from ..surrogates.residuals import restore_surrogate
-from .sampler import systematic_resample
+from .result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
 
 FloatArray = NDArray[np.float64]
 #: Probability mass inside the KDE / Gaussian percentile lines.

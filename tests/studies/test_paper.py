@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 import math
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _paths import ROOT
 from _studies import STUDY, one_error_line, write_study
 
 import fbia
@@ -18,7 +18,7 @@ from fbia.studies.cli import main
 from fbia.studies.paper import KINDS, compare, lookup, read_paper
 from fbia.studies.paper_report import PaperRecord, comparison_table, rules_table, write_summary
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = ROOT / "examples"
 PAPER_STUDIES = sorted(
     p
     for p in [*EXAMPLES.glob("paper_*/*/*.toml"), *EXAMPLES.glob("growth/*.toml")]

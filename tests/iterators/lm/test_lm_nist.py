@@ -23,10 +23,10 @@ from __future__ import annotations
 import importlib.util
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _paths import TESTS
 
 import fbia
 
@@ -35,7 +35,7 @@ def _load_nist():
     name = "fbia_test_nist_strd"
     if name not in sys.modules:
         spec = importlib.util.spec_from_file_location(
-            name, Path(__file__).parent / "data" / "nist_strd" / "nist.py"
+            name, TESTS / "data" / "nist_strd" / "nist.py"
         )
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from _models import toy_problem
+from _paths import ROOT
 
 from fbia.studies.plots import _residuals_um, plot_interfaces
 
@@ -27,7 +28,6 @@ def test_the_residual_panel_shows_the_measures_residuals_in_micrometres(tmp_path
 def test_a_plot_without_labelled_artists_gets_no_legend_and_no_warning(recwarn):
     """An empty plot (every run failed) prints no "No artists with labels" warning: every
     legend of fbia's plots goes through fbia.studies.plots.legend (issue 31 item 6)."""
-    import pathlib
     import re
 
     import matplotlib
@@ -46,7 +46,7 @@ def test_a_plot_without_labelled_artists_gets_no_legend_and_no_warning(recwarn):
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["simulated"]
     plt.close(fig)
     assert not [w for w in recwarn if "No artists with labels" in str(w.message)]
-    root = pathlib.Path(__file__).resolve().parents[1]
+    root = ROOT
     direct = [
         f"{path.relative_to(root)}:{n}"
         for folder in ("core", "iterators", "measures", "plugins")

@@ -5,10 +5,10 @@ against quadrature."""
 import math
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _paths import ROOT
 from test_gp_smc import FAST, _problem
 
 import fbia
@@ -22,7 +22,7 @@ from fbia.iterators.surrogates.residuals import (
     restore_surrogate,
 )
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
+BENCH = ROOT / "benchmarks"
 SIGMA = 0.05
 T = np.linspace(0.0, 1.0, 12)
 

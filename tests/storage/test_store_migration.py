@@ -16,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _paths import TESTS
 
 import fbia
 from fbia.storage import fingerprints
 from fbia.storage.store import STORE_FORMAT, StudyStore
 
-DATA = Path(__file__).parent / "data" / "store_v1"
+DATA = TESTS / "data" / "store_v1"
 EXPECTED = json.loads((DATA / "expected.json").read_text())
 POINTS = EXPECTED["points"]
 

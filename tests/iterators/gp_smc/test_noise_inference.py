@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from _paths import ROOT
 
 import fbia
 from fbia.core.errors import ConfigError
@@ -142,9 +143,8 @@ def test_sigma_n_posterior_matches_quadrature(exact, tmp_path):
 
 
 def test_the_example_study_infers_sigma_n(tmp_path):
-    from pathlib import Path
 
-    example = Path(__file__).parents[1] / "examples" / "flow_cell" / "study_noise.toml"
+    example = ROOT / "examples" / "flow_cell" / "study_noise.toml"
     result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
     assert result.status == "completed" and result.names == ["E", "nu", "sigma_N"]
     lo, _, hi = result.posterior.credible_intervals["sigma_N"]

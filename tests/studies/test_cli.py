@@ -16,6 +16,7 @@ import meshio
 import numpy as np
 import pytest
 from _models import PLUGIN, write_driver
+from _paths import ROOT
 from _studies import BAD_CASES, STUDY, TRUTH, edit, one_error_line
 
 import fbia
@@ -309,7 +310,7 @@ def test_an_unwritable_output_is_one_line_with_status_1(study_file, capsys):
 def test_a_real_ctrl_c_exits_130_and_saves_the_finished_runs(tmp_path):
     # A real SIGINT to the process group, as a terminal sends it, during a run that would take
     # 30 s: exit 130 at once with one line and no traceback, the 6 finished runs saved.
-    # (tests/test_evaluator.py checks that Ctrl-C stops a process pool's workers.)
+    # (tests/execution/test_evaluator.py checks that Ctrl-C stops a process pool's workers.)
     write_driver(tmp_path)
     (tmp_path / "toy.toml").write_text(
         '[model]\nname = "toy_mound"\noptions = { slow_above = 500.0 }\n'
@@ -440,7 +441,7 @@ def test_the_json_schema_accepts_every_example_and_refuses_a_typo(capsys):
     schema = json.loads(capsys.readouterr().out)
     jsonschema.Draft202012Validator.check_schema(schema)
     validator = jsonschema.Draft202012Validator(schema)
-    root = Path(__file__).resolve().parents[1] / "examples"
+    root = ROOT / "examples"
     studies = [
         f
         for f in sorted(root.rglob("*.toml"))

@@ -19,18 +19,17 @@ h = 0.015 m, 81 248 unknowns: c_D = 6.2326, +0.76 %; about 150 s and 1.5 GB).
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
+from _paths import TESTS
 
 pytest.importorskip("ngsolve")
+
 
 from fbia.core.errors import ConfigError  # noqa: E402
 from fbia.plugins.ale_fsi import schaefer_turek_3d  # noqa: E402
 
-DATA = json.loads(
-    (Path(__file__).parent / "data" / "fsi" / "schaefer_turek_1996_3d.json").read_text()
-)
+DATA = json.loads((TESTS / "data" / "fsi" / "schaefer_turek_1996_3d.json").read_text())
 REF = DATA["reference"]["braack_richter_2006"]
 INTERVAL = DATA["reference"]["schaefer_turek_1996_interval"]
 TOL_COARSE = 0.03

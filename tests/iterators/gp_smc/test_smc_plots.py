@@ -1,18 +1,14 @@
 """Figures of gp_smc results (Paper B Figs. 5-9, 12-15) and the percentile levels they draw."""
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from matplotlib.image import imread
+from test_gp_smc import FAST, _problem  # noqa: E402
 
 import fbia
-from fbia.iterators.smc.plots import FIGURES, _kde_levels
-
-sys.path.insert(0, str(Path(__file__).parent))
-from test_gp_smc import FAST, _problem  # noqa: E402
+from fbia.iterators.gp_smc.plots import FIGURES, _kde_levels
 
 
 def test_percentile_levels_hold_their_mass_for_a_gaussian():
@@ -66,7 +62,7 @@ def test_all_failed_result_plots_the_design(tmp_path):
 def test_the_figures_refit_no_gp_beyond_2000_runs():
     """The GP-over-n_train figures refit a GP of L on design prefixes; on a 6000-run design
     the last one (all 6000) took more than 7 min and 10 GB. They stop at 2000 runs."""
-    from fbia.iterators.smc.plots import _MAX_REFIT, _prefix_sizes
+    from fbia.iterators.gp_smc.plots import _MAX_REFIT, _prefix_sizes
 
     assert _prefix_sizes(64) == [10, 20, 50, 64]
     assert _prefix_sizes(2000) == [50, 100, 200, 500, 1000, 2000]
