@@ -13,9 +13,10 @@ fbia.core.errors.ConfigError: model.options: unknown option 'mesh_sise'; valid o
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Mapping
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 import pydantic
 from pydantic import BaseModel, ConfigDict
@@ -132,3 +133,28 @@ def plugin_options(obj: Any, *, exclude_defaults: bool = False) -> dict[str, Any
     if not isinstance(opts, BaseModel):
         return {}
     return dict(opts.model_dump(mode="json", exclude_defaults=exclude_defaults))
+
+
+S = TypeVar("S")
+
+
+def settings_from(
+    options: BaseModel, settings: type[S], renamed: Mapping[str, str] | None = None, **values: Any
+) -> S:
+    """The ``*Settings`` dataclass a solver takes, derived from a plugin's options in one
+    place: each field takes ``values[field]``, else the option ``renamed[field]``, else the
+    option of its own name, else keeps its default.  A name in ``renamed`` or ``values`` that
+    is not a field (or an option) is a TypeError: the mapping cannot go stale silently."""
+    renamed = dict(renamed or {})
+    names = {f.name for f in dataclasses.fields(settings)}  # type: ignore[arg-type]
+    options_of = type(options).model_fields
+    stale = sorted(set(renamed) - names) + sorted(set(values) - names)
+    stale += sorted(v for v in renamed.values() if v not in options_of)
+    if stale:
+        raise TypeError(f"{settings.__name__}: no such field or option: {', '.join(stale)}")
+    kwargs = {
+        name: values[name] if name in values else getattr(options, renamed.get(name, name))
+        for name in names
+        if name in values or renamed.get(name, name) in options_of
+    }
+    return settings(**kwargs)

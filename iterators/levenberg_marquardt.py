@@ -65,6 +65,7 @@ from numpy.typing import NDArray
 
 from ..core.errors import ConfigError
 from ..core.iteration import Evaluator, IteratorBase
+from ..core.options import settings_from
 from ..core.problem import Evaluation, ProblemLike
 from .lm.chains import LMChain, LMSettings, Outcome, PaperChain, err_res_of
 from .lm.handoff import POSTERIOR_LABELS, posterior_starts
@@ -284,22 +285,8 @@ class LevenbergMarquardtIterator(IteratorBase):
             alpha = np.array([float(o.alpha.get(n, default)) for n in names])
         else:
             alpha = np.full(len(names), float(o.alpha))
-        return LMSettings(
-            mode=o.mode,
-            alpha=alpha,
-            beta=o.beta,
-            mu0=o.mu0 if o.mu0 is not None else (1.0 if o.mode == "paper" else 1e-2),
-            mu_limit=o.mu_limit,
-            eps_grad=o.eps_grad,
-            eps_res=o.eps_res,
-            max_iter=o.max_iter,
-            ftol=o.ftol,
-            xtol=o.xtol,
-            gtol=o.gtol,
-            scaling=o.scaling,
-            speculative=o.speculative,
-            final_jacobian=o.final_jacobian,
-        )
+        mu0 = o.mu0 if o.mu0 is not None else (1.0 if o.mode == "paper" else 1e-2)
+        return settings_from(o, LMSettings, alpha=alpha, mu0=mu0)
 
     # -- reporting --------------------------------------------------------------------------------
     @staticmethod

@@ -12,7 +12,7 @@ from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from ...core.options import PluginOptions
+from ...core.options import PluginOptions, settings_from
 from ..fem.outlines import (
     DEFAULT_INTERFACE_MESH_SIZE,
     NAMED_OUTLINES,
@@ -255,21 +255,4 @@ def solver_settings(o: AleFsiOptions) -> Any:
     options (the one place they are mapped; ``growth`` uses it too)."""
     from .forms import SolverSettings
 
-    return SolverSettings(
-        fluid_density=o.fluid_density,
-        fluid_viscosity=o.fluid_viscosity,
-        solid_density=o.solid_density,
-        material=o.material,
-        gravity=o.gravity,
-        outflow=o.outflow,
-        mesh_motion=o.mesh_motion,
-        mesh_stiffening=o.mesh_stiffening,
-        order=o.order,
-        newton_tol=o.newton_tol,
-        newton_max_iter=o.newton_max_iter,
-        min_det_f=o.min_det_f,
-        min_quality=o.min_element_quality,
-        theta=o.theta,
-        threads=o.threads,
-        linear_solver=o.linear_solver,
-    )
+    return settings_from(o, SolverSettings, {"min_quality": "min_element_quality"})

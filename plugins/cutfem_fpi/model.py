@@ -27,7 +27,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -35,7 +35,12 @@ from pydantic import Field, model_validator
 from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Coordinate, Solution
-from ...core.options import Configurable, PluginOptions
+from ...core.options import Configurable, PluginOptions, settings_from
+
+if TYPE_CHECKING:
+    from .coupled import CouplingSettings
+    from .flow import FlowSettings
+    from .skeleton import SkeletonSettings
 
 Point = tuple[float, float]
 
@@ -358,10 +363,8 @@ class CutFemFpiForwardModel(Configurable):
             os.environ.setdefault("MKL_NUM_THREADS", str(self.options.threads))
             import ngsolve as ngs
 
-            from .coupled import CouplingSettings, PoroFsiSolver
-            from .flow import FlowSettings
+            from .coupled import PoroFsiSolver
             from .meshes import biofilm_mesh, channel_mesh, read_flow_cell
-            from .skeleton import SkeletonSettings
 
             o = self.options
             ngs.SetNumThreads(o.threads)
@@ -382,27 +385,7 @@ class CutFemFpiForwardModel(Configurable):
                 skeleton_mesh,
                 length,
                 height,
-                FlowSettings(
-                    viscosity=o.fluid_viscosity,
-                    density=o.fluid_density,
-                    alpha_bj=o.alpha_bj,
-                    beta_bj=o.beta_bj,
-                    saffman=o.saffman,
-                    ghost_penalty=o.ghost_penalty,
-                    pore_ghost_floor=o.pore_ghost_floor,
-                    newton_tol=o.flow_newton_tol,
-                ),
-                SkeletonSettings(kappa=o.kappa, eta=o.eta),
-                CouplingSettings(
-                    tol=o.coupling_tol,
-                    max_iter=o.coupling_max_iter,
-                    omega0=o.omega0,
-                    voxel_size=o.voxel_size,
-                    level_set=o.level_set,
-                    acceleration=o.acceleration,
-                    inexact=o.coupling_inexact,
-                    pore_pressure=o.pore_pressure_transfer,
-                ),
+                *coupled_settings(o),
                 outflow=o.outflow,
                 origin=origin,
             )
@@ -453,3 +436,23 @@ def _check_outline(
         raise ConfigError("must run from the upstream to the downstream foot", where)
     if not shapely.LineString(np.vstack([p, p[:1]])).is_simple:
         raise ConfigError("intersects itself", where)
+
+
+def coupled_settings(o: Any) -> tuple[FlowSettings, SkeletonSettings, CouplingSettings]:
+    """The flow's, the skeleton's and the coupling's settings from the plugin's options (the
+    one place they are mapped)."""
+    from .coupled import CouplingSettings
+    from .flow import FlowSettings
+    from .skeleton import SkeletonSettings
+
+    flow = {"viscosity": "fluid_viscosity", "density": "fluid_density"}
+    coupling = {"tol": "coupling_tol", "max_iter": "coupling_max_iter"}
+    return (
+        settings_from(o, FlowSettings, {**flow, "newton_tol": "flow_newton_tol"}),
+        settings_from(o, SkeletonSettings),
+        settings_from(
+            o,
+            CouplingSettings,
+            {**coupling, "inexact": "coupling_inexact", "pore_pressure": "pore_pressure_transfer"},
+        ),
+    )

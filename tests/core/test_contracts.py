@@ -124,3 +124,31 @@ def test_an_iterators_own_count_gives_way_to_the_books():
     with fbia.SerialEvaluator() as ev:
         named = drive(Lying(), problem, ev, name="lying")  # as fbia run names it
     assert (named.nfev, named.iterator) == (3, "lying")
+
+
+def test_settings_are_derived_from_options_in_one_place():
+    """``settings_from``: same-named options, renamed ones, explicit values, defaults; a stale
+    name is an error, not a silently ignored option."""
+    import dataclasses
+
+    from fbia.core.options import settings_from
+
+    @dataclasses.dataclass(frozen=True)
+    class Settings:
+        tol: float = 1.0
+        order: int = 2
+        kind: str = "a"
+        extra: int = 7
+
+    class Options(fbia.PluginOptions):
+        tol: float = 1e-6
+        solver_order: int = 3
+        kind: str = "b"
+
+    o = Options()
+    assert settings_from(o, Settings, {"order": "solver_order"}) == Settings(1e-6, 3, "b", 7)
+    assert settings_from(o, Settings, kind="c").kind == "c"
+    with pytest.raises(TypeError, match="no such field or option: ordr"):
+        settings_from(o, Settings, {"ordr": "solver_order"})
+    with pytest.raises(TypeError, match="no such field or option: order_of_solver"):
+        settings_from(o, Settings, {"order": "order_of_solver"})
