@@ -16,6 +16,7 @@ from typing import Any
 from ..core.errors import ConfigError, Terminated
 from ..core.iteration import drive
 from ..core.problem import Evaluation, InverseProblem, Result
+from ..execution.executors import ExecutorSpec, evaluator_for
 from ..storage.output_folder import OutputLock, clear_runs
 from ..storage.store import StudyStore
 from . import report
@@ -24,7 +25,7 @@ from .plots import plot_evaluations, plot_interfaces
 from .progress import RunProgress, log_to_file
 from .provenance import now
 from .provenance import provenance as make_provenance
-from .study import ExecutorSpec, Study
+from .study import Study
 from .tables import discrepancy_rows
 
 __all__ = ["STORE_NAME", "forward_study", "run_study", "study_seeds"]
@@ -326,8 +327,8 @@ def _evaluate(
     """Make the evaluator (say where a Dask cluster is) and drive the iterator with it."""
     study, echo, info = session.study, session.echo, session.executor_info
     progress = _Progress(echo, log, session.problem.names)
-    evaluator = executor.make(
-        session.out, store=session.store, listener=listener, retry_failed=retry_failed
+    evaluator = evaluator_for(
+        executor, session.out, store=session.store, listener=listener, retry_failed=retry_failed
     )
     try:
         info.update(evaluator.describe())

@@ -6,9 +6,8 @@ there); :func:`fbia.studies.runner.run_study` runs it.
 
 from __future__ import annotations
 
-import re
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -19,12 +18,12 @@ from ..core.errors import ConfigError, ForwardModelError
 from ..core.observation import Observation
 from ..core.options import plugin_options
 from ..core.parameters import Parameter, Prior
-from ..core.problem import Evaluation, InverseProblem
+from ..core.problem import InverseProblem
 from ..core.protocols import Discrepancy, ForwardModel, InverseIterator
-from ..execution.executors import make_evaluator
+from ..execution.executors import ExecutorSpec
 from .paper import PaperSpec
 
-__all__ = ["ExecutorSpec", "Study", "SyntheticSpec", "derived_seed"]
+__all__ = ["Study", "SyntheticSpec", "derived_seed"]
 
 #: spawn keys of the seed sequence derived from [study] seed
 SYNTHETIC_STREAM, ITERATOR_STREAM = 0, 1
@@ -33,117 +32,6 @@ SYNTHETIC_STREAM, ITERATOR_STREAM = 0, 1
 def derived_seed(seed: int, stream: int) -> int:
     """A 32-bit seed for one consumer of randomness, derived from the study's seed."""
     return int(np.random.SeedSequence(seed, spawn_key=(stream,)).generate_state(1)[0])
-
-
-_SCHEDULER = re.compile(r"((tcp|tls|ucx|ws|wss)://)?(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+):\d{1,5}/?")
-
-
-def check_scheduler_address(address: str, where: str) -> str:
-    """A Dask scheduler address (``tcp://HOST:PORT``; also ``tls://``, ``ucx://``, ``ws://``,
-    ``wss://``, or ``HOST:PORT``), else a one-line ConfigError at ``where``."""
-    if not _SCHEDULER.fullmatch(address.strip()):
-        raise ConfigError(
-            f"{address!r} is not a Dask scheduler address: expected tcp://HOST:PORT "
-            "(or tls://HOST:PORT with TLS set up)",
-            where,
-        )
-    return address.strip()
-
-
-@dataclass(frozen=True)
-class ExecutorSpec:
-    """How forward runs are executed (the ``[executor]`` section).
-
-    ``kind`` is ``serial``, ``processes`` (a local pool of ``workers``) or ``dask`` (a running
-    scheduler at ``address``, else a cluster started for the study: ``cluster = "local"`` or a
-    dask-jobqueue kind with ``cluster_options``).  ``timeout`` is the wall-time limit of one run
-    in seconds; ``isolate`` runs each run in a child process of its own.
-    """
-
-    kind: str = "processes"
-    workers: int | None = None
-    keep_runs: bool = False
-    timeout: float | None = None
-    isolate: bool | None = None
-    address: str | None = None
-    cluster: str = "local"
-    cluster_options: Mapping[str, Any] = field(default_factory=dict)
-
-    def with_workers(self, workers: int | None) -> ExecutorSpec:
-        """The command line's ``--workers N``: 1 runs serially, more on a process pool; for
-        ``dask``, the number of workers of the cluster started for the study."""
-        if workers is None:
-            return self
-        if workers < 1:
-            raise ConfigError(f"--workers must be at least 1, got {workers}")
-        if self.kind == "dask":
-            if self.address:
-                raise ConfigError("--workers does not apply to a running Dask scheduler (address)")
-            return replace(self, workers=workers)
-        return replace(self, kind="serial" if workers == 1 else "processes", workers=workers)
-
-    def with_address(self, address: str | None) -> ExecutorSpec:
-        """The command line's ``--address``: the runs go to that Dask scheduler."""
-        if not address:
-            return self
-        check_scheduler_address(address, "--address")
-        return replace(
-            self, kind="dask", address=address, workers=None, cluster="local", cluster_options={}
-        )
-
-    def make(
-        self, output: Path, on_record: Callable[[Evaluation], None] | None = None, **options: Any
-    ) -> Any:
-        """The evaluator; run folders go to ``<output>/runs`` (successful runs' folders are
-        removed unless ``keep_runs``).  ``options`` (store, listener, retry_failed) are passed
-        on."""
-        settings: dict[str, Any] = {
-            "workdir": output / "runs",
-            "keep_workdirs": self.keep_runs,
-            "on_record": on_record,
-            "timeout": self.timeout,
-            "isolate": self.isolate,
-            **options,
-        }
-        if self.kind == "processes":
-            settings["workers"] = self.workers
-        elif self.kind == "dask":
-            settings.update(
-                address=self.address,
-                workers=self.workers,
-                cluster=self.cluster,
-                cluster_options=dict(self.cluster_options),
-            )
-        return make_evaluator(self.kind, **settings)
-
-    def describe(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "kind": self.kind,
-            "workers": self.workers,
-            "keep_runs": self.keep_runs,
-        }
-        if self.timeout is not None:
-            out["timeout"] = self.timeout
-        if self.isolate is not None:
-            out["isolate"] = self.isolate
-        if self.kind == "dask":
-            out.update(
-                address=self.address,
-                cluster=self.cluster,
-                cluster_options=dict(self.cluster_options),
-            )
-        return out
-
-    def label(self) -> str:
-        """E.g. ``processes, 2 workers, time-out 600 s``."""
-        parts = [self.kind]
-        if self.kind == "dask":
-            parts.append(f"scheduler {self.address}" if self.address else f"{self.cluster} cluster")
-        if self.workers and self.kind != "serial":
-            parts.append(f"{self.workers} workers")
-        if self.timeout is not None:
-            parts.append(f"time-out {self.timeout:g} s")
-        return ", ".join(parts)
 
 
 @dataclass(frozen=True)

@@ -115,14 +115,13 @@ from ..core.interface import Interface
 from ..core.observation import MeasurementPoints, Observation, check_coordinate
 from ..core.parameters import Parameter, Prior
 from ..core.registry import Registry, default_registry
+from ..execution.executors import ExecutorSpec, check_scheduler_address
 from .paper import read_paper
 from .study import (
     ITERATOR_STREAM,
     SYNTHETIC_STREAM,
-    ExecutorSpec,
     Study,
     SyntheticSpec,
-    check_scheduler_address,
     derived_seed,
     store_file,
 )

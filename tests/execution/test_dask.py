@@ -18,10 +18,10 @@ from _models import FAULT_BOUNDS, PLUGIN, check_injected_faults, toy_problem
 import fbia
 from fbia.core.registry import Registry
 from fbia.execution.dask_executor import DaskEvaluator, _jobqueue_cluster
+from fbia.execution.executors import ExecutorSpec
 from fbia.storage.store import StudyStore
 from fbia.studies import study_file as study_module
 from fbia.studies.cli import main
-from fbia.studies.study import ExecutorSpec
 
 
 @pytest.fixture(scope="module")

@@ -71,7 +71,7 @@ def test_a_bad_scheduler_address_is_one_line(study_file, capsys, address):
     "address", ["tcp://10.0.0.5:8786", "tls://node-1.cluster:8786", "[::1]:8786"]
 )
 def test_good_scheduler_addresses_pass(address):
-    from fbia.studies.study import check_scheduler_address
+    from fbia.execution.executors import check_scheduler_address
 
     assert check_scheduler_address(address, "--address") == address
 

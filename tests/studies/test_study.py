@@ -13,7 +13,8 @@ from _studies import BAD_CASES, STUDY, TRUTH, write_study
 
 import fbia
 from fbia.core.registry import Registry
-from fbia.studies.study import ExecutorSpec, derived_seed
+from fbia.execution.executors import ExecutorSpec
+from fbia.studies.study import derived_seed
 from fbia.studies.study_file import load_study
 
 
