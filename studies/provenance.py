@@ -8,6 +8,7 @@ import platform
 import socket
 import sys
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -69,3 +70,26 @@ def provenance(
         "finished": finished,
         "store": None if store is None else dict(store),
     }
+
+
+@dataclass
+class RunRecord:
+    """What the study runner records beside an iterator's result, written once with it as
+    ``result.json``'s ``provenance`` (the iterator's own ``info`` stays the iterator's): how
+    the result was made (:func:`provenance`), the problem, the files written, the discrepancy
+    at the result's ``x`` (one table row per observation) and the warnings of the extras."""
+
+    made: dict[str, Any]
+    problem: dict[str, Any]
+    files: dict[str, Any] = field(default_factory=dict)
+    discrepancy: list[dict[str, Any]] | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            **self.made,
+            "problem": self.problem,
+            "files": self.files,
+            "discrepancy": self.discrepancy,
+            "warnings": self.warnings,
+        }

@@ -123,7 +123,7 @@ def result_report(
             "  ground truth of the synthetic data: "
             + ", ".join(f"{k} = {v:.6g}" for k, v in truth.items())
         )
-    rows = result.info.get("discrepancy")
+    rows = result.provenance.get("discrepancy")
     if rows:
         where = "at x" if result.iterator else "of the forward run"
         lines += ["", f"discrepancy {where}:", format_table(rows)]

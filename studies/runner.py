@@ -23,7 +23,7 @@ from . import report
 from .evaluation_log import EvaluationLog
 from .plots import plot_evaluations, plot_interfaces
 from .progress import RunProgress, log_to_file
-from .provenance import now
+from .provenance import RunRecord, now
 from .provenance import provenance as make_provenance
 from .study import Study
 from .tables import discrepancy_rows
@@ -90,16 +90,16 @@ def _forward_locked(
         n_failed=0 if ev.ok else 1,
         iterator="",
         evaluations=[ev],
+        info={"inputs": ev.x},
     )
+    outputs = _Outputs()
     if ev.ok and ev.solution is not None:
-        rows = discrepancy_rows(problem, ev.solution, study.measure_name)
-        result.info["discrepancy"] = rows
-        files = result.info["files"] = _write_solution(study, ev.solution, out, "forward run")
-        result.info["inputs"] = ev.x
+        outputs.discrepancy = discrepancy_rows(problem, ev.solution, study.measure_name)
+        files = outputs.files = _write_solution(study, ev.solution, out, "forward run")
         echo(f"interfaces: {len(files['interfaces'])} files in {out / 'interfaces'}")
         for name, path in files.get("fields", {}).items():
             echo(f"field {name}: {path}")
-    _finish(study, result, out, started, echo)
+    _finish(study, result, out, started, echo, outputs=outputs)
     return result
 
 
@@ -222,7 +222,7 @@ class _Session:
     executor_info: dict[str, Any] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
 
-    def finish(self, result: Result, quiet: bool = False) -> None:
+    def finish(self, result: Result, outputs: _Outputs | None = None, quiet: bool = False) -> None:
         _finish(
             self.study,
             result,
@@ -232,6 +232,7 @@ class _Session:
             self.executor_info,
             quiet=quiet,
             store=self.store,
+            outputs=outputs,
         )
 
 
@@ -270,14 +271,17 @@ def _run_stored(
         f"({totals['failed']} failed), {totals['reused']} taken from the store"
     )
     result = _checked(study, result)
-    # The result is saved before the extras, which only add files to it: a plot that fails
-    # is reported (echoed and kept in result.info["warnings"]), never fatal.
-    session.finish(result, quiet=True)
-    files, warnings = _extras(session, result, log)
-    if warnings:
-        result.info["warnings"] = warnings
-    result.info.setdefault("files", files)
-    session.finish(result)
+    # result.json is written once, with the run record of the extras (files, discrepancy at
+    # x, warnings: a plot that fails is reported, never fatal); stopped during the extras,
+    # the result is written with what they had made.
+    outputs = _Outputs()
+    try:
+        _extras(session, result, log, outputs)
+    except BaseException:
+        session.finish(result, outputs, quiet=True)
+        raise
+    session.finish(result, outputs)
+    files = outputs.files
     if study.paper is not None:  # published numbers beside the result: report.md
         from .paper_report import write_paper_report
 
@@ -360,14 +364,22 @@ def _checked(study: Study, result: Any) -> Result:
     return result
 
 
-def _extras(
-    session: _Session, result: Result, log: EvaluationLog
-) -> tuple[dict[str, Any], list[str]]:
-    """The files beside the result: the interfaces and discrepancy at the result's x (one
-    more forward run), the iterator's own plots, the evaluations plot; what failed."""
+@dataclass
+class _Outputs:
+    """What a session wrote beside its result (its run record's part: files, the
+    discrepancy at the result's x, the warnings of the extras)."""
+
+    files: dict[str, Any] = field(default_factory=dict)
+    discrepancy: list[dict[str, Any]] | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
+def _extras(session: _Session, result: Result, log: EvaluationLog, outputs: _Outputs) -> None:
+    """The files beside the result, into ``outputs`` as they are made: the interfaces and
+    discrepancy at the result's x (one more forward run), the iterator's own plots, the
+    evaluations plot; what failed."""
     study, problem, out, echo = session.study, session.problem, session.out, session.echo
-    files: dict[str, Any] = {}
-    warnings: list[str] = []
+    files, warnings = outputs.files, outputs.warnings
 
     def extra(what: str, make: Callable[[], Any]) -> Any:
         try:
@@ -381,9 +393,7 @@ def _extras(
         best = problem.evaluate(dict(result.x), workdir=out / "best", keep_solution=True)
         if best.ok and best.solution is not None:
             solution = best.solution
-            result.info.setdefault(
-                "discrepancy", discrepancy_rows(problem, solution, study.measure_name)
-            )
+            outputs.discrepancy = discrepancy_rows(problem, solution, study.measure_name)
             title = f"{study.iterator_name} result"
             written = extra(
                 "writing the interfaces", lambda: _write_solution(study, solution, out, title)
@@ -393,7 +403,7 @@ def _extras(
             warnings.append(f"the forward run at the result's x {best.status}: {best.message}")
             echo(f"warning: {warnings[-1]}")
     if not study.figures:  # e.g. one noise draw of many (fbia.studies.draws)
-        return files, warnings
+        return
     write_plots = getattr(study.iterator, "write_plots", None)
     if callable(write_plots):  # an iterator's own plots: write_plots(result, problem, folder)
         made = extra("the iterator's plots", lambda: write_plots(result, problem, out / "plots"))
@@ -408,7 +418,6 @@ def _extras(
     )
     if made_ev is not None:
         files["evaluations plot"] = str(made_ev)
-    return files, warnings
 
 
 def _announce_resume(
@@ -518,10 +527,14 @@ def _finish(
     executor: Mapping[str, Any] | None = None,
     quiet: bool = False,
     store: StudyStore | None = None,
+    outputs: _Outputs | None = None,
 ) -> None:
-    """Provenance, ``result.json`` and ``report.txt``; echo the report unless ``quiet``."""
+    """The run record (:class:`RunRecord`: provenance, problem, ``outputs``), written once with
+    the result as ``result.json``; the iterator's files; ``report.txt``, echoed unless
+    ``quiet``."""
     problem = study.problem
-    result.provenance = make_provenance(
+    outputs = outputs or _Outputs()
+    made = make_provenance(
         study_path=study.path.resolve(),
         study_text=study.text,
         study_sha256=study.sha256,
@@ -533,7 +546,10 @@ def _finish(
         finished=now(),
         store=None if store is None else store.describe(),
     )
-    result.info.setdefault("problem", problem.describe())
+    record = RunRecord(
+        made, problem.describe(), outputs.files, outputs.discrepancy, outputs.warnings
+    )
+    result.provenance = record.to_dict()
     result.save(out / "result.json")
     write_files = getattr(study.iterator, "write_files", None)
     if callable(write_files):

@@ -160,7 +160,7 @@ def test_a_changed_option_gives_the_result_of_a_fresh_run_and_the_same_one_reuse
     changed = run(0.3, "out")  # resumed: the stored runs compared with the new surface
     fresh = run(0.3, "fresh")
     assert changed.x == fresh.x and changed.x != first.x
-    assert changed.info["discrepancy"] == fresh.info["discrepancy"]
+    assert changed.provenance["discrepancy"] == fresh.provenance["discrepancy"]
     # the option matters: at threshold 0.6 LM lands near the scan's truth (359 +- 7 Pa
     # measured with these 20 um voxels), at 0.3, where speckle in the fluid joins the
     # biofilm, far from it (709 +- 70 Pa)
