@@ -176,7 +176,7 @@ class SurrogateConvergenceIterator(IteratorBase):
                         else float(np.linalg.norm((ml - reference) / (upper - lower)))
                     ),
                     state=gp.state(),
-                )
+                ).attach(gp)
             )
             yield ConvergenceState(
                 "surrogate",

@@ -19,7 +19,6 @@ from matplotlib.figure import Figure
 from ...core.parameters import Parameter
 from ...imaging.figures import legend
 from ..surrogates.design import search_box
-from ..surrogates.gp import GpSurrogate
 from .result import SurrogateConvergenceResult
 
 
@@ -83,7 +82,7 @@ def _fields(r: SurrogateConvergenceResult, inputs: Sequence[Parameter], folder: 
     fig = Figure(figsize=(13, 4.2 * ((len(rows) + 2) // 3)))
     axes = np.atleast_1d(fig.subplots((len(rows) + 2) // 3, min(3, len(rows)))).ravel()
     for ax, row in zip(axes, rows, strict=False):
-        gp = GpSurrogate.from_state(row.state)
+        gp = row.surrogate()
         ml = np.array([row.ml_point[p.name] for p in inputs])
         pts = np.tile(ml, (mesh_a.size, 1))
         pts[:, 0], pts[:, 1] = mesh_a.ravel(), mesh_b.ravel()

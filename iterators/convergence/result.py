@@ -31,6 +31,19 @@ class ConvergenceRow:
     reference_distance: float  # |ML point - reference| in units of the box (nan: none)
     state: dict[str, Any] = field(repr=False, compare=False)  # the GP (GpSurrogate.state)
 
+    def attach(self, gp: Any) -> ConvergenceRow:
+        """Keep the fitted GP with the row (in this process only; not written out)."""
+        self.__dict__["_live"] = gp
+        return self
+
+    def surrogate(self) -> Any:
+        """The row's GP: the fitted one, else rebuilt once from ``state``."""
+        if self.__dict__.get("_live") is None:
+            from ..surrogates.gp import GpSurrogate
+
+            self.attach(GpSurrogate.from_state(self.state))
+        return self.__dict__["_live"]
+
     def to_dict(self) -> dict[str, Any]:
         """The row without the GP's state (for result.json)."""
         return {k: v for k, v in asdict(self).items() if k != "state"}

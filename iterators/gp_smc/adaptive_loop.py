@@ -107,7 +107,6 @@ def adaptive_design(
     loglik = run.log_likelihoods(evaluations)
     train = np.arange(len(start)) < n_initial
     run.evaluations = list(evaluations)
-    run.nfev, run.n_failed = len(evaluations), int((~np.isfinite(loglik)).sum())
     yield GpSmcState(
         "forward_runs",
         f"{len(evaluations)} forward runs, {run.n_failed} failed",
@@ -157,8 +156,6 @@ def adaptive_design(
         new_loglik = run.log_likelihoods(new)
         rmse, n_valid = validation_error(gp, batch[:n_draws], new_loglik[:n_draws])
         run.evaluations.extend(new)
-        run.nfev += len(new)
-        run.n_failed += int((~np.isfinite(new_loglik)).sum())
         points = np.vstack([points, batch])
         loglik = np.concatenate([loglik, new_loglik])
         train = np.concatenate([train, np.ones(len(batch), dtype=bool)])

@@ -310,7 +310,6 @@ class GpSmcIterator(IteratorBase):
         run.evaluations = reused + new
         loglik = run.log_likelihoods(run.evaluations)
         n_failed = int((~np.isfinite(loglik[len(reused) :])).sum())
-        run.nfev, run.n_failed = len(new), n_failed
         yield GpSmcState(
             "forward_runs",
             f"{len(new)} forward runs ({len(reused)} reused), {n_failed} failed",
@@ -410,7 +409,7 @@ class GpSmcIterator(IteratorBase):
             },
             best_x=design.points[best],
             best_log_likelihood=float(design.log_likelihood[best]),
-        )
+        ).attach(gp)
         yield GpSmcState(
             "surrogate",
             f"GP on {int(use.sum())} runs: LOO rel. error {quality['loo_relative_l2']:.3g}",
@@ -484,8 +483,6 @@ class GpSmcIterator(IteratorBase):
             mean_error=float(np.mean(err)) if n_ok else math.nan,
         )
         run.evaluations = [*run.evaluations, *evs]
-        run.nfev += len(evs)
-        run.n_failed += check.n_failed
         yield GpSmcState(
             "check",
             f"surrogate at {check.n} posterior draws: RMSE {check.rmse:.3g} in L",

@@ -43,7 +43,6 @@ from ...core.problem import InverseProblem
 from ...imaging.figures import legend
 from ..smc.sampler import systematic_resample
 from ..surrogates.gp import GpSurrogate
-from ..surrogates.residuals import restore_surrogate
 from .result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit
 
 FloatArray = NDArray[np.float64]
@@ -99,7 +98,7 @@ def plot_gp_smc_result(
     refits: dict[int, GpSurrogate | None] = {}
     surrogate = r.surrogate is not None
     if surrogate and n_x >= 2 and "surrogate_fields" in wanted:
-        gp = restore_surrogate(_fit(r).state)
+        gp = _fit(r).surrogate()
         out.append(_surrogate_fields(gp, r, inputs, labels, folder))
     if surrogate and len(inputs) == 2 and "gp_convergence" in wanted:
         out.append(_gp_convergence(r, inputs, labels, folder, refits))

@@ -25,7 +25,6 @@ from ...core.errors import ConfigError
 from ...core.parameters import Parameter, Prior
 from ...core.problem import jsonable
 from ..smc.sampler import SmcResult, systematic_resample
-from ..surrogates.residuals import restore_surrogate
 from .result import FloatArray, GpSmcResult, LaplaceApproximation, ParticlePosterior
 
 __all__ = [
@@ -171,7 +170,7 @@ def hpd_mass(result: GpSmcResult, point: Mapping[str, float]) -> float:
     if missing:
         raise ConfigError(f"no value for {', '.join(missing)}", "hpd_mass")
     z = np.array([[float(point[n]) for n in result.names]])
-    gp = restore_surrogate(fit.state)
+    gp = fit.surrogate()
     log_prior = sum(
         float(Prior.from_spec(p["prior"]).logpdf(z[0, j])) for j, p in enumerate(result.priors)
     )

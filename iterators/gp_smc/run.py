@@ -42,8 +42,10 @@ class GpSmcState:
 
 @dataclass
 class SmcRun:
-    """What the stages of one :meth:`~fbia.iterators.gp_smc.iterator.GpSmcIterator.steps` share: the
-    problem, the evaluator, the inputs (x then theta), the records and the run counts."""
+    """What the stages of one :meth:`~fbia.iterators.gp_smc.iterator.GpSmcIterator.steps`
+    share: the problem, the evaluator, the inputs (x then theta) and the design's records.
+    Its run counts (``nfev``, ``n_failed``, for the stages' messages) are kept by
+    :meth:`evaluate` alone; the result's are the framework's books."""
 
     problem: InverseProblem
     evaluator: Evaluator
@@ -51,8 +53,7 @@ class SmcRun:
     t_start: float
     history: list[dict[str, Any]] = field(default_factory=list)
     evaluations: list[Evaluation] = field(default_factory=list)
-    nfev: int = 0
-    n_failed: int = 0
+    _runs: list[int] = field(default_factory=lambda: [0, 0], repr=False)  # done, failed
 
     def __post_init__(self) -> None:
         self.count = measurement_count(self.problem)
@@ -106,8 +107,22 @@ class SmcRun:
         return entry
 
     def evaluate(self, x: FloatArray) -> list[Evaluation]:
+        """Forward runs at the rows of ``x`` (the one place the stages ask for runs)."""
         points = [dict(zip(self.names, map(float, row), strict=True)) for row in x]
-        return list(self.evaluator.evaluate(self.problem, points))
+        evs = list(self.evaluator.evaluate(self.problem, points))
+        self._runs[0] += len(evs)
+        self._runs[1] += sum(not ev.ok for ev in evs)
+        return evs
+
+    @property
+    def nfev(self) -> int:
+        """Forward runs asked for so far."""
+        return self._runs[0]
+
+    @property
+    def n_failed(self) -> int:
+        """Of them, the failed ones."""
+        return self._runs[1]
 
     def log_likelihoods(self, evaluations: Sequence[Evaluation]) -> FloatArray:
         """What the surrogate models, per record (-inf where the run failed): Paper B eq. 5,
@@ -124,11 +139,8 @@ class SmcRun:
 
     def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
         """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have
-        zero likelihood (L = -inf) and are counted; the records stay in the evaluator."""
-        evs = self.evaluate(x)
-        self.nfev += len(evs)
-        self.n_failed += sum(not ev.ok for ev in evs)
-        return self.log_likelihoods(evs)
+        zero likelihood (L = -inf)."""
+        return self.log_likelihoods(self.evaluate(x))
 
 
 def run_status(
