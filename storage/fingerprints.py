@@ -185,8 +185,14 @@ def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -
     today."""
     defaults = default_options(obj)
     out = json.loads(canonical(part))
-    if out[plugin].get("version") == _package_version(obj):  # keyed by the package's version
-        out[plugin]["version"] = _class_version(obj)["version"]
+    stored, now = out[plugin].get("version"), _class_version(obj)["version"]
+    # Keyed by the package's version: this release's, or (for a plugin that now declares its
+    # numerics) an earlier one's, whose code the store's source digest still checks.
+    declares = now.startswith("numerics ")
+    if stored == _package_version(obj) or (
+        declares and isinstance(stored, str) and not stored.startswith("numerics ")
+    ):
+        out[plugin]["version"] = now
     options = out[plugin].get("options", {})
     current = getattr(obj, "options", None)
     for k, v in options.items():  # a file keyed by its bytes before fbia parsed it: same bytes

@@ -170,6 +170,25 @@ def test_a_store_keyed_by_the_package_version_is_rekeyed_to_the_numerics_version
     assert '"version":"numerics 1"' in model
 
 
+def test_a_store_keyed_by_an_earlier_release_is_rekeyed_and_its_code_checked(
+    tmp_path, plugin, monkeypatch
+):
+    """A store written by release 0.1.0 of a package, before its plugin declared a numerics
+    version, and read by release 0.2.0 that declares one: the same model, not a different
+    one (fbia 0.2.0 on its demo's stores); the source digest still decides whether the runs
+    are reused, so the user says the change leaves the results as they were."""
+    from fbia.storage import fingerprints
+
+    path = tmp_path / "s.sqlite"
+    monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "0.1.0")
+    assert _evaluate(path, _problem(plugin())) == (set(), 3)
+    monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "0.2.0")
+    declared = plugin(attrs='    numerics_version = "1"')
+    with pytest.raises(fbia.ConfigError, match="other code of the model plugin"):
+        _evaluate(path, _problem(declared))
+    assert _evaluate(path, _problem(declared), reuse_changed_code=True) == ({0, 1, 2}, 3)
+
+
 def _ply(path, comment, z=0.0):
     """An ASCII PLY triangle written with a header ``comment`` (meshio writes a timestamp)."""
     path.write_text(
