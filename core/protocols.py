@@ -18,6 +18,7 @@ plugin's required methods with it (:func:`required_methods`), and so does the co
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -61,8 +62,9 @@ def contract(protocol: type) -> tuple[Member, ...]:
     )
 
 
+@functools.cache
 def contracts() -> dict[str, tuple[Member, ...]]:
-    """Kind -> its contract, read from the three protocols' docstrings."""
+    """Kind -> its contract, read from the three protocols' docstrings (once)."""
     return {
         "forward_model": contract(ForwardModel),
         "measure": contract(Discrepancy),
@@ -73,6 +75,11 @@ def contracts() -> dict[str, tuple[Member, ...]]:
 def required_methods(kind: str) -> list[str]:
     """The methods a plugin of ``kind`` must define (the registry checks them)."""
     return [m.attribute for m in contracts()[kind] if m.role == "required" and "(" in m.name]
+
+
+def missing_methods(kind: str, plugin: Any) -> list[str]:
+    """The required methods of ``kind`` that ``plugin`` (a class or an instance) lacks."""
+    return [m for m in required_methods(kind) if not callable(getattr(plugin, m, None))]
 
 
 @runtime_checkable

@@ -23,7 +23,7 @@ from . import hookspecs
 from .errors import PluginError
 from .extras import missing, require
 from .options import PluginOptions
-from .protocols import required_methods
+from .protocols import missing_methods
 
 KINDS: dict[str, str] = {
     "forward_model": "register_forward_models",
@@ -116,7 +116,7 @@ class Registry:
             raise PluginError(
                 f"{kind} {name!r} has no Options schema (a subclass of fbia.PluginOptions)", where
             )
-        missing = [m for m in required_methods(kind) if not callable(getattr(factory, m, None))]
+        missing = missing_methods(kind, factory)
         if missing:
             raise PluginError(f"{kind} {name!r} lacks method(s) {', '.join(missing)}", where)
         table = self._entries[kind]

@@ -8,7 +8,7 @@ import platform
 import socket
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -73,23 +73,25 @@ def provenance(
 
 
 @dataclass
-class RunRecord:
-    """What the study runner records beside an iterator's result, written once with it as
-    ``result.json``'s ``provenance`` (the iterator's own ``info`` stays the iterator's): how
-    the result was made (:func:`provenance`), the problem, the files written, the discrepancy
-    at the result's ``x`` (one table row per observation) and the warnings of the extras."""
+class RunOutputs:
+    """What a session wrote beside its result: the files, the discrepancy at the result's
+    ``x`` (one table row per observation) and the warnings of the extras (filled as they are
+    made)."""
 
-    made: dict[str, Any]
-    problem: dict[str, Any]
     files: dict[str, Any] = field(default_factory=dict)
     discrepancy: list[dict[str, Any]] | None = None
     warnings: list[str] = field(default_factory=list)
 
+
+@dataclass
+class RunRecord:
+    """What the study runner records beside an iterator's result, written once with it as
+    ``result.json``'s ``provenance`` (the iterator's own ``info`` stays the iterator's): how
+    the result was made (:func:`provenance`), the problem and the session's outputs."""
+
+    made: dict[str, Any]
+    problem: dict[str, Any]
+    outputs: RunOutputs = field(default_factory=RunOutputs)
+
     def to_dict(self) -> dict[str, Any]:
-        return {
-            **self.made,
-            "problem": self.problem,
-            "files": self.files,
-            "discrepancy": self.discrepancy,
-            "warnings": self.warnings,
-        }
+        return {**self.made, "problem": self.problem, **asdict(self.outputs)}

@@ -23,7 +23,7 @@ from . import report
 from .evaluation_log import EvaluationLog
 from .plots import plot_evaluations, plot_interfaces
 from .progress import RunProgress, log_to_file
-from .provenance import RunRecord, now
+from .provenance import RunOutputs, RunRecord, now
 from .provenance import provenance as make_provenance
 from .study import Study
 from .tables import discrepancy_rows
@@ -92,7 +92,7 @@ def _forward_locked(
         evaluations=[ev],
         info={"inputs": ev.x},
     )
-    outputs = _Outputs()
+    outputs = RunOutputs()
     if ev.ok and ev.solution is not None:
         outputs.discrepancy = discrepancy_rows(problem, ev.solution, study.measure_name)
         files = outputs.files = _write_solution(study, ev.solution, out, "forward run")
@@ -222,7 +222,9 @@ class _Session:
     executor_info: dict[str, Any] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
 
-    def finish(self, result: Result, outputs: _Outputs | None = None, quiet: bool = False) -> None:
+    def finish(
+        self, result: Result, outputs: RunOutputs | None = None, quiet: bool = False
+    ) -> None:
         _finish(
             self.study,
             result,
@@ -274,7 +276,7 @@ def _run_stored(
     # result.json is written once, with the run record of the extras (files, discrepancy at
     # x, warnings: a plot that fails is reported, never fatal); stopped during the extras,
     # the result is written with what they had made.
-    outputs = _Outputs()
+    outputs = RunOutputs()
     try:
         _extras(session, result, log, outputs)
     except BaseException:
@@ -364,17 +366,7 @@ def _checked(study: Study, result: Any) -> Result:
     return result
 
 
-@dataclass
-class _Outputs:
-    """What a session wrote beside its result (its run record's part: files, the
-    discrepancy at the result's x, the warnings of the extras)."""
-
-    files: dict[str, Any] = field(default_factory=dict)
-    discrepancy: list[dict[str, Any]] | None = None
-    warnings: list[str] = field(default_factory=list)
-
-
-def _extras(session: _Session, result: Result, log: EvaluationLog, outputs: _Outputs) -> None:
+def _extras(session: _Session, result: Result, log: EvaluationLog, outputs: RunOutputs) -> None:
     """The files beside the result, into ``outputs`` as they are made: the interfaces and
     discrepancy at the result's x (one more forward run), the iterator's own plots, the
     evaluations plot; what failed."""
@@ -527,13 +519,13 @@ def _finish(
     executor: Mapping[str, Any] | None = None,
     quiet: bool = False,
     store: StudyStore | None = None,
-    outputs: _Outputs | None = None,
+    outputs: RunOutputs | None = None,
 ) -> None:
     """The run record (:class:`RunRecord`: provenance, problem, ``outputs``), written once with
     the result as ``result.json``; the iterator's files; ``report.txt``, echoed unless
     ``quiet``."""
     problem = study.problem
-    outputs = outputs or _Outputs()
+    outputs = outputs or RunOutputs()
     made = make_provenance(
         study_path=study.path.resolve(),
         study_text=study.text,
@@ -546,10 +538,7 @@ def _finish(
         finished=now(),
         store=None if store is None else store.describe(),
     )
-    record = RunRecord(
-        made, problem.describe(), outputs.files, outputs.discrepancy, outputs.warnings
-    )
-    result.provenance = record.to_dict()
+    result.provenance = RunRecord(made, problem.describe(), outputs).to_dict()
     result.save(out / "result.json")
     write_files = getattr(study.iterator, "write_files", None)
     if callable(write_files):

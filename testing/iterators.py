@@ -15,7 +15,7 @@ import numpy as np
 from ..core.iteration import RunBook, stamp
 from ..core.parameters import Parameter
 from ..core.problem import Evaluable, Evaluation, InverseProblem, Result
-from ..core.protocols import required_methods
+from ..core.protocols import missing_methods
 from ..core.registry import forward_model
 from ..core.registry import measure as make_measure
 from ..core.synthetic import synthetic_observations
@@ -71,7 +71,7 @@ def check_iterator(
 
     * ``steps(problem, evaluator)`` is a generator that yields at least once and returns a
       :class:`fbia.Result` (so a caller can watch, checkpoint and stop);
-    * it has the methods its contract requires (:data:`fbia.core.protocols.ITERATOR`);
+    * it has the methods its contract requires (:class:`fbia.InverseIterator`);
     * the result says why it stopped: ``status`` and ``message`` are non-empty strings,
       ``success`` is a bool;
     * the framework's books (:func:`fbia.core.iteration.stamp`: ``iterator``, ``nfev``,
@@ -87,7 +87,7 @@ def check_iterator(
 
     global_state = _global_rng_state()
     it = iterator_factory()
-    lacking = [m for m in required_methods("iterator") if not callable(getattr(it, m, None))]
+    lacking = missing_methods("iterator", it)
     if lacking:
         raise _fail(it, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     ev = CountingEvaluator()

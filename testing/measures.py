@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from ..core.interface import Interface
 from ..core.observation import Observation
-from ..core.protocols import required_methods
+from ..core.protocols import missing_methods
 from .errors import _fail
 from .samples import circle_2d, mound_2d, sphere_3d, square_3d, straight_line_2d
 
@@ -146,7 +146,7 @@ def check_measure(
     """Prove that ``measure`` behaves like a distance between interfaces, in 2-D and 3-D.
 
     It checks that it has the methods its contract requires
-    (:data:`fbia.core.protocols.MEASURE`), and for every case of :func:`measure_cases` (or
+    (:class:`fbia.Discrepancy`), and for every case of :func:`measure_cases` (or
     ``cases``) that
 
     * the residuals are a finite 1-D array and the distance a finite float >= 0;
@@ -173,7 +173,7 @@ def check_measure(
     Returns ``{case: {"identical": D0, "simulated": D1, "refined": D1r, "farther": D2}}``.
     """
 
-    lacking = [m for m in required_methods("measure") if not callable(getattr(measure, m, None))]
+    lacking = missing_methods("measure", measure)
     if lacking:
         raise _fail(measure, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     if dims is None:

@@ -14,7 +14,7 @@ import numpy as np
 from ..core.errors import ForwardModelError
 from ..core.interface import Interface
 from ..core.observation import Solution, coordinate_key
-from ..core.protocols import required_methods
+from ..core.protocols import missing_methods
 from .errors import ConformanceError, _fail
 
 
@@ -30,7 +30,7 @@ def check_forward_model(
 
     Checks that
 
-    * it has the methods its contract requires (:data:`fbia.core.protocols.FORWARD_MODEL`);
+    * it has the methods its contract requires (:class:`fbia.ForwardModel`);
     * ``parameter_names()`` is a sequence of distinct strings containing every key of
       ``parameters``;
     * ``solve(parameters, coordinates, workdir)`` returns an :class:`fbia.Solution` with an
@@ -48,9 +48,7 @@ def check_forward_model(
     """
 
     tmp_path = Path(tmp_path)
-    lacking = [
-        m for m in required_methods("forward_model") if not callable(getattr(model, m, None))
-    ]
+    lacking = missing_methods("forward_model", model)
     if lacking:
         raise _fail(model, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     names = model.parameter_names()

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.problem import Result, jsonable
+from ..surrogates.residuals import KeepsSurrogate
 
 __all__ = ["ConvergenceRow", "SurrogateConvergenceResult"]
 
@@ -18,8 +19,9 @@ FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class ConvergenceRow:
-    """The GP trained on the first ``n_train`` design points."""
+class ConvergenceRow(KeepsSurrogate):
+    """The GP trained on the first ``n_train`` design points (the fitted GP itself for the
+    plots: :class:`KeepsSurrogate`)."""
 
     n_train: int
     n_used: int  # successful runs among them (the GP's training set)
@@ -30,19 +32,6 @@ class ConvergenceRow:
     test_relative_l2: float  # ||error|| / ||L_test - mean L_test||
     reference_distance: float  # |ML point - reference| in units of the box (nan: none)
     state: dict[str, Any] = field(repr=False, compare=False)  # the GP (GpSurrogate.state)
-
-    def attach(self, gp: Any) -> ConvergenceRow:
-        """Keep the fitted GP with the row (in this process only; not written out)."""
-        self.__dict__["_live"] = gp
-        return self
-
-    def surrogate(self) -> Any:
-        """The row's GP: the fitted one, else rebuilt once from ``state``."""
-        if self.__dict__.get("_live") is None:
-            from ..surrogates.gp import GpSurrogate
-
-            self.attach(GpSurrogate.from_state(self.state))
-        return self.__dict__["_live"]
 
     def to_dict(self) -> dict[str, Any]:
         """The row without the GP's state (for result.json)."""

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.problem import Result, jsonable
+from ..surrogates.residuals import KeepsSurrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
 
 FloatArray = NDArray[np.float64]
@@ -131,33 +132,15 @@ class AdaptiveDesign:
 
 
 @dataclass(frozen=True)
-class SurrogateFit:
-    """The GP surrogate of L (stage 3): its description and errors, and what rebuilds it.
-
-    The run keeps the fitted surrogate itself with the record (:meth:`attach`, not a field:
-    it is not written to ``result.json``); :meth:`surrogate` gives it to the plots and
-    :func:`~fbia.iterators.gp_smc.posterior.hpd_mass`, and rebuilds it from ``state`` only
-    for a result read back from its file."""
+class SurrogateFit(KeepsSurrogate):
+    """The GP surrogate of L (stage 3): its description and errors, and what rebuilds it;
+    the fitted surrogate itself for the plots and
+    :func:`~fbia.iterators.gp_smc.posterior.hpd_mass` (:class:`KeepsSurrogate`)."""
 
     summary: dict[str, Any]  # kernel, hyperparameters, n_train, LOO and held-out errors
     state: dict[str, Any]  # GpSurrogate.from_state(state) gives the GP back
     best_x: FloatArray  # the training run of highest L
     best_log_likelihood: float
-
-    def attach(self, surrogate: Any) -> SurrogateFit:
-        """Keep the fitted ``surrogate`` with this record (in this process only)."""
-        object.__setattr__(self, "_live", surrogate)
-        return self
-
-    def surrogate(self) -> Any:
-        """The fitted surrogate: the run's own, else rebuilt once from ``state``."""
-        live = self.__dict__.get("_live")
-        if live is None:
-            from ..surrogates.residuals import restore_surrogate
-
-            live = restore_surrogate(self.state)
-            self.attach(live)
-        return live
 
 
 #: the largest surrogate RMSE in L at posterior draws that counts as "well below 1": an error

@@ -390,3 +390,23 @@ def restore_surrogate(state: Mapping[str, Any]) -> Surrogate:
     if state.get("feasibility") is not None:
         surrogate.feasibility = Feasibility.from_state(state["feasibility"])
     return surrogate
+
+
+class KeepsSurrogate:
+    """Mixin of a (frozen) result record with a surrogate's ``state``: the run keeps the
+    fitted surrogate itself with the record (:meth:`attach`: not a field, so not written to
+    ``result.json``), and :meth:`surrogate` gives it to plots and checks, rebuilding it from
+    ``state`` only for a record read back from its file, once."""
+
+    state: Mapping[str, Any]
+
+    def attach(self, surrogate: Any) -> Any:
+        """Keep the fitted ``surrogate`` with this record (in this process only)."""
+        self.__dict__["_live"] = surrogate
+        return self
+
+    def surrogate(self) -> Any:
+        """The fitted surrogate: the run's own, else rebuilt once from ``state``."""
+        if self.__dict__.get("_live") is None:
+            self.attach(restore_surrogate(self.state))
+        return self.__dict__["_live"]

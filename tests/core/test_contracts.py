@@ -76,10 +76,11 @@ def test_the_framework_stamps_the_books_on_a_result_whose_iterator_counted_nothi
     assert (result.nfev, result.n_failed) == (3, 1)
     assert [e.x["E"] for e in result.evaluations] == [300.0, 400.0, 120.0]
     assert result.iterator == "_Silent"  # not registered: its class name
-    with fbia.SerialEvaluator() as ev:
+    with fbia.SerialEvaluator() as ev:  # a book per drive: two drives on one evaluator
+        first, again = drive(_Silent(), problem, ev), drive(_Silent(), problem, ev)
+        assert first.nfev == again.nfev == 3 and again.evaluations[0].x["E"] == 300.0
         book = RunBook(ev)
-        again = drive(_Silent(), problem, ev)
-        assert book.nfev == 0 and again.nfev == 3  # a book per drive
+        assert (book.nfev, book.n_failed, book.records) == (0, 0, [])  # its own, empty
 
 
 def test_a_registered_iterator_gets_its_registered_name():
