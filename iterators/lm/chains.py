@@ -14,7 +14,8 @@ Two modes share the finite-difference Jacobian (eq. 21-23) and the error measure
     Paper A as published: every step of eq. 18 is taken; μ is updated by eq. 26 only when
     eq. 27 holds (the new μ applies from the next step on, as in QUEENS, where the paper's
     algorithm was implemented); a step that leaves the bounds (eq. 28) is declined and μ
-    doubled; the run ends without result when μ > μ0·1e6 or when a forward run fails, and
+    doubled, and the iteration that follows a declined step keeps the doubled μ (QUEENS
+    evaluates the errors at the same point again, so eq. 27 does not hold there); the run ends without result when μ > μ0·1e6 or when a forward run fails, and
     with the iterate of lowest err_res on eq. 29a-c.  One deliberate difference from QUEENS:
     after a declined step the new step is computed from the same J, where QUEENS re-ran the
     n_x + 1 runs at the unchanged point (same iterates, fewer runs).
@@ -321,6 +322,7 @@ class PaperChain(LMChain):
                 break
             # eq. 18 with the bounds check of eq. 28: a step out of bounds is declined, μ doubled
             A = J.T @ J
+            declined = False
             while True:
                 try:
                     step = np.linalg.solve(A + self.mu * np.diag(np.diag(A)), -(J.T @ r))
@@ -336,6 +338,7 @@ class PaperChain(LMChain):
                 if np.all(xt > self.lower) and np.all(xt < self.upper):
                     break
                 self.mu *= 2.0
+                declined = True
                 self._record(xt, None, False, "out of bounds: mu doubled (eq. 28)")
                 if self.mu > s.mu0 * s.mu_limit:
                     self.x_last, self.x = x, None
@@ -345,8 +348,15 @@ class PaperChain(LMChain):
                         f"> mu0 * {s.mu_limit:g}; no parameter result (Paper A, eq. 28)",
                     )
                     return
-            # eq. 26 under condition eq. 27 (the update applies to the next step)
-            if prev is not None and self.err_grad < prev[0] and self.err_res < prev[1]:
+            # eq. 26 under condition eq. 27 (the update applies to the next step).  After a
+            # declined step QUEENS computes the errors at the same point again, so eq. 27
+            # compares the point with itself and μ keeps its doubled value for this step.
+            if (
+                not declined
+                and prev is not None
+                and self.err_grad < prev[0]
+                and self.err_res < prev[1]
+            ):
                 self.mu *= self.err_grad / prev[0]
             prev = (self.err_grad, self.err_res)
             x = xt

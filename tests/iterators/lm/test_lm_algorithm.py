@@ -77,6 +77,67 @@ def test_paper_mode_follows_eq_17_to_27():
     assert taken[-1]["mu"] < 1.0
 
 
+def queens_reference(fun, x0, lower, upper, mu0, alpha, beta, iterations):
+    """QUEENS' loop for Paper A with bounds (eq. 18-28), pass by pass: every pass evaluates
+    r and J at the current point and moves the previous errors on; a step out of bounds
+    doubles mu and the next pass starts again at the same point (so eq. 27 compares the point
+    with itself there); mu > mu0 * 1e6 ends the run.  Returns (x, mu) at every point reached,
+    mu as it stood on arrival."""
+    x, mu = np.asarray(x0, dtype=float), mu0
+    res = grad = None
+    visited, arrived, k = [], True, 0
+    while k < iterations:
+        r = fun(x)
+        dx = alpha + beta * x
+        J = np.column_stack(
+            [(fun(x + dx[i] * np.eye(len(x))[i]) - r) / dx[i] for i in range(len(x))]
+        )
+        res_o, grad_o = res, grad
+        res, grad = np.linalg.norm(r) / math.sqrt(len(r)), np.linalg.norm(J.T @ r)
+        if res_o is None:
+            res_o, grad_o = res, grad
+        if arrived:
+            visited.append((x.copy(), mu))
+            arrived = False
+        A = J.T @ J
+        step = -np.linalg.solve(A + mu * np.diag(np.diag(A)), J.T @ r)
+        if np.any(x + step <= lower) or np.any(x + step >= upper):
+            mu *= 2.0
+            if mu > mu0 * 1e6:
+                break
+            continue
+        x, arrived = x + step, True
+        if res < res_o and grad < grad_o:
+            mu *= grad / grad_o
+        k += 1
+    return visited
+
+
+def test_paper_mode_keeps_the_doubled_mu_after_a_declined_step_as_queens():
+    # the second step from (-1.2, 1) leaves the box x1 < 1.15, and so do the steps after it:
+    # with mu kept doubled after each declined step the run creeps to the bound and ends at
+    # the damping limit, as QUEENS' does
+    lower, upper = np.array([-2.0, -1.0]), np.array([2.0, 1.15])
+    result = fbia.least_squares(
+        rosenbrock,
+        [-1.2, 1.0],
+        (lower, upper),
+        mode="paper",
+        alpha=1e-5,
+        beta=1e-3,
+        max_iter=30,
+        eps_grad=0,
+    )
+    expected = queens_reference(rosenbrock, [-1.2, 1.0], lower, upper, 1.0, 1e-5, 1e-3, 30)
+    reached = [h for h in result.history if h["accepted"]]
+    assert sum(not h["accepted"] for h in result.history) > 10  # declined steps
+    assert result.status == "damping_limit"
+    assert len(reached) == len(expected)
+    for h, (x, mu) in zip(reached, expected, strict=True):
+        np.testing.assert_allclose(list(h["x"].values()), x, rtol=1e-12)
+        assert h["mu"] == pytest.approx(mu, rel=1e-12)
+
+
 def test_paper_mode_perturbs_each_parameter_by_alpha_plus_beta_x_in_one_batch():
     ev = RecordingEvaluator()
     fbia.least_squares(
