@@ -15,8 +15,9 @@ Two modes share the finite-difference Jacobian (eq. 21-23) and the error measure
     eq. 27 holds (the new μ applies from the next step on, as in QUEENS, where the paper's
     algorithm was implemented); a step that leaves the bounds (eq. 28) is declined and μ
     doubled, and the iteration that follows a declined step keeps the doubled μ (QUEENS
-    evaluates the errors at the same point again, so eq. 27 does not hold there); the run ends without result when μ > μ0·1e6 or when a forward run fails, and
-    with the iterate of lowest err_res on eq. 29a-c.  One deliberate difference from QUEENS:
+    evaluates the errors at the same point again, so eq. 27 does not hold there); the run
+    ends without result when μ > μ0·1e6 or when a forward run fails, and with the iterate of
+    lowest err_res on eq. 29a-c.  One deliberate difference from QUEENS:
     after a declined step the new step is computed from the same J, where QUEENS re-ran the
     n_x + 1 runs at the unchanged point (same iterates, fewer runs).
 ``robust``
