@@ -209,3 +209,17 @@ def test_a_draws_result_loads_back_as_it_was(ran):
     got, want = loaded.quantities(), result.quantities()
     assert got.keys() == want.keys() and all(got[k] == want[k] for k in want)
     assert loaded.summary() == result.summary()
+
+
+@pytest.mark.parametrize(("n", "low", "high"), [(20, 0.85, 0.89), (100, 0.92, 0.945)])
+def test_the_range_of_n_draws_holds_a_further_draw_as_the_rule_states(n, low, high):
+    """DRAWS_RULE and the draws module state how often the 2.5-97.5 % range of N draws holds
+    a further draw (about 87 % at N = 20, 93 % at N = 100): the coverage of the percentiles,
+    which does not depend on the distribution (exact value by the order statistics of uniform
+    draws, (h_high - h_low) / (N + 1) for the interpolated positions h)."""
+    rng = np.random.default_rng(11)
+    u = rng.uniform(size=(20_000, n))  # F(X) of any continuous distribution
+    covered = np.percentile(u, 97.5, axis=1) - np.percentile(u, 2.5, axis=1)
+    assert low < covered.mean() < high
+    h = np.array([0.025, 0.975]) * (n - 1)  # 0-based interpolated positions
+    assert low < (h[1] - h[0]) / (n + 1) < high
