@@ -34,9 +34,9 @@ OUT = HERE / "output_layouts"
 
 #: name -> (points, placement, significant)
 LAYOUTS: dict[str, tuple[int, str, float]] = {
-    "even_12": (12, "even", 0.5),  # study.toml's
+    "even_12": (12, "even", 0.5),  # study.toml's until issue 26 moved it to moved_10
     "even_8": (8, "even", 0.5),
-    "moved_10": (10, "displacement", 0.5),  # where it moves most (Fig. 16)
+    "moved_10": (10, "displacement", 0.5),  # where it moves most (Fig. 16): study.toml's
     "moved_6": (6, "displacement", 0.5),
     "moved_10_wide": (10, "displacement", 0.25),  # reaching further down the flanks
     "moved_10_top": (10, "displacement", 0.75),  # only the most displaced part
