@@ -336,7 +336,7 @@ class GpSmcIterator(IteratorBase):
         restart instead of ``gp_restarts``."""
         opts = self.options
         restarts = opts.gp_restarts if start is None else min(1, opts.gp_restarts)
-        rng = np.random.default_rng(opts.seed)
+        rng = np.random.default_rng(opts.seed if opts.gp_seed is None else opts.gp_seed)
         link = None
         if opts.surrogate != "log_likelihood":
             link, residuals, why = residual_link(

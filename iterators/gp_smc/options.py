@@ -90,6 +90,11 @@ class GpSmcOptions(PluginOptions):
         "n_particles) [-]",
     )
     seed: int = Field(0, description="seed of the Sobol scrambling and of SMC [-]")
+    gp_seed: int | None = Field(
+        None,
+        description="seed of the GP's restart guesses (eq. 29), None: seed; another value "
+        "refits the surrogate on the same design (a new seed makes a new design) [-]",
+    )
     ard: bool = Field(
         False,
         description="one GP length scale per input (product of 1-D Matérn 3/2 kernels, "

@@ -425,3 +425,23 @@ def test_the_laplace_angle_is_measured_in_the_design_box_scale():
     each = np.degrees(np.arctan2(0.2 / 1.3, 100.0 / 700.0))
     assert principal_angle(band, across, box) == pytest.approx(min(2 * each, 180 - 2 * each))
     assert principal_angle(np.diag([1.0, 0.0]), np.diag([0.0, 1.0]), box) == pytest.approx(90.0)
+
+
+def test_gp_seed_refits_the_surrogate_on_the_same_design():
+    """gp_seed (default: seed) seeds only the GP's restart guesses: the same design and runs,
+    other restart guesses; gp_seed = seed is the default fit to the bit."""
+    problem = _problem()
+    opts = {**FAST, "n_train": 64, "n_test": 8, "n_check": 0, "gp_restarts": 3}
+    opts["surrogate"] = "log_likelihood"
+    base = fbia.iterator("gp_smc", **opts).run(problem)
+    same = fbia.iterator("gp_smc", gp_seed=FAST["seed"], **opts).run(problem)
+    other = fbia.iterator("gp_smc", gp_seed=7, **opts).run(problem)
+    np.testing.assert_array_equal(same.posterior.particles, base.posterior.particles)
+    np.testing.assert_array_equal(other.design.points, base.design.points)
+    assert other.nfev == base.nfev
+    guesses = [
+        [str(run["start"]) for run in res.surrogate.surrogate().info["runs"]]
+        for res in (base, other)
+    ]
+    assert guesses[0][0] == guesses[1][0]  # the data-based guess
+    assert guesses[0][1:] != guesses[1][1:]  # the seeded perturbations
