@@ -19,8 +19,8 @@ runs the study's iterator N times, each on its own synthetic data:
 
 How many draws: the central 95 % range estimated from N draws (percentiles interpolated
 between order statistics) holds a further draw with probability about 87 % at N = 20 and 93 %
-at N = 100 (simulated with normal draws; it does not depend on the distribution), so a range
-from 20 draws is a narrow one; Paper A's draws studies use 100.
+at N = 100 (the order statistics of N draws: it does not depend on the distribution), so a
+range from 20 draws is a narrow one; Paper A's draws studies use 100.
 
 The draws as a whole are ``completed`` when there are at least :data:`MIN_DRAWS` of them and
 at most :data:`MAX_LOST` of them gave no result that is a success and not flagged unreliable

@@ -162,13 +162,14 @@ def chain() -> None:
         "|---|---|---|---|---|",
     ]
     assert six.synthetic is not None
-    lost = 0
+    lost = chained = 0
     for k, folder in enumerate(sorted(step2_draws.iterdir())[: six.synthetic.draws]):
         own = json.loads((folder / "result.json").read_text(encoding="utf-8"))
         x = own["x"]
         if x is None:  # step 2 gave no result: nothing to chain from
             lines.append(f"| {k} | {own['status']} | - | - | - |")
             continue
+        chained += 1
         x0 = {}
         for i in (1, 2, 3):
             x0[f"E_{i}"], x0[f"nu_{i}"] = x[f"E_{i}"], 0.1
@@ -182,7 +183,6 @@ def chain() -> None:
         starts = " / ".join(f"{x[f'E_{i}']:.1f}" for i in (1, 2, 3))
         lines.append(f"| {k} | {own['status']} | {starts} | {result.status} | {nus} |")
         print(lines[-1], flush=True)
-    chained = sum(1 for line in lines[5:] if not line.endswith("| - | - | - |"))
     lines += ["", f"{lost} of {chained} draws give no result from their own step 2."]
     (OUT / "chain.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     print("\n".join(lines))
