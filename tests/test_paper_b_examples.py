@@ -48,11 +48,11 @@ def _distance(x: dict[str, float]) -> float:
     return float(np.hypot(*((x[k] - TRUTH[k]) / BOX[k] for k in TRUTH)))
 
 
+#: the SMC of the example files (Algorithm 1 as Paper B states it) at a quick size
+PAPER_SMC = "n_particles = 10000, n_rejuvenation = 30, zeta = 0.998"
 SMALL_SMC = {
     "n_train = 1000": "n_train = 96",
-    "n_particles = 5000, n_rejuvenation = 20, zeta = 0.995": (
-        "n_particles = 1000, n_rejuvenation = 5, zeta = 0.9"
-    ),
+    PAPER_SMC: "n_particles = 1000, n_rejuvenation = 5, zeta = 0.9",
     "n_check = 8": "n_check = 0, uncertainty_check = false",
 }
 
@@ -97,9 +97,7 @@ def test_informed_priors_pull_nu_to_their_mode_and_the_inflow_widens_e(tmp_path)
     edits = {
         **SMALL_SMC,
         "n_train = 1000": "n_train = 128",
-        "n_particles = 5000, n_rejuvenation = 20, zeta = 0.995": (
-            "n_particles = 4000, n_rejuvenation = 5, zeta = 0.9"
-        ),
+        PAPER_SMC: "n_particles = 4000, n_rejuvenation = 5, zeta = 0.9",
     }
     uniform = _run(_quick(tmp_path, "posterior", "study_uniform.toml", edits))
     informed = _run(_quick(tmp_path, "posterior", "study_informed.toml", edits))
@@ -111,7 +109,11 @@ def test_informed_priors_pull_nu_to_their_mode_and_the_inflow_widens_e(tmp_path)
     assert mean_i[1] < mean_u[1] and mean_i[0] < mean_u[0]
     # nu is the sloppy parameter: wider than E relative to the width of its bounds
     assert std_u[1] / BOX["nu"] > std_u[0] / BOX["E"]
-    inflow = _run(_quick(tmp_path, "posterior", "study_inflow.toml", edits))
+    # the inflow study: Paper B's Sobol start (here 128 runs), then one adaptive round
+    inflow_edits = {k: v for k, v in edits.items() if k != "n_train = 1000"}
+    inflow_edits["n_initial = 1000, n_train = 2000"] = "n_initial = 128, n_train = 160"
+    inflow_edits["smc_table = 151"] = "smc_table = 41"
+    inflow = _run(_quick(tmp_path, "posterior", "study_inflow.toml", inflow_edits))
     assert inflow.posterior is not None
     assert np.asarray(inflow.posterior.std)[0] > std_u[0]  # E is less certain
 
