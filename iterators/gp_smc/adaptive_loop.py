@@ -54,9 +54,11 @@ ROUND_REJUVENATION = 5
 #: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further)
 WIDE_TEMPERATURE = 0.25
 #: fits the surrogate to (x, y) and the runs' records (a residual emulator uses their
-#: residuals), warm-started from earlier hyperparameters when given
+#: residuals), warm-started from earlier hyperparameters when given, its kernel's axes along
+#: the principal axes of a covariance when given (GpSurrogate.fit's axes)
 FitGp = Callable[
-    [FloatArray, FloatArray, Mapping[str, Any] | None, Sequence[Evaluation]], Surrogate
+    [FloatArray, FloatArray, Mapping[str, Any] | None, Sequence[Evaluation], FloatArray | None],
+    Surrogate,
 ]
 #: SMC on a log-likelihood with a number of particles (the rounds' coarse settings)
 Sample = Callable[[Callable[[FloatArray], FloatArray], int], SmcResult]
@@ -121,6 +123,7 @@ def adaptive_design(
     converged = False
     gp: Surrogate | None = None
     floor = -math.inf
+    axes: FloatArray | None = None  # gp_axes = "posterior": the last round's covariance
     while True:
         t0 = time.perf_counter()
         use = train & np.isfinite(loglik)
@@ -133,7 +136,7 @@ def adaptive_design(
         # extreme parameters, and the criterion must not send batch after batch there
         y = soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
         records = [run.evaluations[i] for i in np.flatnonzero(train)]
-        gp = fit_gp(points[train], y[train], hyper, records)
+        gp = fit_gp(points[train], y[train], hyper, records, axes)
         if opts.failures == "classify":
             gp.feasibility = fit_feasibility(points[train], np.isfinite(loglik[train]))
         n_design = int(train.sum())
@@ -187,6 +190,8 @@ def adaptive_design(
         rounds.append(entry)
         hyper = gp.hyperparameters()
         previous = moments
+        if opts.gp_axes == "posterior":
+            axes = np.atleast_2d(post.cov)
         yield GpSmcState("round", entry.describe(), run.record("round", **entry.to_record()))
     summary = AdaptiveDesign(n_initial, rounds, reason, floor)
     return AdaptiveOutcome(_design(points, loglik, run, train), gp, summary)

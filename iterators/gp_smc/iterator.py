@@ -152,6 +152,12 @@ class GpSmcIterator(IteratorBase):
                 "needs mode = 'surrogate' and a known sigma_N (noise_std, not noise_prior)",
                 "surrogate_uncertainty",
             )
+        if opts.gp_axes != "inputs" and (opts.mode != "surrogate" or opts.design != "adaptive"):
+            raise ConfigError(
+                "follows the posterior of an adaptive design's rounds: needs mode = "
+                "'surrogate' and design = 'adaptive'",
+                "gp_axes",
+            )
         self._check_memory(run.n_x)
         adaptive: AdaptiveDesign | None = None
         if opts.mode == "surrogate":
@@ -176,7 +182,7 @@ class GpSmcIterator(IteratorBase):
                 outcome = yield from adaptive_design(
                     run,
                     opts,
-                    lambda x, y, s, recs: self._fit_gp(run, x, y, s, recs),
+                    lambda x, y, s, recs, axes: self._fit_gp(run, x, y, s, recs, axes),
                     lambda ll, n: self._round_smc(run, ll, n),
                 )
                 design, gp, adaptive = outcome.design, outcome.gp, outcome.summary
@@ -329,11 +335,13 @@ class GpSmcIterator(IteratorBase):
         y: FloatArray,
         start: Mapping[str, Any] | None,
         records: Sequence[Evaluation],
+        axes: FloatArray | None = None,
     ) -> Surrogate:
         """The surrogate on the runs ``records`` at ``x`` (``y``: what a GP of L is trained
         on): the residual emulator (option ``surrogate``) or the GP of eq. 26-29; ``start``:
         earlier hyperparameters (a round of the adaptive design), which then also take one
-        restart instead of ``gp_restarts``."""
+        restart instead of ``gp_restarts``; ``axes``: a covariance whose principal axes the
+        kernel follows (option ``gp_axes``)."""
         opts = self.options
         restarts = opts.gp_restarts if start is None else min(1, opts.gp_restarts)
         rng = np.random.default_rng(opts.seed if opts.gp_seed is None else opts.gp_seed)
@@ -358,6 +366,7 @@ class GpSmcIterator(IteratorBase):
                 residuals,
                 rng=rng,
                 start=start if start and "components" in start else None,
+                axes=axes,
             )
         return GpSurrogate(
             ard=opts.ard,
@@ -368,7 +377,7 @@ class GpSmcIterator(IteratorBase):
             subset=opts.gp_subset,
             polish_iters=opts.gp_polish_iters,
             trend=opts.gp_trend,
-        ).fit(x, y, rng=rng, start=None if start and "components" in start else start)
+        ).fit(x, y, rng=rng, start=None if start and "components" in start else start, axes=axes)
 
     def _round_smc(
         self, run: SmcRun, log_likelihood: Callable[[FloatArray], FloatArray], n_particles: int

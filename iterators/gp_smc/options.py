@@ -100,6 +100,14 @@ class GpSmcOptions(PluginOptions):
         description="one GP length scale per input (product of 1-D Matérn 3/2 kernels, "
         "Remark 9) instead of one for all standardised inputs [-]",
     )
+    gp_axes: Literal["inputs", "posterior"] = Field(
+        "inputs",
+        description="axes of the GP kernel's length scales: 'inputs' the standardised inputs "
+        "(Paper B); 'posterior' (design = 'adaptive') from the second round on the principal "
+        "axes of the last round's posterior covariance, so that a posterior that is a narrow "
+        "ridge across the inputs gets one short length scale across it (rotated inputs in "
+        "fbia.iterators.surrogates.gp) [-]",
+    )
     gp_optimizer: Literal["lbfgsb", "scg"] = Field(
         "lbfgsb", description=f"evidence maximiser (eq. 29): one of {OPTIMIZERS} [-]"
     )

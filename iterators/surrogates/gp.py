@@ -13,8 +13,9 @@ The surrogate is a GP with constant prior mean m = min(L) - 1.0 (max(L) - min(L)
 (Remark 10, so that the surrogate falls off far from the data), a Matérn 3/2 kernel (eq. 27)
 with one length scale, or a product of 1-D Matérn 3/2 kernels with one length scale per input
 (Remark 9, "ARD"), inputs standardised with the mean and standard deviation of the training
-inputs, and a fixed nugget variance sigma_n^2 = 1e-5 (max(L) - min(L)) (Paper B, §"Convergence
-over number of training points"). Signal variance and length scales maximise the evidence
+inputs (and, given ``axes``, rotated to the principal axes of a covariance, below), and a
+fixed nugget variance sigma_n^2 = 1e-5 (max(L) - min(L)) (Paper B, §"Convergence over number
+of training points"). Signal variance and length scales maximise the evidence
 (eq. 29) with GPy's L-BFGS-B (default, with restarts from seeded initial guesses) or scaled
 conjugate gradients.
 
@@ -26,6 +27,17 @@ margin (:func:`~fbia.iterators.smc.diagnostics.extrapolation_margin`, chi2_d(0.9
 of L), counts the capped points in ``guard``, and :meth:`GpSurrogate.extrapolated_mass` gives
 the posterior mass an SMC result puts where the cap bites: a sampler cannot be pulled into a
 region where the surrogate invents evidence without it showing.
+
+**Rotated inputs** (``fit(..., axes=cov)``): a product kernel has its length scales along the
+input axes, so a posterior that is a narrow ridge across them (in Paper B's example 8 the
+inflow against E_2: its principal standard deviations span 0.005 to 0.26 of the box) needs
+short length scales in every input the ridge crosses, everywhere. Given a covariance of the
+inputs (an adaptive design's current posterior), the standardised inputs u are rotated to its
+principal axes, z = u V with C_u = V diag(lambda) V^T the covariance in units of u, so that
+one length scale runs across the ridge and the others along it (the rotation of "active
+subspace" and whitened-input GPs; Constantine 2015, ch. 4; Garnett, Osborne, Hennig 2014).
+Measured on example 8's first 3396 adaptive runs (GP of D, ARD, held-out at the next 302
+posterior draws): RMSE in L 6.8 on the input axes, 2.3 rotated (median |error| 0.89, 0.20).
 """
 
 from __future__ import annotations
@@ -123,6 +135,20 @@ def matern32_cross(
     return prod
 
 
+def principal_axes(cov: ArrayLike, x_std: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The eigenvectors (columns, orthonormal) of the covariance ``cov`` of the inputs in units
+    of their standard deviations ``x_std``: the axes of :meth:`GpSurrogate.fit`'s ``axes``."""
+    c = np.atleast_2d(np.asarray(cov, dtype=float))
+    if c.shape != (len(x_std), len(x_std)) or not np.all(np.isfinite(c)):
+        raise ConfigError(
+            f"GP axes: a finite {len(x_std)} x {len(x_std)} covariance is needed, got {c.shape}",
+            "gp",
+        )
+    c_u = c / np.outer(x_std, x_std)
+    _, vectors = np.linalg.eigh(0.5 * (c_u + c_u.T))
+    return np.asarray(vectors, dtype=np.float64)
+
+
 def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     from scipy.linalg import cho_solve
 
@@ -199,6 +225,8 @@ class GpSurrogate(ExtrapolationGuard):
         self.model: Any = None
         self.info: dict[str, Any] = {}
         self._chol: NDArray[np.float64] | None = None  # set when restored (from_state)
+        #: orthogonal (d, d): standardised inputs u enter the kernel as u @ rotation (fit's axes)
+        self.rotation: NDArray[np.float64] | None = None
         if guard_margin is not None and not guard_margin >= 0:
             raise ConfigError(f"guard_margin must be >= 0, got {guard_margin}", "gp")
         self.guard_margin = guard_margin
@@ -215,15 +243,18 @@ class GpSurrogate(ExtrapolationGuard):
         y: ArrayLike,
         rng: np.random.Generator | int | None = None,
         start: Mapping[str, Any] | None = None,
+        axes: ArrayLike | None = None,
     ) -> GpSurrogate:
         """Train on inputs ``x`` (n, d) and log-likelihood values ``y`` (n,); returns self.
 
         ``start``: the :meth:`hyperparameters` of an earlier fit on part of these data (an
         adaptive design's previous round) as the first initial guess, instead of the data-based
-        one and the search on a subset; ``restarts`` perturb it.
+        one and the search on a subset; ``restarts`` perturb it. ``axes``: a (d, d) covariance
+        of the inputs (in their units) whose principal axes the kernel's axes follow (module
+        docstring); None: the input axes.
         """
         with blas_single_thread():
-            return self._fit(x, y, rng, start)
+            return self._fit(x, y, rng, start, axes)
 
     def _fit(
         self,
@@ -231,6 +262,7 @@ class GpSurrogate(ExtrapolationGuard):
         y: ArrayLike,
         rng: np.random.Generator | int | None,
         start: Mapping[str, Any] | None = None,
+        axes: ArrayLike | None = None,
     ) -> GpSurrogate:
         x = np.atleast_2d(np.asarray(x, dtype=float))
         y = np.asarray(y, dtype=float).ravel()
@@ -247,6 +279,7 @@ class GpSurrogate(ExtrapolationGuard):
         self.x_mean = x.mean(axis=0)
         self.x_std = x.std(axis=0)
         self.x_std[self.x_std == 0] = 1.0
+        self.rotation = None if axes is None else principal_axes(axes, self.x_std)
         # the prior mean: Remark 10's constant, or a concave quadratic (gp_trend) plus 0
         self.trend = QuadraticTrend.fit(x, y) if self.trend_kind == "quadratic" else None
         y_fit = y if self.trend is None else y - self.trend(x)
@@ -295,7 +328,7 @@ class GpSurrogate(ExtrapolationGuard):
                 mean_offset=self.mean_offset,
                 subset=self.subset,
                 trend=self.trend_kind,
-            ).fit(x[: self.subset], y[: self.subset], rng)
+            ).fit(x[: self.subset], y[: self.subset], rng, axes=axes)
             hp = pre.hyperparameters()
             ratio = np.asarray(hp["x_std"]) / self.x_std
             ells = np.asarray(hp["lengthscales"]) * (ratio if self.ard else ratio.mean())
@@ -337,7 +370,8 @@ class GpSurrogate(ExtrapolationGuard):
         return self
 
     def _standardise(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        return (np.asarray(x, dtype=float) - self.x_mean) / self.x_std
+        u = (np.asarray(x, dtype=float) - self.x_mean) / self.x_std
+        return u if self.rotation is None else u @ self.rotation
 
     def _initial_guesses(self, xs, ys, rng) -> list[tuple[float, NDArray[np.float64]]]:
         """A data-based guess (signal variance = mean square of y - m, length scale = median
@@ -528,6 +562,7 @@ class GpSurrogate(ExtrapolationGuard):
             "prior_mean": self.mean_value,
             "scale": self.scale,
             "trend": None if self.trend is None else self.trend.state(),
+            **({} if self.rotation is None else {"rotation": self.rotation}),
         }
 
     @classmethod
@@ -538,6 +573,8 @@ class GpSurrogate(ExtrapolationGuard):
         gp.y_train = np.asarray(state["y_train"], dtype=float)
         gp.x_mean = np.asarray(state["x_mean"], dtype=float)
         gp.x_std = np.asarray(state["x_std"], dtype=float)
+        if state.get("rotation") is not None:
+            gp.rotation = np.asarray(state["rotation"], dtype=float)
         gp.scale = float(state["scale"])
         gp.mean_value = float(state["prior_mean"])
         if state.get("trend") is not None:

@@ -197,9 +197,12 @@ class ResidualSurrogate(ExtrapolationGuard):
         r: ArrayLike,
         rng: np.random.Generator | int | None = None,
         start: Mapping[str, Any] | None = None,
+        axes: ArrayLike | None = None,
     ) -> ResidualSurrogate:
         """Train on inputs ``x`` (n, d) and residual vectors ``r`` (n, m) (rows with NaN:
-        failed runs, left out); ``start``: an earlier fit's :meth:`hyperparameters`."""
+        failed runs, left out); ``start``: an earlier fit's :meth:`hyperparameters`; ``axes``:
+        a covariance of the inputs whose principal axes every component's kernel follows
+        (:meth:`GpSurrogate.fit`)."""
         x = np.atleast_2d(np.asarray(x, dtype=float))
         u = np.atleast_2d(np.asarray(r, dtype=float)) / self.link.sigma
         ok = np.all(np.isfinite(u), axis=1) if u.size else np.zeros(len(x), dtype=bool)
@@ -226,7 +229,7 @@ class ResidualSurrogate(ExtrapolationGuard):
         for j in range(k):
             warm = starts[j] if j < len(starts) else None
             gp = self._component()
-            self.components.append(gp.fit(x, scores[:, j], rng=rng, start=warm))
+            self.components.append(gp.fit(x, scores[:, j], rng=rng, start=warm, axes=axes))
         self.y_train = self.log_likelihood(0.5 * np.sum(u * u, axis=1))
         self.truncation = float(tail[k])
         self.info = {

@@ -118,3 +118,19 @@ def test_a_budget_too_small_to_converge_is_said(exact_2d):
     ).run(problem)
     assert result.adaptive.stop_reason == "budget"
     assert "did not converge within n_train runs" in result.message
+
+
+def test_posterior_axes_meet_the_2d_target_and_need_an_adaptive_design(exact_2d):
+    """gp_axes = "posterior": from the second round the kernel's axes follow the last round's
+    posterior covariance (GpSurrogate.fit's axes); the same target as the input axes."""
+    problem, mean, std = exact_2d
+    opts = {"n_train": 92, "n_particles": 3000, "n_rejuvenation": 8, "zeta": 0.95, "ard": True}
+    result = fbia.iterator("gp_smc", gp_axes="posterior", **opts).run(problem)
+    assert result.status == "completed" and result.adaptive.converged
+    state = result.surrogate.state  # a GP of L, or a residual emulator's component GPs
+    assert all("rotation" in gp for gp in state.get("components", [state]))
+    got_std = np.sqrt(np.diag(result.posterior.cov))
+    assert np.all(np.abs(result.posterior.mean - mean) < 0.3 * std)
+    assert np.all((got_std < 1.5 * std) & (got_std > std / 1.5))
+    with pytest.raises(fbia.ConfigError, match="design = 'adaptive'"):
+        fbia.iterator("gp_smc", gp_axes="posterior", design="sobol", n_train=8).run(problem)

@@ -203,3 +203,41 @@ def test_guard_caps_a_mean_that_overshoots_outside_the_data_and_counts_it():
     with pytest.raises(fbia.ConfigError, match="guard_margin must be >= 0"):
         GpSurrogate(guard_margin=-1.0)
     assert GpSurrogate(guard_margin=0.0).fit(x, y, rng=0).extrapolation_cap == y.max()
+
+
+def test_rotated_axes_follow_a_narrow_ridge_across_the_inputs():
+    """fit(..., axes=cov): the product kernel's length scales along the principal axes of a
+    covariance (the adaptive design's posterior) instead of the inputs. L is a Gaussian ridge
+    along the diagonal, 13 times narrower across it than along it; with 128 Sobol runs the
+    rotated GP is more than 4 times closer to L where the posterior is (measured 0.0056 against
+    0.054 RMSE); an isotropic kernel is unchanged by a rotation; the state keeps the axes."""
+
+    def ridge(x):
+        return -0.5 * (((x[:, 0] - x[:, 1]) / 0.03) ** 2 + ((x[:, 0] + x[:, 1] - 1) / 0.4) ** 2)
+
+    x = qmc.Sobol(2, scramble=True, seed=4).random(128)
+    rng = np.random.default_rng(1)
+    d, s = rng.normal(0, 0.03, 2000), rng.normal(0, 0.4, 2000)  # draws from exp(L)
+    post = np.column_stack([0.5 + (s + d) / 2, 0.5 + (s - d) / 2])
+    post = post[np.all((post > 0) & (post < 1), axis=1)]
+    cov = np.cov(post.T)
+
+    def rmse(gp):
+        return float(np.sqrt(np.mean((gp.predict_mean(post) - ridge(post)) ** 2)))
+
+    axis = GpSurrogate(ard=True).fit(x, ridge(x), rng=0)
+    rotated = GpSurrogate(ard=True).fit(x, ridge(x), rng=0, axes=cov)
+    assert rotated.rotation is not None and axis.rotation is None
+    np.testing.assert_allclose(rotated.rotation.T @ rotated.rotation, np.eye(2), atol=1e-12)
+    # the first axis (smallest variance) is across the ridge: along (1, -1) / sqrt(2)
+    assert abs(abs(rotated.rotation[0, 0] - rotated.rotation[1, 0]) - np.sqrt(2)) < 0.05
+    assert rmse(rotated) < 0.25 * rmse(axis)
+    iso = GpSurrogate(ard=False).fit(x, ridge(x), rng=0)
+    iso_rot = GpSurrogate(ard=False).fit(x, ridge(x), rng=0, axes=cov)
+    assert rmse(iso_rot) == pytest.approx(rmse(iso), rel=1e-3)
+    again = GpSurrogate.from_state(rotated.state())
+    np.testing.assert_allclose(again.rotation, rotated.rotation)
+    tol = 1e-3 * np.ptp(rotated.y_train)
+    np.testing.assert_allclose(again.predict_mean(post), rotated.predict_mean(post), atol=tol)
+    with pytest.raises(fbia.ConfigError, match="axes"):
+        GpSurrogate(ard=True).fit(x, ridge(x), rng=0, axes=np.eye(3))
