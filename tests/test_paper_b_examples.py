@@ -5,7 +5,9 @@ its digits: the best run under each of the three measures lies near the ground t
 failed runs are the soft ones; the second and third measure run no forward run; the ML point
 of the GP approaches the truth as n_train grows; the informed priors pull the posterior mean
 towards their modes; nu is the sloppy parameter; the uncertain inflow widens the posterior in
-E.  ``make test-slow``; 35-65 s each on two cores (measured: 145 s for the three)."""
+E (the inflow study: Paper B's Sobol start, then one adaptive round).  ``make test-slow``;
+35-65 s each on two cores (measured: 145 s for the three; 55 s for the posterior test at
+stop 38)."""
 
 from __future__ import annotations
 
