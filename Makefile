@@ -44,8 +44,11 @@ typecheck: $(STAMP) package-tree
 docs: $(STAMP) package-tree
 	$(BIN)/mkdocs build --strict --quiet
 
+# The suite in TEST_WORKERS processes (pytest-xdist): 2 for the 2-core machine of the goal
+# (measured at stop 38: 386 s against 575 s in one process, all 1354 tests passing).
+TEST_WORKERS ?= 2
 pytest: $(STAMP)
-	$(BIN)/pytest
+	$(BIN)/pytest -n $(TEST_WORKERS)
 
 # Long verification runs (finer meshes, full studies): not part of `make test`.
 test-slow: $(STAMP)
