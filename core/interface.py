@@ -45,9 +45,12 @@ class Interface:
     cells
         Element connectivity, shape (m, 2) for segments or (m, 3) for triangles; the column
         count must equal the spatial dimension.
+
+    A forward model asked for tangents (``solve(..., tangents=names)``) sets
+    :attr:`tangents`: per input name, d vertices / d input (the shape of ``vertices``).
     """
 
-    __slots__ = ("_vertices", "_cells", "_cache")
+    __slots__ = ("_vertices", "_cells", "_cache", "tangents")
 
     def __init__(self, vertices: ArrayLike, cells: ArrayLike) -> None:
         v = np.array(vertices, dtype=float)
@@ -69,6 +72,7 @@ class Interface:
         self._vertices: FloatArray = v
         self._cells: IntArray = c
         self._cache: dict[str, FloatArray] = {}
+        self.tangents: dict[str, FloatArray] = {}
         if np.any(self.sizes <= 0.0):
             n = int(np.count_nonzero(self.sizes <= 0.0))
             kind = "length" if self.dim == 2 else "area"

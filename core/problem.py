@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import ConfigError, ForwardModelError, MeasureError
 from .interface import NonFiniteInterfaceError
-from .observation import Observation, Solution, coordinate_key
+from .observation import Coordinate, Observation, Solution, coordinate_key
 from .options import plugin_options
 from .parameters import Parameter, Prior
 from .protocols import Discrepancy, ForwardModel
@@ -59,6 +59,10 @@ class Evaluation:
     workdir: str | None = None
     diagnostics: dict[str, Any] = field(default_factory=dict)
     solution: Solution | None = field(default=None, repr=False)
+    #: dr/dx (n_r, n): columns in the order of :attr:`jacobian_names`, from the model's
+    #: tangents (``fbia.iterators.lm.tangents``); None when the run gave none
+    jacobian: NDArray[np.float64] | None = field(default=None, repr=False)
+    jacobian_names: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -328,7 +332,7 @@ class InverseProblem:
         t0 = time.perf_counter()
         try:
             coords = self.coordinates()
-            solution = self.model.solve(full, coords, wd)
+            solution = self.solve(full, coords, wd)
             missing = [c for c in coords if coordinate_key(c) not in solution.interfaces]
             if missing:
                 raise _PluginBug(f"forward model returned no interface for coordinate(s) {missing}")
@@ -355,6 +359,10 @@ class InverseProblem:
             if tmp is not None:
                 shutil.rmtree(tmp, ignore_errors=True)
         return ev
+
+    def solve(self, full: dict[str, float], coords: Sequence[Coordinate], wd: Path) -> Solution:
+        """The forward run of :meth:`evaluate` (``fbia.iterators.lm.tangents`` adds tangents)."""
+        return self.model.solve(full, coords, wd)
 
     def describe(self) -> dict[str, Any]:
         """A JSON-ready description of the problem (for results and provenance)."""
@@ -444,19 +452,10 @@ class Result:
     provenance: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "status": self.status,
-            "success": self.success,
-            "message": self.message,
-            "x": self.x,
-            "nfev": self.nfev,
-            "n_failed": self.n_failed,
-            "iterator": self.iterator,
-            "history": jsonable(self.history),
-            "info": jsonable(self.info),
-            "provenance": jsonable(self.provenance),
-            "evaluations": [e.to_dict() for e in self.evaluations],
-        }
+        plain = ("status", "success", "message", "x", "nfev", "n_failed", "iterator")
+        out = {k: getattr(self, k) for k in plain}
+        out.update({k: jsonable(getattr(self, k)) for k in ("history", "info", "provenance")})
+        return {**out, "evaluations": [e.to_dict() for e in self.evaluations]}
 
     def save(self, path: str | Path) -> Path:
         """Write the result as JSON."""

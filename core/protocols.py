@@ -99,6 +99,8 @@ class ForwardModel(Protocol):
     * ``solve(parameters, coordinates, workdir)`` (required): an :class:`fbia.Solution`
       with one interface per coordinate; raises :class:`fbia.ForwardModelError` (and nothing
       else) when the run fails; inputs it is not given keep their option values.
+    * ``tangent_inputs()`` (optional, default ``()``): the inputs whose tangents ``solve(...,
+      tangents=names)`` gives, each interface's ``tangents[name]`` = d vertices / d name.
     * ``example_parameters()`` (optional): where the conformance kit runs it.
     * ``example_options()`` (optional, default ``{}``): the kit's options.
     """
@@ -123,6 +125,8 @@ class Discrepancy(Protocol):
     * ``numerics_version`` (optional, default None): the store keys comparisons by it.
     * ``residuals(simulated, observation)`` (required): a finite vector whose squared norm is
       D²; raises :class:`fbia.MeasureError` for interfaces it cannot compare.
+    * ``residuals_jvp(simulated, observation, dvertices)`` (optional, default a difference):
+      d residuals for a vertex motion (default: a central difference of ``residuals``).
     * ``distance(simulated, observation)`` (required): D, the norm of the residuals.
     * ``measurements_per_observation`` (optional, default ``len(residuals)``): n of eq. 5.
     * ``example_options()`` (optional, default ``{}``): the kit's options.

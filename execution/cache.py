@@ -14,12 +14,28 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.errors import MeasureError
+from ..core.observation import Solution
 from ..core.problem import Evaluation, InverseProblem
 from ..storage.store import StudyStore
 from .isolation import RunOutcome
 
-__all__ = ["Plan", "RunCache"]
+__all__ = ["AsksTangents", "Plan", "RunCache"]
+
+
+@runtime_checkable
+class AsksTangents(Protocol):
+    """A problem whose records carry J from the model's tangents
+    (:class:`fbia.iterators.lm.tangents.TangentProblem`)."""
+
+    tangent_names: tuple[str, ...]
+
+    def jacobian_from(self, solution: Solution) -> NDArray[np.float64] | None: ...
 
 
 @dataclass
@@ -58,6 +74,8 @@ class RunCache:
             )
             if run is not None and not retry:
                 plan.reused[i] = dataclasses.replace(run.record, index=i, x=x)
+                if isinstance(problem, AsksTangents) and run.record.ok:
+                    self._tangent_jacobian(problem, plan.reused[i], key)
             elif key in first:
                 plan.copies.append((i, first[key]))
             else:
@@ -67,6 +85,17 @@ class RunCache:
                 self._keys[i] = key
                 plan.to_run.append((i, x))
         return plan
+
+    def _tangent_jacobian(self, problem: AsksTangents, record: Evaluation, key: str) -> None:
+        """J of a stored run from its stored tangents (a run stored without them has none:
+        the iterator then differentiates by forward runs)."""
+        solution = self.store.solution(key)
+        try:
+            jacobian = None if solution is None else problem.jacobian_from(solution)
+        except MeasureError:
+            jacobian = None
+        if jacobian is not None:
+            record.jacobian, record.jacobian_names = jacobian, problem.tangent_names
 
     def record(self, outcome: RunOutcome) -> None:
         """Store a run that has just finished (with its interfaces, for later comparisons)."""

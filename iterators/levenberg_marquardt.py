@@ -66,12 +66,13 @@ from numpy.typing import NDArray
 from ..core.errors import ConfigError
 from ..core.iteration import Evaluator, IteratorBase
 from ..core.options import settings_from
-from ..core.problem import Evaluation, ProblemLike
+from ..core.problem import Evaluation, InverseProblem, ProblemLike
 from .lm.chains import LMChain, LMSettings, Outcome, PaperChain, err_res_of
 from .lm.handoff import POSTERIOR_LABELS, posterior_starts
 from .lm.options import LMOptions
 from .lm.result import FitStatistics, LMResult, LMState, compare_starts
 from .lm.robust import RobustChain
+from .lm.tangents import TangentProblem, tangent_inputs
 
 FloatArray = NDArray[np.float64]
 
@@ -112,7 +113,10 @@ class LevenbergMarquardtIterator(IteratorBase):
         upper = np.asarray(problem.upper, dtype=float)
         extra = self._uncertain_inputs(problem)
         starts = self._starts(problem, names, lower, upper)
-        settings = self._settings(names)
+        jacobian = self._jacobian_kind(problem, names)
+        if jacobian == "tangent":
+            problem = TangentProblem.of(problem, names)  # type: ignore[arg-type]
+        settings = self._settings(names, jacobian)
         kind = PaperChain if settings.mode == "paper" else RobustChain
         chains: list[LMChain] = [
             kind(i, x, lower, upper, settings, names) for i, x in enumerate(starts)
@@ -148,7 +152,7 @@ class LevenbergMarquardtIterator(IteratorBase):
                             )
                 pos = 0
                 for idx, batch in order:
-                    outs = [_outcome(e) for e in records[pos : pos + len(batch)]]
+                    outs = [_outcome(e, names) for e in records[pos : pos + len(batch)]]
                     pos += len(batch)
                     try:
                         pending[idx] = gens[idx].send(outs)
@@ -271,7 +275,25 @@ class LevenbergMarquardtIterator(IteratorBase):
             out.append(x)
         return out
 
-    def _settings(self, names: list[str]) -> LMSettings:
+    def _jacobian_kind(self, problem: Any, names: list[str]) -> str:
+        """How J is computed (option ``jacobian``): ``"auto"`` is ``"tangent"`` in robust mode
+        when the problem's model gives tangents for every parameter, else ``"forward"``."""
+        o = self.options
+        if o.mode == "paper":
+            return "forward"
+        if o.jacobian != "auto":
+            if o.jacobian == "tangent" and not isinstance(problem, InverseProblem):
+                raise ConfigError(
+                    "jacobian = 'tangent' needs an InverseProblem whose forward model gives "
+                    "tangents",
+                    "levenberg_marquardt: jacobian",
+                )
+            return o.jacobian
+        model = getattr(problem, "model", None)
+        has = isinstance(problem, InverseProblem) and set(names) <= set(tangent_inputs(model))
+        return "tangent" if has else "forward"
+
+    def _settings(self, names: list[str], jacobian: str = "forward") -> LMSettings:
         o = self.options
         if isinstance(o.alpha, dict):
             unknown = [k for k in o.alpha if k not in names]
@@ -286,7 +308,7 @@ class LevenbergMarquardtIterator(IteratorBase):
         else:
             alpha = np.full(len(names), float(o.alpha))
         mu0 = o.mu0 if o.mu0 is not None else (1.0 if o.mode == "paper" else 1e-2)
-        return settings_from(o, LMSettings, alpha=alpha, mu0=mu0)
+        return settings_from(o, LMSettings, alpha=alpha, mu0=mu0, jacobian=jacobian)
 
     # -- reporting --------------------------------------------------------------------------------
     @staticmethod
@@ -358,7 +380,11 @@ class LevenbergMarquardtIterator(IteratorBase):
             "names": names,
             "starts": rows,
             "warnings": warnings,
-            "info": {"mode": settings.mode, "options": self.options.model_dump()},
+            "info": {
+                "mode": settings.mode,
+                "jacobian": settings.jacobian,
+                "options": self.options.model_dump(),
+            },
         }
         labels = self.options.x0_labels or (
             list(POSTERIOR_LABELS) if self.options.x0_from is not None else None
@@ -432,9 +458,10 @@ class LevenbergMarquardtIterator(IteratorBase):
         )
 
 
-def _outcome(e: Evaluation) -> Outcome:
+def _outcome(e: Evaluation, names: list[str]) -> Outcome:
     if e.ok and e.residuals is not None:
-        return Outcome(np.asarray(e.residuals, dtype=float))
+        tangent = e.jacobian if e.jacobian_names == tuple(names) else None
+        return Outcome(np.asarray(e.residuals, dtype=float), jacobian=tangent)
     return Outcome(None, f"{e.status}: {e.message}")
 
 

@@ -107,6 +107,24 @@ class CppMeasure(Configurable):
             return np.zeros(0)
         return closest_points(geometry_of(gamma, self._observed), vertices).signed_distance
 
+    def residuals_jvp(
+        self, simulated: Interface, observation: Observation, dvertices: np.ndarray
+    ) -> np.ndarray:
+        """d residuals for a motion ``dvertices`` (n, dim) of the simulated vertices, exactly:
+        the distance's gradient in a vertex is the unit vector from its closest point, signed
+        as the residual (the envelope theorem: the closest point's own motion drops out); a
+        vertex on the observed interface moves with minus its (pseudo-)normal."""
+        self.residuals(simulated, observation)  # the checks, and the search data cached
+        assert observation.interface is not None
+        inside = self._inside(simulated.vertices)
+        q = simulated.vertices[inside]
+        cp = closest_points(geometry_of(observation.interface, self._observed), q)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = (q - cp.point) / cp.distance[:, None]
+        sign = np.sign(cp.signed_distance)[:, None]
+        grad = np.where(cp.distance[:, None] > 0.0, sign * unit, -cp.normal)
+        return np.einsum("ij,ij->i", grad, np.asarray(dvertices, dtype=float)[inside])
+
     def distance(self, simulated: Interface, observation: Observation) -> float:
         """``D_cpp``: the 2-norm of the residuals [mm] (eq. 7)."""
         return float(np.linalg.norm(self.residuals(simulated, observation)))

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
-import io
 import json
 import os
 import socket
@@ -58,7 +57,7 @@ import numpy as np
 
 from ..core.errors import ConfigError, MeasureError, StoreError
 from ..core.interface import Interface
-from ..core.observation import CoordinateKey, Solution, coordinate_key
+from ..core.observation import CoordinateKey, Solution
 from ..core.problem import Evaluation, InverseProblem
 from .db import connect
 from .fingerprints import (
@@ -73,6 +72,7 @@ from .fingerprints import (
     run_key,
     without_defaults,
 )
+from .interface_blob import pack_interfaces, unpack_interfaces
 from .migration import code_change, comparison_rekey, migrate, model_change, rekey
 from .output_folder import LockHeld, is_fbia_store, lock_file, this_process
 
@@ -134,32 +134,6 @@ def _now() -> str:
 
 def _floats(array: np.ndarray | None) -> bytes | None:
     return None if array is None else np.ascontiguousarray(array, dtype="<f8").tobytes()
-
-
-# -- interfaces as bytes ---------------------------------------------------------------------------
-def pack_interfaces(interfaces: Mapping[CoordinateKey, Interface]) -> bytes:
-    """The interfaces of a run as an ``.npz`` (no pickles): coordinate, vertices, cells."""
-    arrays: dict[str, np.ndarray] = {}
-    keys = []
-    for k, (coordinate, gamma) in enumerate(sorted(interfaces.items())):
-        keys.append([[name, value] for name, value in coordinate])
-        arrays[f"vertices_{k}"] = np.asarray(gamma.vertices, dtype="<f8")
-        arrays[f"cells_{k}"] = np.asarray(gamma.cells, dtype="<i8")
-    arrays["coordinates"] = np.array(json.dumps(keys))
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)  # type: ignore[arg-type]
-    return buffer.getvalue()
-
-
-def unpack_interfaces(blob: bytes) -> Solution:
-    """The :class:`Solution` (interfaces only) of :func:`pack_interfaces`."""
-    with np.load(io.BytesIO(blob), allow_pickle=False) as data:
-        keys = json.loads(str(data["coordinates"]))
-        interfaces = {
-            coordinate_key(dict(pairs)): Interface(data[f"vertices_{k}"], data[f"cells_{k}"])
-            for k, pairs in enumerate(keys)
-        }
-    return Solution(interfaces)
 
 
 # -- the store ---------------------------------------------------------------------------------
@@ -477,6 +451,11 @@ class StudyStore:
                 out[run.key] = run
         return out
 
+    def solution(self, key: str) -> Solution | None:
+        """The stored interfaces (and tangents) of run ``key``; None without them."""
+        row = self._db.execute("SELECT interfaces FROM runs WHERE key = ?", (key,)).fetchone()
+        return None if row is None or row[0] is None else unpack_interfaces(row[0])
+
     def runs(self) -> list[StoredRun]:
         """Every stored run with its comparison under the bound problem (unbound: the problem
         bound last), in the order first written."""
@@ -507,8 +486,8 @@ class StudyStore:
 
     def _compare_stored(self, row: Sequence[Any]) -> StoredRun | None:
         """Compare a stored solved run with the bound problem's observations and keep it."""
-        blob = self._db.execute("SELECT interfaces FROM runs WHERE key = ?", (row[0],)).fetchone()
-        solution = unpack_interfaces(blob[0])
+        solution = self.solution(str(row[0]))
+        assert solution is not None
         record = Evaluation(
             index=int(row[1]), x={k: float(v) for k, v in json.loads(row[4]).items()}
         )

@@ -49,6 +49,8 @@ class Outcome:
 
     residuals: FloatArray | None
     message: str = ""
+    #: dr/dx at the point from the model's tangents (``jacobian = "tangent"``), if it gave them
+    jacobian: FloatArray | None = None
 
     @property
     def ok(self) -> bool:
@@ -73,6 +75,7 @@ class LMSettings:
     scaling: str = "adaptive"
     speculative: bool = False
     final_jacobian: str = "central"
+    jacobian: str = "forward"  # "tangent" | "forward" | "central" (robust mode)
 
     @classmethod
     def for_mode(cls, mode: str, n: int, **kw: Any) -> LMSettings:

@@ -123,6 +123,15 @@ class LMOptions(PluginOptions):
         "the result is as accurate as the residuals allow, not only as the forward-"
         "difference J does; 'forward': stop at the first convergence",
     )
+    jacobian: Literal["auto", "tangent", "forward", "central"] = Field(
+        "auto",
+        description="robust mode: how J is computed. 'tangent': from the forward model's "
+        "tangents (one run per iteration, no finite differences; the model must give them: "
+        "ale_fsi in quasi-static mode); 'forward': forward differences (n_x + 1 runs per "
+        "iteration, then final_jacobian); 'central': central differences throughout (2 n_x "
+        "+ 1 runs); 'auto' (default): 'tangent' where the model gives tangents for every "
+        "parameter, else 'forward'.  Paper mode always uses forward differences (eq. 21-23)",
+    )
     max_nfev: int | None = Field(
         None,
         ge=1,
@@ -169,6 +178,11 @@ class LMOptions(PluginOptions):
             raise ValueError(
                 "option mu_limit applies to mode='paper' only; the robust mode ends when "
                 "the steps fall below xtol"
+            )
+        if self.mode == "paper" and self.jacobian not in ("auto", "forward"):
+            raise ValueError(
+                f"jacobian = {self.jacobian!r} applies to mode='robust' only; Paper A's "
+                "algorithm differentiates by forward differences (eq. 21-23)"
             )
         alphas = self.alpha if isinstance(self.alpha, dict) else {"alpha": self.alpha}
         bad = {k: v for k, v in alphas.items() if not v >= 0}

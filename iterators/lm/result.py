@@ -88,6 +88,14 @@ class LMState:
         return f"round {self.round}, {self.nfev} runs ({self.n_failed} failed): " + "; ".join(parts)
 
 
+#: How each ``jacobian`` option computes J, for the summary.
+_JACOBIAN_SOURCE = {
+    "tangent": "the model's tangents",
+    "forward": "forward differences",
+    "central": "central differences",
+}
+
+
 @dataclass
 class LMResult(Result):
     """:class:`~fbia.core.problem.Result` of the Levenberg–Marquardt iterator.
@@ -249,7 +257,8 @@ class LMResult(Result):
         if self.err_res is not None:
             lines.append(
                 f"  err_res = {self.err_res:.4e}, err_grad = {self.err_grad:.3e}, "
-                f"{self.iterations} iterations"
+                f"{self.iterations} iterations, J from "
+                + _JACOBIAN_SOURCE.get(self.info.get("jacobian", "forward"), "differences")
             )
         if self.stderr:
             lines.append(

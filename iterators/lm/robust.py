@@ -87,6 +87,28 @@ class RobustChain(LMChain):
                 bad.append(i)
         return J, bad
 
+    def _jacobian_at(
+        self, x: FloatArray, r0: FloatArray, outs: Sequence[Outcome]
+    ) -> Generator[list[FloatArray], list[Outcome], tuple[FloatArray, list[int]]]:
+        """J at x: the model's tangents (``jacobian = "tangent"``; ``outs[0]`` is x's run),
+        central differences (``"central"``) or forward differences, from ``outs[1:]`` when
+        they are x's perturbed runs, else from new runs (a run without tangents, such as one
+        stored before, falls back to them)."""
+        s = self.settings
+        tangent = outs[0].jacobian if s.jacobian == "tangent" else None
+        if tangent is not None:
+            J = np.asarray(tangent, dtype=float)
+            if J.shape != (len(r0), len(x)):
+                raise RuntimeError(f"tangent Jacobian of shape {J.shape}, want {(len(r0), len(x))}")
+            return J, []
+        if s.jacobian == "central":
+            return (yield from self._central_jacobian(x, r0))
+        d = self._deltas(x)
+        if len(outs) == len(x) + 1:
+            return (yield from self._jacobian(x, r0, d, outs[1:]))
+        more = yield from self._ask(perturbed(x, d, range(len(x))))
+        return (yield from self._jacobian(x, r0, d, more))
+
     def _free(self, x: FloatArray, g: FloatArray, frozen: Sequence[int]) -> NDArray[np.bool_]:
         """Parameters free to move: not frozen and not held at a bound by the gradient."""
         at_lower = (x <= self.lower) & (g > 0)
@@ -162,7 +184,8 @@ class RobustChain(LMChain):
         s = self.settings
         x = self.x0.astype(float).copy()
         d = self._deltas(x)
-        outs = yield from self._ask([x, *perturbed(x, d, range(len(x)))])
+        batch = perturbed(x, d, range(len(x))) if s.jacobian == "forward" else []
+        outs = yield from self._ask([x, *batch])
         if not outs[0].ok:
             self.x_last = x
             self._stop(
@@ -174,19 +197,21 @@ class RobustChain(LMChain):
             return
         assert outs[0].residuals is not None
         r = self._check_length(outs[0].residuals)
-        J, frozen = yield from self._jacobian(x, r, d, outs[1:])
+        J, frozen = yield from self._jacobian_at(x, r, outs)
         self._set_point(x, r, J)
         self.mu = s.mu0
         self._record(x, r, True, "start")
         radius = math.nan  # set at the first step
         first_iteration = self.iterations
-        central = False  # phase 2: central-difference Jacobians
+        # phase 2: central-difference Jacobians (from the start with jacobian = "central")
+        central = s.jacobian == "central"
+        exact = s.jacobian == "tangent"  # J from tangents: no phase 2
 
         def final(status: str, message: str) -> bool:
             """Stop here (True), or go on to phase 2 with a central-difference J (False)."""
-            if central or s.final_jacobian != "central" or status not in SUCCESS:
+            if central or exact or s.final_jacobian != "central" or status not in SUCCESS:
                 tail = "; J from central differences" if central else ""
-                self._stop(status, message + tail)
+                self._stop(status, message + ("; J from tangents" if exact else tail))
                 return True
             return False
 
@@ -205,7 +230,7 @@ class RobustChain(LMChain):
             if verdict is not None:
                 status, message, absolute = verdict
                 if absolute:
-                    self._stop(status, message)
+                    self._stop(status, message + ("; J from tangents" if exact else ""))
                     return
                 if final(status, message):
                     return
@@ -243,7 +268,8 @@ class RobustChain(LMChain):
                 rt: FloatArray | None = None
                 dt: FloatArray | None = None
                 if pred > 0.0 and pnorm > 0.0:
-                    dt = self._deltas(xt) if s.speculative and not central else None
+                    speculate = s.speculative and s.jacobian == "forward" and not central
+                    dt = self._deltas(xt) if speculate else None
                     extra = [] if dt is None else perturbed(xt, dt, range(len(x)))
                     outs = yield from self._ask([xt, *extra])
                     if outs[0].ok:
@@ -323,7 +349,10 @@ class RobustChain(LMChain):
                 self._set_point(xt, rt, None)
                 self._record(xt, rt, True, "step")
                 return
-            if stop is not None or central:
+            if exact:
+                J, frozen = yield from self._jacobian_at(xt, rt, outs)
+                note = "step"
+            elif stop is not None or central:
                 note = "step" if central else "step; central-difference Jacobian from here on"
                 central = True
                 radius = math.inf if stop is not None else radius

@@ -56,6 +56,7 @@ from ...core.options import Configurable, PluginOptions
 from ..fem.flow_cell import SOLID
 from .mesh_source import build_mesh, regions_in_file
 from .options import AleFsiOptions, solver_settings
+from .sensitivities import TangentReport, vertex_tangents
 
 __all__ = ["AleFsiForwardModel", "AleFsiOptions", "solver_settings"]
 
@@ -135,15 +136,31 @@ class AleFsiForwardModel(Configurable):
             names += [f"E_{k}", f"nu_{k}"]
         return names + ["inflow_rate"]
 
+    def tangent_inputs(self) -> list[str]:
+        """The inputs whose tangents :meth:`solve` gives (quasi-static mode: every material
+        input and the inflow rate; transient: none, iterators use finite differences)."""
+        if self.options.mode != "quasi_static":
+            return []
+        return self.parameter_names()
+
     def solve(
-        self, parameters: Mapping[str, float], coordinates: Sequence[Coordinate], workdir: Path
+        self,
+        parameters: Mapping[str, float],
+        coordinates: Sequence[Coordinate],
+        workdir: Path,
+        tangents: Sequence[str] = (),
     ) -> Solution:
-        """Solve at every coordinate; raise :class:`ForwardModelError` if the run fails."""
+        """Solve at every coordinate; raise :class:`ForwardModelError` if the run fails.
+
+        ``tangents``: inputs whose d(vertices)/d(input) each interface carries in
+        ``Interface.tangents`` (:mod:`~fbia.plugins.ale_fsi.sensitivities`)."""
         t_start = time.perf_counter()
         cpu_start = time.process_time()
         params = self._check_parameters(parameters)
         self._given_rate = "inflow_rate" in parameters
         levels = self._check_coordinates(coordinates, params)
+        tangents = self._check_tangents(tangents, coordinates)
+        tangent_report = TangentReport()
         solver = self._get_solver()
         post = self._post
         solver.set_materials(self._materials(params))
@@ -162,6 +179,8 @@ class AleFsiForwardModel(Configurable):
             for key, val in solver.check_state(label).items():
                 diag[key] = min(diag.get(key, math.inf), val)
             curves[index] = post.interface()
+            if tangents:
+                curves[index].tangents = vertex_tangents(solver, post, tangents, tangent_report)
             per["max_displacement"][index] = post.max_interface_displacement()
             per["fluid_force"][index] = post.forces().tolist()
             if self.options.probes:
@@ -200,6 +219,13 @@ class AleFsiForwardModel(Configurable):
             diag["jacobians"] = rep.jacobians
             diag["warm_start"] = False
         diag.update(per)
+        if tangents:
+            diag["tangents"] = {
+                "inputs": list(tangents),
+                "seconds": tangent_report.seconds,
+                "refinements": tangent_report.refinements,
+                "refactorised": tangent_report.refactorised,
+            }
         pairs: list[tuple[Coordinate, Interface]] = list(zip(coordinates, curves, strict=True))
         diag.update(
             linear_solver=solver.linear_solver,
@@ -229,6 +255,19 @@ class AleFsiForwardModel(Configurable):
             if not math.isfinite(v):
                 raise ForwardModelError(f"parameter {k} is not finite ({v})", "invalid_parameter")
         return params
+
+    def _check_tangents(
+        self, tangents: Sequence[str], coordinates: Sequence[Coordinate]
+    ) -> list[str]:
+        where = "ale_fsi.solve: tangents"
+        names = list(tangents)
+        unknown = [n for n in names if n not in self.tangent_inputs()]
+        if unknown:
+            mode = "" if self.options.mode == "quasi_static" else " (transient mode gives none)"
+            raise ConfigError(f"no tangents for {unknown}{mode}", where)
+        if "inflow_rate" in names and any("inflow_rate" in c for c in coordinates):
+            raise ConfigError("inflow_rate is a coordinate here, not an input", where)
+        return names
 
     def _materials(self, params: dict[str, float]) -> dict[str, tuple[float, float]]:
         regions = self.solid_regions()

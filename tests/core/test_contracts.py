@@ -25,7 +25,8 @@ def test_the_contracts_are_read_from_the_protocols_docstrings():
         assert roles[kind][:4] == common
     assert [n for n, _ in roles["forward_model"][4:]] == [
         "numerics_version", "dim", "parameter_names()", "undeformed()",
-        "solve(parameters, coordinates, workdir)", "example_parameters()", "example_options()",
+        "solve(parameters, coordinates, workdir)", "tangent_inputs()", "example_parameters()",
+        "example_options()",
     ]  # fmt: skip
     assert [n for n, r in roles["iterator"] if r == "framework"] == [
         "__init__(options)", "result.iterator, nfev, n_failed, evaluations",
@@ -34,6 +35,7 @@ def test_the_contracts_are_read_from_the_protocols_docstrings():
     defaults = {m.name: m.default for m in read["measure"] if m.role == "optional"}
     assert defaults["requires"] == "()" and defaults["dims"] == "(2, 3)"
     assert defaults["mesh_dependent"] == "False"
+    assert "a difference" == defaults["residuals_jvp(simulated, observation, dvertices)"]
 
 
 def test_the_registry_requires_the_contracts_methods():
