@@ -100,7 +100,8 @@ class AleFsiForwardModel(Configurable):
         super().__init__(options, **kwargs)
         self._solver: Any = None
         self._post: Any = None  # AleFsiPostprocess of the solver
-        self._store: list[tuple[dict[str, float], float, NDArray[np.float64]]] = []
+        self._store: list[_Stored] = []
+        self._dstate: dict[str, NDArray[np.float64]] = {}  # dU/dp of the state just recorded
         self._regions: list[str] | None = None
         self._given_rate = False
 
@@ -181,6 +182,7 @@ class AleFsiForwardModel(Configurable):
             curves[index] = post.interface()
             if tangents:
                 curves[index].tangents = vertex_tangents(solver, post, tangents, tangent_report)
+                self._dstate = dict(tangent_report.state_tangents)
             per["max_displacement"][index] = post.max_interface_displacement()
             per["fluid_force"][index] = post.forces().tolist()
             if self.options.probes:
@@ -393,14 +395,19 @@ class AleFsiForwardModel(Configurable):
             # then the cold path from this run's last level (or rest) with continuation
             attempts: list[tuple[float, NDArray[np.float64] | None, bool]] = []
             if start is not None:
-                attempts.append((start[0], start[1], False))
+                predicted = _predicted(start, key, rate)
+                if predicted is not None:  # first order in the inputs (the tangents)
+                    solver.set_state(predicted)
+                    if solver.admissible():
+                        attempts.append((rate, predicted, False))
+                attempts.append((start[1], start[2], False))
             if solved:
                 last = max(solved, key=abs)
                 attempts.append((last, solved[last], True))
             else:
                 attempts.append((0.0, None, True))
             error: ForwardModelError | None = None
-            for k, (r0, x0, continuation) in enumerate(attempts):
+            for r0, x0, continuation in attempts:
                 solver.set_state(x0)
                 solver.inflow_rate.Set(r0)
                 try:
@@ -414,18 +421,25 @@ class AleFsiForwardModel(Configurable):
                     continue
                 iterations[i] += rep.iterations
                 jacobians[i] += rep.jacobians
-                warm_used = warm_used or (k == 0 and start is not None)
+                warm_used = warm_used or (start is not None and not continuation)
                 error = None
                 break
             if error is not None:
                 raise error
+            self._dstate = {}
             record(f"inflow rate {rate:g} mm^2/s", i)
             solved[rate] = solver.state()
-            self._remember(key, rate, solved[rate])
+            self._remember(key, rate, solved[rate], self._dstate)
         return iterations, jacobians, warm_used
 
-    def _remember(self, key: dict[str, float], rate: float, state: NDArray[np.float64]) -> None:
-        self._store.append((dict(key), rate, state))
+    def _remember(
+        self,
+        key: dict[str, float],
+        rate: float,
+        state: NDArray[np.float64],
+        dstate: dict[str, NDArray[np.float64]],
+    ) -> None:
+        self._store.append((dict(key), rate, state, dstate))
         del self._store[:-16]
 
 
@@ -439,16 +453,27 @@ def _check_probes(mesh: Any, probes: Sequence[tuple[float, ...]]) -> None:
             raise ConfigError(f"probe {tuple(p)} lies outside the mesh", where)
 
 
-def _nearest(
-    store: list[tuple[dict[str, float], float, NDArray[np.float64]]],
-    key: dict[str, float],
-    rate: float,
-) -> tuple[float, NDArray[np.float64]] | None:
-    """The stored (rate, state) nearest to (parameters, rate); distances relative per input."""
+#: A stored state: (inputs, inflow rate, state, d state / d input of the inputs it has).
+_Stored = tuple[dict[str, float], float, NDArray[np.float64], dict[str, NDArray[np.float64]]]
+
+
+def _nearest(store: list[_Stored], key: dict[str, float], rate: float) -> _Stored | None:
+    """The stored state nearest to (parameters, rate); distances relative per input."""
     best, best_d = None, math.inf
-    for k, r, x in store:
+    for entry in store:
+        k, r = entry[0], entry[1]
         d = sum(abs(k[n] - key[n]) / max(abs(k[n]), abs(key[n]), 1.0) for n in key)
         d += abs(r - rate) / max(abs(r), abs(rate), 1.0)
         if d < best_d:
-            best, best_d = (r, x), d
+            best, best_d = entry, d
     return best
+
+
+def _predicted(start: _Stored, key: dict[str, float], rate: float) -> NDArray[np.float64] | None:
+    """The stored state moved to ``key`` to first order, ``U + sum dU/dp (p - p0)``, where it
+    has the tangents of every input that differs and lies at ``rate``; else None."""
+    k, r, x, dstate = start
+    moved = [n for n in key if key[n] != k[n]]
+    if r != rate or not moved or not all(n in dstate for n in moved):
+        return None
+    return x + sum((key[n] - k[n]) * dstate[n] for n in moved)

@@ -38,9 +38,9 @@ from ..fem.newton import NewtonFailure
 
 __all__ = ["TangentReport", "material_inputs", "vertex_tangents"]
 
-#: Refinement stops when the correction is below this fraction of the solution (scaled per
-#: dof, max norm), far below the 1e-5 the tangents are verified to.
-REFINE_TOL = 1e-11
+#: Refinement stops when the correction is below this fraction of the solution (per field,
+#: max norm), far below the 1e-5 the tangents are verified to.
+REFINE_TOL = 1e-9
 REFINE_MAX = 25
 
 
@@ -52,6 +52,9 @@ class TangentReport:
     refactorised: bool = False
     seconds: float = 0.0
     inputs: list[str] = field(default_factory=list)
+    #: dU/dp (all dofs) of the last state's material inputs: the model's first-order
+    #: prediction of a warm start at other inputs
+    state_tangents: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
 
 def material_inputs(regions: Sequence[str]) -> dict[str, tuple[str, str]]:
@@ -88,6 +91,7 @@ def vertex_tangents(
     dirichlet: dict[str, NDArray[np.float64]] = {}
     materials = material_inputs(solver.solids)
     derivs: dict[tuple[str, str], NDArray[np.float64]] = {}
+    r0 = _residual(solver)
     for name in names:
         if name == "inflow_rate":
             g = np.asarray(solver.load_direction(), dtype=float)
@@ -99,15 +103,19 @@ def vertex_tangents(
         dmu, dlam = _lame_derivatives(E, nu, which)
         for lame_name in ("mu", "lam"):
             if (region, lame_name) not in derivs:
-                derivs[region, lame_name] = _residual_derivative(solver, region, lame_name)
+                derivs[region, lame_name] = _residual_derivative(solver, region, lame_name, r0)
         rhs[name] = -(dmu * derivs[region, "mu"] + dlam * derivs[region, "lam"])
     out = {}
+    report.state_tangents = {}
+    fresh = [False]  # factorised at this state
     reference = post.interface(deformed=False).vertices
     try:
         for name in names:
-            du = _solve(solver, rhs[name], report)
+            du = _solve(solver, rhs[name], report, fresh)
             if name in dirichlet:
                 du = np.where(free, du, dirichlet[name])
+            else:
+                report.state_tangents[name] = du
             solver.set_state(du)
             out[name] = post.interface(deformed=True).vertices - reference
     finally:
@@ -132,13 +140,14 @@ def _residual(solver: Any) -> NDArray[np.float64]:
     return np.array(res.FV().NumPy(), copy=True)
 
 
-def _residual_derivative(solver: Any, region: str, which: str) -> NDArray[np.float64]:
+def _residual_derivative(
+    solver: Any, region: str, which: str, r0: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """dR/dμ_r or dR/dλ_r: the residual is linear in each (module docstring)."""
     param = solver._mu[region] if which == "mu" else solver._lam[region]
     value = float(param.Get())
     mu = float(solver._mu[region].Get())
     delta = abs(value) if value != 0.0 else mu
-    r0 = _residual(solver)
     try:
         param.Set(value + delta)
         r1 = _residual(solver)
@@ -147,24 +156,25 @@ def _residual_derivative(solver: Any, region: str, which: str) -> NDArray[np.flo
     return (r1 - r0) / delta
 
 
-def _solve(solver: Any, b: NDArray[np.float64], report: TangentReport) -> NDArray[np.float64]:
+def _solve(
+    solver: Any, b: NDArray[np.float64], report: TangentReport, fresh: list[bool]
+) -> NDArray[np.float64]:
     """J^-1 b on the free dofs (zero elsewhere): Newton's factorisation refined against the
-    assembled Jacobian, a fresh factorisation where that does not contract."""
+    assembled Jacobian; a fresh factorisation (once per state: ``fresh[0]`` says it is
+    done) where that does not contract."""
     newton = solver._newton
     free = solver.free_mask
     rhs = solver.vector.CreateVector()
     rhs.FV().NumPy()[:] = np.where(free, b, 0.0)
-    if newton.inverse is not None:
+    x = _refined(solver, newton, rhs, report) if newton.inverse is not None else None
+    if x is None and not fresh[0]:
+        newton.factorise("tangents")
+        # of the converged state now: the best chord for the next solve as well
+        fresh[0] = report.refactorised = True
         x = _refined(solver, newton, rhs, report)
-        if x is not None:
-            return x
-    newton.factorise("tangents")
-    newton.chord_ok = False  # (the state is the converged one; the next solve re-checks)
-    report.refactorised = True
-    x = _refined(solver, newton, rhs, report)
     if x is None:
         raise NewtonFailure("tangents: the linear solve does not converge", "linear_solver")
-    return x
+    return np.asarray(x)
 
 
 def _refined(solver: Any, newton: Any, rhs: Any, report: TangentReport) -> Any:
