@@ -142,8 +142,12 @@ def test_sigma_n_posterior_matches_quadrature(exact, tmp_path):
     assert path.name == "marginals_1d.png" and path.stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_the_example_study_infers_sigma_n(tmp_path):
-
+    """The example study file end to end (a verification run of ~40 s, so in make test-slow):
+    in make test, test_study_file_noise_prior reads the same [likelihood] noise_prior, and
+    test_sigma_n_posterior_matches_quadrature runs the same problem through gp_smc and checks
+    sigma_N's interval and marginal plot more strictly, against quadrature."""
     example = ROOT / "examples" / "flow_cell" / "study_noise.toml"
     result = fbia.run_study(fbia.load_study(example), tmp_path / "out", echo=lambda s: None)
     assert result.status == "completed" and result.names == ["E", "nu", "sigma_N"]
