@@ -194,16 +194,19 @@ def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_pa
 
 def test_dome_passes_the_forward_model_conformance_checks(tmp_path):
     """The protocol every forward model honours (fbia.testing): deterministic, independent of
-    the order of the coordinates, inputs untouched, a failing run a ForwardModelError."""
+    the order of the coordinates, inputs untouched, a failing run a ForwardModelError.  The
+    protocol holds at any resolution, so on a dome coarser than DOME (622 tetrahedra against
+    1338), and the failing run is so soft that the first continuation step inverts elements
+    (E = 1 Pa fails only after a longer continuation): 9 s instead of 24 s."""
     from fbia.testing import check_forward_model
 
-    model = AleFsiForwardModel(**DOME)
+    model = AleFsiForwardModel(**{**DOME, "mesh_size": 0.5, "interface_mesh_size": 0.25})
     check_forward_model(
         model,
         MATERIAL,
         [{"inflow_rate": 50.0}, {"inflow_rate": 100.0}],
         tmp_path,
-        failing_parameters={"E": 1.0, "nu": 0.3},
+        failing_parameters={"E": 0.01, "nu": 0.3},
     )
 
 
