@@ -70,8 +70,11 @@ def test_batch_picks_distinct_points_near_the_posterior_where_the_gp_is_unsure()
 
 
 # -- the 2-D target (E, nu): <= 100 runs, means within 0.3 std, std within a factor 1.5 ----------
-E_GRID = np.linspace(100.0, 800.0, 71)
-NU_GRID = np.linspace(-0.8, 0.5, 66)
+# 20 Pa and 0.04 apart: the posterior is broad (std 97 Pa, 0.076), so this grid's mean and std
+# are within 0.003 std and 0.5 % of a grid twice as fine each way (71 x 66 points; measured),
+# far below the target's 0.3 std and factor 1.5, at a quarter of the forward runs
+E_GRID = np.linspace(100.0, 800.0, 36)
+NU_GRID = np.linspace(-0.8, 0.5, 33)
 
 
 @pytest.fixture(scope="module")
