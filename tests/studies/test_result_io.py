@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 from _paths import ROOT
-from _studies import edit
+from _studies import edit, write_study
 
 import fbia
 from fbia.iterators.gp_smc.result import GpSmcResult
@@ -46,14 +46,35 @@ def test_an_lm_result_loads_back_as_it_was(study_file, capsys):
         )
 
 
-def test_a_gp_smc_result_loads_back_and_its_posterior_is_an_arviz_netcdf(study_file, capsys):
-    arviz = pytest.importorskip("arviz")
+@pytest.fixture(scope="module")
+def bayes_run(tmp_path_factory):
+    """The BAYES study run once through the command line (~15 s), shared by the two tests
+    that read its output: its study file and what it printed."""
+    import contextlib
+    import io
+    import os
+
+    folder = tmp_path_factory.mktemp("bayes")
+    study_file = write_study(folder)
     study_file.write_text(BAYES)
+    cwd, printed = os.getcwd(), io.StringIO()
+    os.chdir(folder)
+    try:
+        with contextlib.redirect_stdout(printed):
+            status = main(["run", "study.toml"])
+    finally:
+        os.chdir(cwd)
+    return study_file, status, printed.getvalue()
+
+
+def test_a_gp_smc_result_loads_back_and_its_posterior_is_an_arviz_netcdf(bayes_run):
+    arviz = pytest.importorskip("arviz")
+    study_file, status, printed = bayes_run
     # 32 runs leave the surrogate far off at the posterior (RMSE ~ 80 in L): unreliable,
     # exit status 3, and its files are written all the same
-    assert main(["run", "study.toml"]) == 3
+    assert status == 3
     out = study_file.parent / "out"
-    printed = capsys.readouterr().out.splitlines()
+    printed = printed.splitlines()
     assert any(line.startswith("wrote ") and line.endswith("posterior.nc") for line in printed)
     loaded = fbia.load_result(out)
     assert isinstance(loaded, GpSmcResult) and loaded.posterior is not None
@@ -99,16 +120,15 @@ def test_a_field_the_file_does_not_hold_is_none_and_a_wrong_type_is_one_line(tmp
         fbia.load_result(tmp_path)
 
 
-def test_the_take_away_example_loads_plots_and_hands_to_arviz(study_file, capsys):
+def test_the_take_away_example_loads_plots_and_hands_to_arviz(bayes_run, capsys):
     """examples/flow_cell/load_results.py on a gp_smc output (issue 29 items 3 and 6): the
     result loads, fbia.plot draws its figures with the ground truth marked, ArviZ summarises
     the posterior."""
     import runpy
 
     pytest.importorskip("arviz")
-    study_file.write_text(BAYES)
-    assert main(["run", "study.toml"]) == 3
-    capsys.readouterr()
+    study_file, status, _ = bayes_run
+    assert status == 3
     example = runpy.run_path(str(ROOT / "examples" / "flow_cell" / "load_results.py"))
     paths = example["main"](study_file.parent / "out", study_file)
     printed = capsys.readouterr().out
