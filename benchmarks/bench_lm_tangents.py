@@ -64,7 +64,7 @@ def _dome_problem() -> tuple[Any, dict[str, Any]]:
         threads=2,
     )
     truth = {"E": 400.0, "nu": 0.3}
-    obs = fbia.synthetic_observations(model, truth, [{"inflow_rate": 100.0}], noise_std=0.0)
+    obs = fbia.synthetic_observations(model, truth, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0)
     problem = fbia.InverseProblem(
         model=model,
         measure=fbia.measure("cpp"),

@@ -101,6 +101,12 @@ class ForwardModel(Protocol):
       else) when the run fails; inputs it is not given keep their option values.
     * ``tangent_inputs()`` (optional, default ``()``): the inputs whose tangents ``solve(...,
       tangents=names)`` gives, each interface's ``tangents[name]`` = d vertices / d name.
+    * ``prepare()`` (optional): build what every run needs (a mesh) once, in the process from
+      which isolated runs are forked (``fbia.execution.isolation``), so they start warm.
+    * ``warm_state()`` (optional, default None): what a finished run leaves for later runs to
+      start from (picklable); an isolated run sends it back to the forking process, whose
+      model takes it with ``adopt_warm_state(state)``.
+    * ``adopt_warm_state(state)`` (optional): take the ``warm_state()`` of another process.
     * ``example_parameters()`` (optional): where the conformance kit runs it.
     * ``example_options()`` (optional, default ``{}``): the kit's options.
     """

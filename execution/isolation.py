@@ -17,7 +17,11 @@ on.  So:
 * a run that kills its process (``os._exit``, a segfault, the out-of-memory killer) becomes a
   failed record that says how it died;
 * neither costs more than that run: the helper, with everything imported, serves the next run
-  at once (a fork takes milliseconds), and no state of one run leaks into the next;
+  at once (a fork takes milliseconds), and no state of one run leaks into the next but what
+  the model declares: a model's optional ``prepare()`` runs once in the helper (``ale_fsi``
+  meshes there, so no run meshes again), and its ``warm_state()`` after each run goes back to
+  the helper's model (``adopt_warm_state``: ``ale_fsi``'s converged states, from which the
+  next runs warm-start as they do in one process);
 * a helper whose caller dies (the study was killed) kills the run under way and exits.
 
 Every executor uses it the same way: the serial evaluator in the study's process, the process
@@ -477,12 +481,42 @@ def _child(problem: Evaluable, x: dict[str, float], workdir: str, index: int, ou
             ev.status, ev.message = "error", f"the record could not be sent back: {exc}"
             ev.diagnostics = {}
             data = pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)
+        data = pickle.dumps((data, _warm_state(problem)), protocol=pickle.HIGHEST_PROTOCOL)
         view = memoryview(data)
         while view:
             view = view[os.write(out, view) :]
         code = 0
     finally:
         os._exit(code)
+
+
+# -- warm runs: the model meshed once in the helper, each run's end state adopted by it ---------
+def _prepare(problem: Evaluable) -> None:
+    """The model's optional ``prepare()`` in the helper, before any run is forked from it, so
+    that every run inherits what it built (a mesh).  A failure is left to the runs to report:
+    each one meets it again and records it."""
+    prepare = getattr(getattr(problem, "model", None), "prepare", None)
+    if callable(prepare):
+        with contextlib.suppress(Exception):
+            prepare()
+
+
+def _warm_state(problem: Evaluable) -> Any:
+    """In the child, after its run: the model's optional ``warm_state()`` (else None)."""
+    member = getattr(getattr(problem, "model", None), "warm_state", None)
+    try:
+        return member() if callable(member) else None
+    except Exception:  # a warm start is an optimisation: never a reason to lose a record
+        return None
+
+
+def _adopt(problem: Evaluable | None, warm: Any) -> None:
+    """In the helper: the model takes a finished run's warm state (``adopt_warm_state``), so
+    the runs forked next start from it."""
+    adopt = getattr(getattr(problem, "model", None), "adopt_warm_state", None)
+    if warm is not None and callable(adopt):
+        with contextlib.suppress(Exception):
+            adopt(warm)
 
 
 def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
@@ -527,6 +561,7 @@ def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no c
             except Exception as exc:  # e.g. a model class this process cannot import
                 _send(answers, ("problem", f"the problem could not be loaded: {exc!r}"))
                 return  # the caller starts a new helper for the next problem
+            _prepare(problem)
             _send(answers, ("problem", None))
         elif kind == "run":
             assert problem is not None
@@ -547,6 +582,8 @@ def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no c
             _, status = os.waitpid(pid, 0)
             running.clear()
             if data is not None and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
+                data, warm = pickle.loads(data)
+                _adopt(problem, warm)
                 _send(answers, ("done", data))
             else:
                 _send(answers, ("died", _exit_text(status)))

@@ -102,6 +102,7 @@ class AleFsiForwardModel(Configurable):
         self._post: Any = None  # AleFsiPostprocess of the solver
         self._store: list[_Stored] = []
         self._dstate: dict[str, NDArray[np.float64]] = {}  # dU/dp of the state just recorded
+        self._run_states: list[_Stored] = []  # the states of the latest run
         self._regions: list[str] | None = None
         self._given_rate = False
 
@@ -137,6 +138,21 @@ class AleFsiForwardModel(Configurable):
             names += [f"E_{k}", f"nu_{k}"]
         return names + ["inflow_rate"]
 
+    def prepare(self) -> None:
+        """Mesh and build the solver now (the isolation helper does it once before it forks
+        the runs, which then start meshed)."""
+        self._get_solver()
+
+    def warm_state(self) -> list[_Stored]:
+        """The states this model instance solved in its latest run (for later runs in another
+        process: :meth:`adopt_warm_state`)."""
+        return list(self._run_states)
+
+    def adopt_warm_state(self, state: list[_Stored]) -> None:
+        """Warm-start later runs from states another process solved (:meth:`warm_state`)."""
+        self._store.extend(state)
+        del self._store[:-16]
+
     def tangent_inputs(self) -> list[str]:
         """The inputs whose tangents :meth:`solve` gives (quasi-static mode: every material
         input and the inflow rate; transient: none, iterators use finite differences)."""
@@ -161,6 +177,7 @@ class AleFsiForwardModel(Configurable):
         self._given_rate = "inflow_rate" in parameters
         levels = self._check_coordinates(coordinates, params)
         tangents = self._check_tangents(tangents, coordinates)
+        self._run_states = []
         tangent_report = TangentReport()
         solver = self._get_solver()
         post = self._post
@@ -440,6 +457,7 @@ class AleFsiForwardModel(Configurable):
         dstate: dict[str, NDArray[np.float64]],
     ) -> None:
         self._store.append((dict(key), rate, state, dstate))
+        self._run_states.append(self._store[-1])
         del self._store[:-16]
 
 

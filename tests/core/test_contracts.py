@@ -25,8 +25,8 @@ def test_the_contracts_are_read_from_the_protocols_docstrings():
         assert roles[kind][:4] == common
     assert [n for n, _ in roles["forward_model"][4:]] == [
         "numerics_version", "dim", "parameter_names()", "undeformed()",
-        "solve(parameters, coordinates, workdir)", "tangent_inputs()", "example_parameters()",
-        "example_options()",
+        "solve(parameters, coordinates, workdir)", "tangent_inputs()", "prepare()",
+        "warm_state()", "adopt_warm_state(state)", "example_parameters()", "example_options()",
     ]  # fmt: skip
     assert [n for n, r in roles["iterator"] if r == "framework"] == [
         "__init__(options)", "result.iterator, nfev, n_failed, evaluations",
