@@ -5,8 +5,10 @@ of requested points it says which are stored (their records are returned as they
 stored failure is a finished run too, unless ``retry_failed``, which runs each stored failure
 once more), which are asked for twice in the batch (run once) and which must run; every
 finished run is written to the store the moment it finishes (:meth:`RunCache.record`), so a
-killed study loses nothing that finished.  The executors (serial, process pool, Dask) know
-nothing of stores: they run what the cache leaves them.
+killed study loses nothing that finished.  A problem that asks for the model's tangents
+(:class:`AsksTangents`) gets J of a stored run from its stored tangents; a run stored without
+them runs again (one run, where differences would take n_x).  The executors (serial, process
+pool, Dask) know nothing of stores: they run what the cache leaves them.
 """
 
 from __future__ import annotations
@@ -72,10 +74,13 @@ class RunCache:
                 and not run.record.ok
                 and key not in self._retried
             )
-            if run is not None and not retry:
-                plan.reused[i] = dataclasses.replace(run.record, index=i, x=x)
-                if isinstance(problem, AsksTangents) and run.record.ok:
-                    self._tangent_jacobian(problem, plan.reused[i], key)
+            reuse = None if run is None else dataclasses.replace(run.record, index=i, x=x)
+            if reuse is not None and isinstance(problem, AsksTangents) and reuse.ok:
+                # a run stored without tangents runs again for them: one run, not n_x more
+                if not self._tangent_jacobian(problem, reuse, key):
+                    reuse = None
+            if reuse is not None and not retry:
+                plan.reused[i] = reuse
             elif key in first:
                 plan.copies.append((i, first[key]))
             else:
@@ -86,9 +91,9 @@ class RunCache:
                 plan.to_run.append((i, x))
         return plan
 
-    def _tangent_jacobian(self, problem: AsksTangents, record: Evaluation, key: str) -> None:
-        """J of a stored run from its stored tangents (a run stored without them has none:
-        the iterator then differentiates by forward runs)."""
+    def _tangent_jacobian(self, problem: AsksTangents, record: Evaluation, key: str) -> bool:
+        """Give a stored run its J from its stored tangents; False for a run stored without
+        them (or whose measure cannot differentiate them)."""
         solution = self.store.solution(key)
         try:
             jacobian = None if solution is None else problem.jacobian_from(solution)
@@ -96,6 +101,7 @@ class RunCache:
             jacobian = None
         if jacobian is not None:
             record.jacobian, record.jacobian_names = jacobian, problem.tangent_names
+        return jacobian is not None
 
     def record(self, outcome: RunOutcome) -> None:
         """Store a run that has just finished (with its interfaces, for later comparisons)."""

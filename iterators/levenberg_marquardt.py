@@ -383,6 +383,10 @@ class LevenbergMarquardtIterator(IteratorBase):
             "info": {
                 "mode": settings.mode,
                 "jacobian": settings.jacobian,
+                "jacobians": {
+                    k: sum(c.j_sources.get(k, 0) for c in chains)
+                    for k in ("tangent", "forward", "central")
+                },
                 "options": self.options.model_dump(),
             },
         }

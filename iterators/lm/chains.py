@@ -137,6 +137,8 @@ class LMChain:
     nfev: int = 0
     n_failed: int = 0
     history: list[dict[str, Any]] = field(default_factory=list)
+    #: Jacobians computed, by source: "tangent", "forward", "central"
+    j_sources: dict[str, int] = field(default_factory=dict)
     #: The last iterate, kept for reports when the run gives no result (paper mode).
     x_last: FloatArray | None = None
     _scale: FloatArray | None = None
@@ -196,6 +198,7 @@ class LMChain:
         """Forward-difference Jacobian (eq. 22-23).  In robust mode a failed perturbed run is
         repeated once on the other side of x; a column that still fails is returned in the
         list of frozen parameters (held fixed for the next step)."""
+        self._count("forward")
         J = np.zeros((len(r0), len(x)))
         bad = []
         for i, o in enumerate(outcomes):
@@ -215,6 +218,9 @@ class LMChain:
                         J[:, i] = (self._check_length(o.residuals) - r0) / d2[i]
                         bad.remove(i)
         return J, bad
+
+    def _count(self, source: str) -> None:
+        self.j_sources[source] = self.j_sources.get(source, 0) + 1
 
     def _set_point(self, x: FloatArray, r: FloatArray, J: FloatArray | None) -> None:
         self.x, self.r = x, r

@@ -252,13 +252,20 @@ class LMResult(Result):
         lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
         return "\n".join(line.rstrip() for line in lines)
 
+    def _jacobian_sources(self) -> str:
+        """Where J came from: the option's source, or each source's count where they mix
+        (tangents asked for, differences where a run gave none)."""
+        counts = {k: v for k, v in self.info.get("jacobians", {}).items() if v}
+        if len(counts) <= 1:
+            return _JACOBIAN_SOURCE.get(self.info.get("jacobian", "forward"), "differences")
+        return ", ".join(f"{_JACOBIAN_SOURCE[k]} ({n})" for k, n in counts.items())
+
     def summary(self) -> str:
         lines = [super().summary()]
         if self.err_res is not None:
             lines.append(
                 f"  err_res = {self.err_res:.4e}, err_grad = {self.err_grad:.3e}, "
-                f"{self.iterations} iterations, J from "
-                + _JACOBIAN_SOURCE.get(self.info.get("jacobian", "forward"), "differences")
+                f"{self.iterations} iterations, J from {self._jacobian_sources()}"
             )
         if self.stderr:
             lines.append(

@@ -73,6 +73,7 @@ class RobustChain(LMChain):
         :mod:`fbia.iterators.lm.finite_differences`).  A column whose runs fail keeps its last
         value and its parameter is held fixed for the next step."""
         s = self.settings
+        self._count("central")
         stencil = central_stencil(x, s.alpha, s.beta, self.lower, self.upper)
         outs = yield from self._ask(stencil.points)
         J = np.zeros((len(r0), len(x))) if self.J is None else self.J.copy()
@@ -100,6 +101,7 @@ class RobustChain(LMChain):
             J = np.asarray(tangent, dtype=float)
             if J.shape != (len(r0), len(x)):
                 raise RuntimeError(f"tangent Jacobian of shape {J.shape}, want {(len(r0), len(x))}")
+            self._count("tangent")
             return J, []
         if s.jacobian == "central":
             return (yield from self._central_jacobian(x, r0))

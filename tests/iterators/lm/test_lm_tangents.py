@@ -64,6 +64,21 @@ def test_a_resumed_study_takes_j_from_the_stored_tangents(fsi_problem, tmp_path)
             assert ev.reused == set(range(again.nfev))  # nothing ran again
     assert again.x == first.x and again.nfev == first.nfev
     assert all(e.jacobian is not None for e in again.evaluations)
+    assert again.info["jacobians"] == {"tangent": again.nfev, "forward": 0, "central": 0}
+
+
+def test_runs_stored_without_tangents_run_again_for_them(fsi_problem, tmp_path):
+    """A store made with forward differences: LM with tangents reruns the points it needs
+    (one run each) instead of taking J from their differences, and says where J came from."""
+    with StudyStore(tmp_path / "store.sqlite") as store:
+        with fbia.SerialEvaluator(store=store) as ev:
+            _lm(jacobian="forward").run(fsi_problem, ev)
+        with fbia.SerialEvaluator(store=store) as ev:
+            again = _lm().run(fsi_problem, ev)
+            rerun = set(range(again.nfev)) - ev.reused
+    assert 0 < len(rerun) <= again.nfev  # the start, at least, was stored without tangents
+    assert again.info["jacobians"]["forward"] == 0
+    assert "J from the model's tangents" in again.summary()
 
 
 def test_no_tangents_no_tangent_jacobian():
