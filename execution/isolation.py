@@ -7,21 +7,22 @@
 >>> #     outcome = runner.run(problem, {"E": 300.0, "nu": 0.2}, "runs/eval_000000", 0, timeout=600)
 
 An :class:`IsolatedRunner` starts one helper Python process (in a session of its own) that
-imports fbia and loads the problem once, then *forks* one child per run.  The child runs the
-forward model in a process group of its own and sends the record back; the helper passes it
-on.  So:
+imports fbia and loads the problem once, then *forks* a run process
+(:mod:`fbia.execution.isolation_helper`) in a process group of its own, which runs the
+forward model and sends each record back; the helper passes it on.  So:
 
-* a run that passes its time limit is stopped for good: its whole process group (the child and
-  any solver it started) is killed with SIGKILL and the run becomes a failed record
-  ``"time-out after N s ..."``;
+* a run that passes its time limit is stopped for good: its whole process group (the run
+  process and any solver it started) is killed with SIGKILL and the run becomes a failed
+  record ``"time-out after N s ..."``;
 * a run that kills its process (``os._exit``, a segfault, the out-of-memory killer) becomes a
   failed record that says how it died;
-* neither costs more than that run: the helper, with everything imported, serves the next run
-  at once (a fork takes milliseconds), and no state of one run leaks into the next but what
-  the model declares: a model's optional ``prepare()`` runs once in the helper (``ale_fsi``
-  meshes there, so no run meshes again), and its ``warm_state()`` after each run goes back to
-  the helper's model (``adopt_warm_state``: ``ale_fsi``'s converged states, from which the
-  next runs warm-start as they do in one process);
+* neither costs more than that run: the helper, with everything imported, forks a new run
+  process for the next run at once (a fork takes milliseconds);
+* runs are as warm as in the worker itself: the run process serves one run after another and
+  keeps the model's state between them (``ale_fsi``: warm starts and its last factorisation);
+  a run process forked after a failure starts from the helper's model, which the model's
+  optional ``prepare()`` built once (``ale_fsi`` meshes there) and which took the
+  ``warm_state()`` of every finished run (``adopt_warm_state``);
 * a helper whose caller dies (the study was killed) kills the run under way and exits.
 
 Every executor uses it the same way: the serial evaluator in the study's process, the process
@@ -34,7 +35,6 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import ctypes
 import os
 import pickle
 import select
@@ -257,7 +257,7 @@ class IsolatedRunner:
     def _start(self) -> None:
         job_r, job_w = os.pipe()
         res_r, res_w = os.pipe()
-        code = "from fbia.execution.isolation import _helper_main; _helper_main()"
+        code = "from fbia.execution.isolation_helper import helper_main; helper_main()"
         try:
             self._proc = subprocess.Popen(
                 [sys.executable, "-c", code, str(job_r), str(res_w)],
@@ -456,134 +456,3 @@ def run_isolated_or_here(
     if isolate:
         return thread_runner().run(problem, x, workdir, index, timeout)
     return evaluate_here(problem, x, workdir, index)
-
-
-# -- the helper's side ---------------------------------------------------------------------------
-def _die_with_parent() -> None:
-    """Linux: this process gets SIGKILL when its parent ends (a run whose helper was killed)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
-
-
-def _child(problem: Evaluable, x: dict[str, float], workdir: str, index: int, out: int) -> None:
-    """In the forked child: run, send the outcome, exit without cleanup of the helper's state
-    (status 0 with an outcome sent; 1 if the run raised SystemExit or the like)."""
-    code = 1
-    try:
-        os.setpgid(0, 0)
-        _die_with_parent()
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
-        outcome = evaluate_here(problem, x, workdir, index)
-        try:
-            data = pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)
-        except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            ev = outcome.record
-            ev.status, ev.message = "error", f"the record could not be sent back: {exc}"
-            ev.diagnostics = {}
-            data = pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)
-        data = pickle.dumps((data, _warm_state(problem)), protocol=pickle.HIGHEST_PROTOCOL)
-        view = memoryview(data)
-        while view:
-            view = view[os.write(out, view) :]
-        code = 0
-    finally:
-        os._exit(code)
-
-
-# -- warm runs: the model meshed once in the helper, each run's end state adopted by it ---------
-def _prepare(problem: Evaluable) -> None:
-    """The model's optional ``prepare()`` in the helper, before any run is forked from it, so
-    that every run inherits what it built (a mesh).  A failure is left to the runs to report:
-    each one meets it again and records it."""
-    prepare = getattr(getattr(problem, "model", None), "prepare", None)
-    if callable(prepare):
-        with contextlib.suppress(Exception):
-            prepare()
-
-
-def _warm_state(problem: Evaluable) -> Any:
-    """In the child, after its run: the model's optional ``warm_state()`` (else None)."""
-    member = getattr(getattr(problem, "model", None), "warm_state", None)
-    try:
-        return member() if callable(member) else None
-    except Exception:  # a warm start is an optimisation: never a reason to lose a record
-        return None
-
-
-def _adopt(problem: Evaluable | None, warm: Any) -> None:
-    """In the helper: the model takes a finished run's warm state (``adopt_warm_state``), so
-    the runs forked next start from it."""
-    adopt = getattr(getattr(problem, "model", None), "adopt_warm_state", None)
-    if warm is not None and callable(adopt):
-        with contextlib.suppress(Exception):
-            adopt(warm)
-
-
-def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
-    """Read the child's outcome; if the caller goes away meanwhile, kill the child and exit."""
-    chunks: list[bytes] = []
-    while True:
-        ready, _, _ = select.select([pipe, jobs], [], [])
-        if jobs in ready:  # the caller closed its end (or died): nothing waits for this run
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(pid, signal.SIGKILL)
-            os._exit(0)
-        chunk = os.read(pipe, 1 << 20)
-        if not chunk:
-            return b"".join(chunks) if chunks else None
-        chunks.append(chunk)
-
-
-def _helper_main() -> None:  # pragma: no cover - runs in the helper process
-    jobs, answers = int(sys.argv[1]), int(sys.argv[2])
-    running: list[int] = []  # the child of the run under way
-    try:
-        _serve(jobs, answers, running)
-    except (BrokenPipeError, ConnectionResetError):  # the caller is gone (killed, e.g. during
-        for pid in running:  # start-up): stop the run and exit silently, no traceback
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(pid, signal.SIGKILL)
-    os._exit(0)  # nothing left to flush to a caller that may be gone
-
-
-def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no cover - helper
-    problem: Evaluable | None = None
-    while True:
-        message = _recv(jobs)
-        if message is None:  # the caller closed the pipe or died
-            return
-        kind = message[0]
-        if kind == "init":
-            sys.path[:] = message[1]
-        elif kind == "problem":
-            try:
-                problem = pickle.loads(message[1])
-            except Exception as exc:  # e.g. a model class this process cannot import
-                _send(answers, ("problem", f"the problem could not be loaded: {exc!r}"))
-                return  # the caller starts a new helper for the next problem
-            _prepare(problem)
-            _send(answers, ("problem", None))
-        elif kind == "run":
-            assert problem is not None
-            _, x, workdir, index = message
-            pipe_r, pipe_w = os.pipe()
-            pid = os.fork()
-            if pid == 0:
-                for fd in (pipe_r, jobs, answers):
-                    os.close(fd)
-                _child(problem, x, workdir, index, pipe_w)
-            running[:] = [pid]
-            os.close(pipe_w)
-            with contextlib.suppress(OSError):  # also done by the child: no race with a kill
-                os.setpgid(pid, pid)
-            _send(answers, ("started", pid))
-            data = _collect(jobs, pipe_r, pid)
-            os.close(pipe_r)
-            _, status = os.waitpid(pid, 0)
-            running.clear()
-            if data is not None and os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
-                data, warm = pickle.loads(data)
-                _adopt(problem, warm)
-                _send(answers, ("done", data))
-            else:
-                _send(answers, ("died", _exit_text(status)))

@@ -95,7 +95,7 @@ def _helper(tmp_path: Path) -> tuple[subprocess.Popen[bytes], int, int, Path]:
             [
                 sys.executable,
                 "-c",
-                "from fbia.execution.isolation import _helper_main; _helper_main()",
+                "from fbia.execution.isolation_helper import helper_main; helper_main()",
                 str(job_r),
                 str(res_w),
             ],
