@@ -36,32 +36,27 @@ against 1.65x).  But an isolated run was then a fresh child of the worker's isol
 which had never run the model: every run was cold (meshing, the first assembly, no warm
 start): 16.5 s per coarse 3-D run, against 3 s for a warm-started run inside a worker.
 
-Since issue 30 (item 5) the helper meshes the model once (``prepare()``) before it forks the
-runs and takes each run's end state back (``warm_state()`` -> ``adopt_warm_state()``), so a
-forked run starts meshed and warm.  The last column is the wall time per run and worker
-against warm serial runs in the study's own process (the anchor row).  Measured 2026-11-28
-on the 2-core VM shared with a test suite (load average 2.4-4.1), 6 runs:
+Since issue 30 (item 5) the helper meshes the model once (``prepare()``) and forks one run
+process that serves the runs one after another (warm, with its last factorisation, as a
+worker would), replaced after a time-out or a crash from the helper's model, which holds the
+warm states the runs sent back (``warm_state()`` -> ``adopt_warm_state()``).  The last column
+is the wall time per run and worker against warm serial runs in the study's own process (the
+anchor row; issue 30's target: 1.3x).  Measured 2026-11-28 on the 2-core VM, idle (load
+average 2.1 before and 2.0 after, from the benchmark itself), 8 runs:
 
     isolated (the Dask default)
-    3-D dome        serial     6       8.4   0.714                               1.40 s/run
-    3-D dome             1     6      16.6   0.361     1.00       100%           1.98x
-    3-D dome             2     6      10.7   0.562     1.56        78%           2.54x
-    2-D flow cell   serial     6       0.6   9.670                               0.10 s/run
-    2-D flow cell        1     6       1.8   3.370     1.00       100%           2.87x
-    2-D flow cell        2     6       1.2   4.922     1.46        73%           3.93x
+    model          workers  runs  wall [s]  runs/s speed-up efficiency  s/run x workers / serial
+    3-D dome        serial     8       9.7   0.829                               1.21 s/run
+    3-D dome             1     8      10.5   0.763     1.00       100%           1.09x
+    3-D dome             2     8       5.4   1.473     1.93        96%           1.13x
+    2-D flow cell   serial     8       0.6  13.232                               0.08 s/run
+    2-D flow cell        1     8       0.7  11.295     1.00       100%           1.17x
+    2-D flow cell        2     8       0.4  18.533     1.64        82%           1.43x
 
-    --no-isolate
-    3-D dome        serial     6       7.5   0.804                               1.24 s/run
-    3-D dome             1     6       7.9   0.759     1.00       100%           1.06x
-    3-D dome             2     6       7.5   0.805     1.06        53%           2.00x
-
-An isolated 3-D run now costs 2.8 s instead of 16.5 s, still 2x a warm serial run: each forked
-child must assemble and factorise its first Jacobian (the serial run reuses the factorisation
-of the run before it for chord steps), and a Dask task adds about 0.2 s (the 2-D rows).  In the
-workers themselves (``isolate = false``) one worker is within 1.06x of warm serial runs; the
-second worker's figures say nothing on this loaded machine.  The next step (not built): a
-persistent child per helper that serves runs until it times out or dies, so the factorisation
-survives between isolated runs too.
+A 3-D run under isolation costs 1.09-1.13x a warm serial run (16.5 s a run, 11.8x, when
+every run was a cold fork; 2.8 s, 2x, with the warm helper alone, whose forked runs each
+factorised their first Jacobian).  The 2-D runs take 0.08 s: Dask's own cost per task shows
+(1.43x with 2 workers).
 """
 
 from __future__ import annotations

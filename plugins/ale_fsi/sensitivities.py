@@ -40,7 +40,7 @@ __all__ = ["TangentReport", "material_inputs", "vertex_tangents"]
 
 #: Refinement stops when the correction is below this fraction of the solution (per field,
 #: max norm), far below the 1e-5 the tangents are verified to.
-REFINE_TOL = 1e-9
+REFINE_TOL = 1e-7
 REFINE_MAX = 25
 
 
