@@ -41,6 +41,10 @@ def check_forward_model(
       in a fresh working folder, with a copy of the parameters and the coordinates reversed,
       gives the same interfaces (same connectivity, vertices equal to ``rtol`` times the
       interface's size);
+    * a model with ``tangent_inputs()`` gives, with ``solve(..., tangents=names)`` for those
+      of ``parameters``, tangents of the vertices' shape that agree with central differences
+      of the model itself (step 1e-4 relative) to 1e-3 of their largest entry (a check of
+      signs, scales and vertex order; a model's own tests verify the accuracy it claims);
     * with ``failing_parameters`` (a run known to fail), ``solve`` raises
       :class:`fbia.ForwardModelError` with a message, and nothing else.
 
@@ -65,13 +69,15 @@ def check_forward_model(
     if not coordinates:
         raise ValueError("check_forward_model needs at least one coordinate")
 
-    def solve(params: Mapping[str, float], coords: Sequence[Mapping[str, float]], run: str) -> Any:
+    def solve(
+        params: Mapping[str, float], coords: Sequence[Mapping[str, float]], run: str, **kw: Any
+    ) -> Any:
         tmp_path.mkdir(parents=True, exist_ok=True)
         workdir = Path(tempfile.mkdtemp(prefix=f"{run}_", dir=tmp_path))  # fresh and empty
         params_before, coords_before = copy.deepcopy(dict(params)), copy.deepcopy(list(coords))
         cwd = os.getcwd()
         try:
-            return model.solve(params, coords, workdir)
+            return model.solve(params, coords, workdir, **kw)
         finally:
             if os.getcwd() != cwd:
                 os.chdir(cwd)
@@ -140,6 +146,8 @@ def check_forward_model(
                 "second run",
             )
 
+    _check_tangents(model, parameters, coordinates, solve)
+
     if failing_parameters is not None:
         try:
             solve(failing_parameters, coordinates, "run_fail")
@@ -159,6 +167,47 @@ def check_forward_model(
                 model, f"the run at {dict(failing_parameters)} was expected to fail but did not"
             )
     return first
+
+
+def _check_tangents(
+    model: Any,
+    parameters: Mapping[str, float],
+    coordinates: Sequence[Mapping[str, float]],
+    solve: Any,
+) -> None:
+    """The tangents of the inputs in ``parameters`` against central differences (see
+    :func:`check_forward_model`)."""
+    member = getattr(model, "tangent_inputs", None)
+    offered = list(member()) if callable(member) else []
+    in_coordinates = {k for c in coordinates for k in c}
+    names = [n for n in offered if n in parameters and n not in in_coordinates]
+    if not names:
+        return
+    got = solve(parameters, coordinates, "run_tangents", tangents=names)
+    for name in names:
+        h = 1e-4 * max(abs(float(parameters[name])), 1.0)
+        sides = [
+            solve({**parameters, name: float(parameters[name]) + sign * h}, coordinates, "run_fd")
+            for sign in (1.0, -1.0)
+        ]
+        for c in coordinates:
+            gamma = got.interface(c)
+            tangent = np.asarray(gamma.tangents.get(name, np.nan), dtype=float)
+            if tangent.shape != gamma.vertices.shape or not np.all(np.isfinite(tangent)):
+                raise _fail(
+                    model,
+                    f"solve(..., tangents=[{name!r}]) gave no finite tangent of the vertices' "
+                    f"shape {gamma.vertices.shape} at {dict(c)}",
+                )
+            fd = (sides[0].interface(c).vertices - sides[1].interface(c).vertices) / (2.0 * h)
+            scale = max(float(np.abs(fd).max()), float(np.abs(tangent).max()), 1e-300)
+            dev = float(np.abs(tangent - fd).max())
+            if dev > 1e-3 * scale:
+                raise _fail(
+                    model,
+                    f"the tangent of {name} at {dict(c)} differs from a central difference of "
+                    f"the model by {dev / scale:.2g} of its size (> 1e-3)",
+                )
 
 
 def example_run(cls: type) -> tuple[dict[str, float], list[dict[str, float]]]:

@@ -173,6 +173,34 @@ class NeverFails(GoodModel):
         return super().solve({"a": min(parameters["a"], 1.0)}, coordinates, workdir)
 
 
+class WithTangents(GoodModel):
+    """Gives d vertices / da (the curve is linear in a); ``sign`` -1 gets it wrong."""
+
+    sign = 1.0
+
+    def tangent_inputs(self):
+        return ["a"]
+
+    def solve(self, parameters, coordinates, workdir, tangents=()):
+        solution = super().solve(parameters, coordinates, workdir)
+        for c in coordinates:
+            gamma = solution.interface(c)
+            slope = self.curve(1.0, c) - self.curve(0.0, c)
+            gamma.tangents = {n: self.sign * slope for n in tangents}
+        return solution
+
+
+class WrongTangents(WithTangents):
+    sign = -1.0
+
+
+def test_check_forward_model_checks_tangents_against_differences(tmp_path):
+    solution = ft.check_forward_model(WithTangents(), *GOOD_RUN, tmp_path)
+    assert solution.interface({"q": 50.0}).tangents == {}  # the first run asks for none
+    with pytest.raises(ft.ConformanceError, match=r"the tangent of a at \{'q': 50.0\} differs"):
+        ft.check_forward_model(WrongTangents(), *GOOD_RUN, tmp_path)
+
+
 def test_check_forward_model_passes_a_good_model(tmp_path):
     solution = ft.check_forward_model(
         GoodModel(), *GOOD_RUN, tmp_path, failing_parameters={"a": 2.0}
