@@ -53,9 +53,10 @@ average 2.1 before and 2.0 after, from the benchmark itself), 8 runs:
     2-D flow cell        1     8       0.7  11.295     1.00       100%           1.17x
     2-D flow cell        2     8       0.4  18.533     1.64        82%           1.43x
 
-A 3-D run under isolation costs 1.09-1.13x a warm serial run (16.5 s a run, 11.8x, when
-every run was a cold fork; 2.8 s, 2x, with the warm helper alone, whose forked runs each
-factorised their first Jacobian).  The 2-D runs take 0.08 s: Dask's own cost per task shows
+A 3-D run under isolation costs 1.09-1.13x a warm serial run.  Before: 16.5 s a run when
+every run was a cold fork (2026-11-26, loaded machine, against about 3 s warm then); 2.8 s,
+1.98x warm serial, with the warm helper alone, whose forked runs each factorised their first
+Jacobian (2026-11-28, load 2.4-4.1).  The 2-D runs take 0.08 s: Dask's own cost per task shows
 (1.43x with 2 workers).
 """
 

@@ -185,8 +185,8 @@ class RobustChain(LMChain):
         conditioned problems is far from what the residuals determine."""
         s = self.settings
         x = self.x0.astype(float).copy()
-        d = self._deltas(x)
-        batch = perturbed(x, d, range(len(x))) if s.jacobian == "forward" else []
+        # forward differences: x's perturbed runs in the same batch (_jacobian_at uses them)
+        batch = perturbed(x, self._deltas(x), range(len(x))) if s.jacobian == "forward" else []
         outs = yield from self._ask([x, *batch])
         if not outs[0].ok:
             self.x_last = x

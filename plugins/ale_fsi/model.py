@@ -101,7 +101,6 @@ class AleFsiForwardModel(Configurable):
         self._solver: Any = None
         self._post: Any = None  # AleFsiPostprocess of the solver
         self._store: list[_Stored] = []
-        self._dstate: dict[str, NDArray[np.float64]] = {}  # dU/dp of the state just recorded
         self._run_states: list[_Stored] = []  # the states of the latest run
         self._regions: list[str] | None = None
         self._given_rate = False
@@ -140,7 +139,7 @@ class AleFsiForwardModel(Configurable):
 
     def prepare(self) -> None:
         """Mesh and build the solver now (the isolation helper does it once before it forks
-        the runs, which then start meshed)."""
+        a run process, which then starts meshed)."""
         self._get_solver()
 
     def warm_state(self) -> list[_Stored]:
@@ -199,7 +198,6 @@ class AleFsiForwardModel(Configurable):
             curves[index] = post.interface()
             if tangents:
                 curves[index].tangents = vertex_tangents(solver, post, tangents, tangent_report)
-                self._dstate = dict(tangent_report.state_tangents)
             per["max_displacement"][index] = post.max_interface_displacement()
             per["fluid_force"][index] = post.forces().tolist()
             if self.options.probes:
@@ -213,7 +211,9 @@ class AleFsiForwardModel(Configurable):
 
         solver.timings = {"assembly": 0.0, "solve": 0.0}
         if self.options.mode == "quasi_static":
-            iterations, jacobians, warm = self._quasi_static(solver, params, levels, record)
+            iterations, jacobians, warm = self._quasi_static(
+                solver, params, levels, record, tangent_report
+            )
             diag["newton_iterations_per_coordinate"] = iterations
             diag["newton_iterations"] = int(sum(iterations))
             diag["jacobians"] = int(sum(jacobians))
@@ -386,12 +386,19 @@ class AleFsiForwardModel(Configurable):
         return self._post
 
     def _quasi_static(
-        self, solver: Any, params: dict[str, float], levels: list[float], record: Any
+        self,
+        solver: Any,
+        params: dict[str, float],
+        levels: list[float],
+        record: Any,
+        tangents: TangentReport,
     ) -> tuple[list[int], list[int], bool]:
         """Continuation through the requested inflow levels (ascending |rate|).
 
         Returns the Newton iterations (chord steps included) and the Jacobian assemblies per
-        coordinate, and whether a stored state of an earlier run served as warm start.
+        coordinate, and whether a stored state of an earlier run served as warm start.  Each
+        solved state is kept with its dU/dp (``tangents.state_tangents``, set by ``record``
+        when tangents are asked for) for first-order warm starts of later runs.
         """
         order = sorted(range(len(levels)), key=lambda i: abs(levels[i]))
         iterations = [0] * len(levels)
@@ -443,10 +450,10 @@ class AleFsiForwardModel(Configurable):
                 break
             if error is not None:
                 raise error
-            self._dstate = {}
-            record(f"inflow rate {rate:g} mm^2/s", i)
+            tangents.state_tangents = {}
+            record(f"inflow rate {rate:g} mm^2/s", i)  # sets them when tangents are asked for
             solved[rate] = solver.state()
-            self._remember(key, rate, solved[rate], self._dstate)
+            self._remember(key, rate, solved[rate], tangents.state_tangents)
         return iterations, jacobians, warm_used
 
     def _remember(

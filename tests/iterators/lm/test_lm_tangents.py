@@ -17,20 +17,25 @@ TRUTH = {"E": 400.0, "nu": 0.3}
 COORDS = [{"inflow_rate": 100.0}]
 
 
-@pytest.fixture(scope="module")
-def fsi_problem():
-    model = fbia.forward_model("ale_fsi", **COARSE)
-    obs = fbia.synthetic_observations(model, TRUTH, COORDS, noise_std=0.0005, seed=3)
+def _problem(model, noise, sigma, e_max=1500.0):
+    """E and nu of ``model`` from its own interface at TRUTH with ``noise`` [mm] (seed 3),
+    compared by cpp; sigma_N = ``sigma`` [mm]."""
+    obs = fbia.synthetic_observations(model, TRUTH, COORDS, noise_std=noise, seed=3)
     return fbia.InverseProblem(
         model=model,
         measure=fbia.measure("cpp"),
         observations=obs,
         parameters=[
-            fbia.Parameter("E", bounds=(100, 1500)),
+            fbia.Parameter("E", bounds=(100, e_max)),
             fbia.Parameter("nu", bounds=(-0.8, 0.45)),
         ],
-        noise_std=0.0005,
+        noise_std=sigma,
     )
+
+
+@pytest.fixture(scope="module")
+def fsi_problem():
+    return _problem(fbia.forward_model("ale_fsi", **COARSE), noise=0.0005, sigma=0.0005)
 
 
 def _lm(**options):
@@ -82,18 +87,7 @@ def test_runs_stored_without_tangents_run_again_for_them(fsi_problem, tmp_path):
 
 
 def test_no_tangents_no_tangent_jacobian():
-    model = fbia.forward_model("analytic_mound_2d")
-    obs = fbia.synthetic_observations(model, TRUTH, COORDS, noise_std=0.0, seed=0)
-    problem = fbia.InverseProblem(
-        model=model,
-        measure=fbia.measure("cpp"),
-        observations=obs,
-        parameters=[
-            fbia.Parameter("E", bounds=(100, 800)),
-            fbia.Parameter("nu", bounds=(-0.8, 0.45)),
-        ],
-        noise_std=0.01,
-    )
+    problem = _problem(fbia.forward_model("analytic_mound_2d"), noise=0.0, sigma=0.01, e_max=800.0)
     result = _lm().run(problem)
     assert result.info["jacobian"] == "forward" and result.success
     with pytest.raises(fbia.ConfigError, match="gives no tangents for E, nu"):
