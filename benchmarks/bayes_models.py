@@ -52,6 +52,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
@@ -184,6 +185,10 @@ class Case:
     rays: NDArray[np.intp]  # grid indices of the measurement points
     y_obs: FloatArray  # observed heights there
     truth: dict[str, float]
+    #: "ray" (Paper B eq. 6, one residual per ray) or "cpp" (eq. 7, one per simulated vertex)
+    measure: str = "ray"
+    #: the observed polyline (the cpp measure's target), shape (n_points, 2)
+    observed: FloatArray | None = None
 
     @property
     def inputs(self) -> list[fbia.Parameter]:
@@ -206,14 +211,26 @@ class Case:
         for j, n in enumerate(self.model.parameter_names()):
             full[:, j] = z[:, self.names.index(n)] if n in self.names else fixed[n]
         (sigma,) = noise_levels(self.problem)
-        n_meas = len(self.rays)
+        n_meas = len(self.rays) if self.measure == "ray" else len(self.model.x)
         const = -0.5 * n_meas * math.log(2 * math.pi * sigma**2)
         out = np.empty(len(z))
         for a in range(0, len(z), chunk):
             E, nu, q = self.model.split(full[a : a + chunk], self.model.parameter_names())
-            r = self.y_obs[None, :] - self.model.heights(E, nu, q)[:, self.rays]
+            y = self.model.heights(E, nu, q)
+            if self.measure == "ray":
+                r = self.y_obs[None, :] - y[:, self.rays]
+            else:
+                r = self.cpp_residuals(y)
             out[a : a + chunk] = const - np.sum(r**2, axis=1) / (2 * sigma**2)
         return out
+
+    def cpp_residuals(self, y: FloatArray) -> FloatArray:
+        """Eq. 7 for simulated graphs ``y`` (N, n_points) over the model's grid: each vertex's
+        distance to the closest point on the observed polyline (on its segments), positive
+        below it (the solid side: the observed graph spans the same x, so the side is that of
+        the observed height at the vertex's x)."""
+        assert self.observed is not None
+        return _cpp_graph(np.ascontiguousarray(y), self.model.x, self.observed)
 
     def check_log_likelihood(self, n: int, seed: int) -> float:
         """Largest |eq. 5 vectorised - eq. 5 through the real pipeline| at the truth and ``n``
@@ -229,6 +246,42 @@ class Case:
         return float(np.max(np.abs(direct - self.log_likelihood(z))))
 
 
+@numba.njit(cache=True)
+def _segment_d2(observed: FloatArray, s: int, px: float, py: float) -> float:  # pragma: no cover
+    """Squared distance of (px, py) to segment s of ``observed``."""
+    ax, ay = observed[s, 0], observed[s, 1]
+    bx, by = observed[s + 1, 0] - ax, observed[s + 1, 1] - ay
+    qx, qy = px - ax, py - ay
+    t = min(max((qx * bx + qy * by) / (bx * bx + by * by), 0.0), 1.0)
+    dx, dy = qx - t * bx, qy - t * by
+    return dx * dx + dy * dy
+
+
+@numba.njit(cache=True, parallel=True)
+def _cpp_graph(
+    y: FloatArray, x: FloatArray, observed: FloatArray
+) -> FloatArray:  # pragma: no cover
+    """:meth:`Case.cpp_residuals` for every row of ``y``.  Exact: the observed polyline is a
+    graph over the same x, so the segments are searched outwards from the vertex's own x and
+    the search stops where a segment's x-distance alone exceeds the best distance so far."""
+    n_rows, n = y.shape
+    m = len(observed) - 1
+    out = np.empty((n_rows, n))
+    for r in numba.prange(n_rows):
+        for j in range(n):
+            best = (observed[j, 1] - y[r, j]) ** 2  # the observed vertex at the same x
+            for s in range(j, m):  # segments to the right: [x_s, x_s+1], x_s >= x_j
+                if (observed[s, 0] - x[j]) ** 2 > best:
+                    break
+                best = min(best, _segment_d2(observed, s, x[j], y[r, j]))
+            for s in range(j - 1, -1, -1):  # to the left: x_s+1 <= x_j
+                if (x[j] - observed[s + 1, 0]) ** 2 > best:
+                    break
+                best = min(best, _segment_d2(observed, s, x[j], y[r, j]))
+            out[r, j] = np.sign(observed[j, 1] - y[r, j]) * math.sqrt(best)
+    return out
+
+
 def inflow_parameter() -> fbia.Parameter:
     """Paper B Fig. 10: the inflow rate ~ Beta(2.6, 1.4) on [0, 110] mm^2/s (mode 88)."""
     return fbia.Parameter("inflow_rate", unit="mm^2/s", prior=fbia.priors.beta(2.6, 1.4, 0, 110))
@@ -240,15 +293,20 @@ def build_case(
     sigma_n: float = 0.01,
     n_points: int = 41,
     seed: int = 0,
+    measure: str = "ray",
 ) -> Case:
     """``"2d"`` (E, nu at q = 100), ``"2d_inflow"`` (E, nu under the uncertain q) or ``"7d"``
     (E_k, nu_k of three layers under the uncertain q): the model, synthetic data with
     ``noise_obs`` [mm] (Paper B eq. 16: 1 um), the ray measure at every other interior vertex,
     sigma_N = ``sigma_n`` [mm] (eq. 5; Paper B uses 0.01 mm with the ray measure), and the
     priors of Paper B (uniform E [100, 800] Pa in 2-D, [100, 1500] Pa per layer in 7-D;
-    uniform nu [-0.8, 0.5]; the Beta inflow of Fig. 10)."""
+    uniform nu [-0.8, 0.5]; the Beta inflow of Fig. 10).  ``measure="cpp"``: the cpp measure
+    (eq. 7, one residual per simulated vertex) against the observed polyline instead of rays
+    (issue 30's 6 + 1-D case: cpp with sigma_N = 2 um)."""
     if name not in ("2d", "2d_inflow", "7d"):
         raise ValueError(f"unknown case {name!r}; valid: 2d, 2d_inflow, 7d")
+    if measure not in ("ray", "cpp"):
+        raise ValueError(f"unknown measure {measure!r}; valid: ray, cpp")
     layered = name == "7d"
     model = LayeredMoundForwardModel(subdomains=3 if layered else 1, n_points=n_points)
     truth = dict(TRUTH_7D if layered else TRUTH_2D)
@@ -280,13 +338,14 @@ def build_case(
         truth["inflow_rate"] = TRUE_INFLOW
     problem = fbia.InverseProblem(
         model=model,
-        measure=fbia.measure("ray"),
+        measure=fbia.measure(measure),
         observations=[obs],
         parameters=parameters,
         noise_std=sigma_n,
         **extra,
     )
-    return Case(name, problem, model, rays, y_data[rays], truth)
+    observed = np.c_[model.x, y_data]
+    return Case(name, problem, model, rays, y_data[rays], truth, measure, observed)
 
 
 # -- brute-force posteriors -----------------------------------------------------------------------

@@ -342,7 +342,8 @@ def print_reference(case: Case, ref: Reference, settings: Mapping[str, Any]) -> 
     shift = np.abs(a.mean - b.mean) / ref.moments.std
     ratio = np.abs(np.log(a.std / b.std))
     print(
-        f"  exact L: vectorised eq. 5 = eq. 5 through InverseProblem.evaluate + ray measure + "
+        f"  exact L: vectorised eq. 5 = eq. 5 through InverseProblem.evaluate + {case.measure} "
+        "measure + "
         f"fbia.core.likelihood to max |dL| = {ref.check_dl:.1e} (truth + 30 prior draws)"
     )
     print(
@@ -378,6 +379,19 @@ def main(argv: list[str] | None = None) -> int:
         "a 25x sharper log-likelihood)",
     )
     ap.add_argument(
+        "--measure",
+        choices=("ray", "cpp"),
+        default="ray",
+        help="the shape measure: ray (Paper B eq. 6, one residual per ray) or cpp (eq. 7, one "
+        "per simulated vertex: a residual emulator with many components; issue 30's case)",
+    )
+    ap.add_argument(
+        "--n-points",
+        type=int,
+        default=41,
+        help="vertices of the model's interface (with cpp: residuals per run) [-]",
+    )
+    ap.add_argument(
         "--repeats",
         type=int,
         default=1,
@@ -402,10 +416,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"warm-up (numba compilation, imports): {time.perf_counter() - t0:.1f} s, not counted")
     summary = []
     for name in cases:
-        case = build_case(name, seed=args.seed, sigma_n=args.sigma_n)
+        case = build_case(
+            name, seed=args.seed, sigma_n=args.sigma_n, measure=args.measure, n_points=args.n_points
+        )
         n_x = len(case.problem.parameters)
         x, theta = case.problem.names, case.problem.uncertain_names
-        print(f"\n=== case {name}: x = {x}, theta = {theta}")
+        print(
+            f"\n=== case {name}: x = {x}, theta = {theta}, {case.measure} measure, "
+            f"sigma_N {args.sigma_n} mm"
+        )
         settings = QUICK_REFERENCE if args.quick else REFERENCE
         grid = (QUICK_GRID if args.quick else GRID).get(name)
         ref = exact_reference(case, settings, grid)

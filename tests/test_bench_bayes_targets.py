@@ -2,7 +2,7 @@
 
 The benchmark judges the gp_smc pipeline against an SMC reference on a vectorised likelihood.
 These tests prove the reference right: the vectorised eq. 5 equals what the pipeline computes
-through InverseProblem.evaluate, the ray measure and fbia.core.likelihood; the SMC reference
+through InverseProblem.evaluate, the ray or cpp measure and fbia.core.likelihood; the SMC reference
 agrees with brute-force quadrature on a fine grid (2-D, and 2-D under the uncertain inflow);
 and the benchmark runs end to end (no accuracy asserted on the surrogate pipeline).
 """
@@ -20,9 +20,10 @@ import bayes_models  # noqa: E402
 import bench_bayes_targets as bench  # noqa: E402
 
 
+@pytest.mark.parametrize("measure", ["ray", "cpp"])
 @pytest.mark.parametrize("name", ["2d", "2d_inflow", "7d"])
-def test_vectorised_likelihood_is_eq_5_through_the_pipeline(name):
-    case = bayes_models.build_case(name)
+def test_vectorised_likelihood_is_eq_5_through_the_pipeline(name, measure):
+    case = bayes_models.build_case(name, measure=measure, sigma_n=0.002)
     assert case.check_log_likelihood(12, seed=3) < 1e-9
     # not degenerate: the truth is far more likely than a typical prior draw
     z = np.array([[case.truth[n] for n in case.names], [p.mean for p in case.priors]])
