@@ -54,15 +54,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...core.errors import ConfigError
 from .guard import ExtrapolationGuard, GuardCounts
-from .mean import fused_kernels
+from .mean import KernelTerms, fused_mean
 from .trend import QuadraticTrend
 
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
 _SQRT3 = math.sqrt(3.0)
-#: Largest |scaled input| for the exp-free product-kernel loop (e^a e^-b stays far from
-#: overflow and underflow: e^(2 * 300) ~ 1e260).
-_EXP_FREE_RANGE = 300.0
 OPTIMIZERS = ("lbfgsb", "scg")
 #: Bounds of the length scales (standardised inputs) and of the signal variance (in units of
 #: (max L - min L)^2) during training.
@@ -426,6 +423,7 @@ class GpSurrogate(ExtrapolationGuard):
 
     def _precompute(self) -> None:
         """alpha = (K + sigma_n^2 I)^-1 (y - m) / scale and the kernel constants (eq. 28a)."""
+        self.__dict__.pop("_terms", None)
         hp = self.hyperparameters()
         self._alpha = np.asarray(self.model.posterior.woodbury_vector, dtype=float).ravel()
         self._ell = np.asarray(hp["lengthscales"], dtype=float)
@@ -433,29 +431,24 @@ class GpSurrogate(ExtrapolationGuard):
         self._xs = self._standardise(self.x_train)
 
     # -- prediction -----------------------------------------------------------------------
+    def kernel_terms(self) -> KernelTerms:
+        """The posterior mean's terms for the compiled loops (:mod:`.mean`), built once."""
+        if "_terms" not in self.__dict__:
+            f = self.scale * self._var
+            self._terms = KernelTerms.of(self.ard, self._ell, self._xs, self._alpha, f)
+        return self._terms
+
     def predict_mean(self, x: ArrayLike, fused: bool | None = None) -> NDArray[np.float64]:
         """Posterior mean of L at the rows of ``x`` (M, d) (eq. 28a), all points at once.
 
-        ``fused``: compiled numba loops (:mod:`.gp_mean`; ``None``: from 64 points on;
+        ``fused``: compiled numba loops (:mod:`.mean`; ``None``: from 64 points on;
         ``True``: always) or numpy blocks (``False``).
         """
         if not hasattr(self, "_alpha"):
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
         xs = self._standardise(np.atleast_2d(x))
         if fused is not False and (fused or len(xs) >= 64):
-            kernels = fused_kernels()
-            scale = _SQRT3 / (self._ell if self.ard else self._ell[0])
-            xt_t = np.ascontiguousarray((self._xs * scale).T)
-            a = np.ascontiguousarray(xs * scale)
-            if not self.ard:
-                raw = kernels[1](a, xt_t, self._alpha, 32)
-                return self._prior_mean(x) + self.scale * self._var * raw
-            # Scaled inputs too far out for e^a (tiny length scales): the numpy blocks below.
-            if max(np.abs(a).max(), np.abs(xt_t).max()) < _EXP_FREE_RANGE:
-                raw = kernels[0](
-                    a, xt_t, np.exp(a), np.exp(-a), np.exp(xt_t), np.exp(-xt_t), self._alpha, 32
-                )
-                return self._prior_mean(x) + self.scale * self._var * raw
+            return self._prior_mean(x) + fused_mean(self.kernel_terms(), xs)
         out = np.empty(len(xs))
         rows = max(1, _BLOCK // max(1, len(self._xs)))
         for i in range(0, len(xs), rows):

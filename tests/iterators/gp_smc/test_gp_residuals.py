@@ -88,6 +88,33 @@ def test_variance_vanishes_at_runs_and_covariance_is_consistent(fitted):
     assert off[0, 1] == pytest.approx(cov[0, 1]) and off[0, 1] == pytest.approx(off[1, 0])
 
 
+@pytest.mark.parametrize("ard", [True, False])
+def test_components_predicted_in_one_call_equal_one_by_one(ard):
+    """The batched compiled loop over the principal components (issue 30) gives each
+    component's own posterior mean, also where a component has its own length scales."""
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 0.6, (60, 2))
+    link, r, _ = residual_link(_records(x), [SIGMA], None)
+    assert link is not None
+    s = ResidualSurrogate(link, ard=ard).fit(x, r, rng=0)
+    assert len(s.components) >= 3
+    test = rng.uniform(-0.1, 0.7, (300, 2))
+    one_by_one = np.column_stack([gp.predict_mean(test, fused=False) for gp in s.components])
+    # the numpy blocks and the compiled loops sum k(x, X) alpha in other orders: alpha of a
+    # nearly interpolating GP is large and alternating, so they agree to ~1e-10 of the scores
+    scale = np.abs(one_by_one).max()
+    np.testing.assert_allclose(s._scores(test), one_by_one, rtol=0, atol=1e-9 * scale)
+    if ard:  # the components differ in their length scales, so the batch is not one kernel
+        ells = np.array([gp.hyperparameters()["lengthscales"] for gp in s.components])
+        assert np.ptp(ells, axis=0).max() > 0.1 * ells.min()
+        # one component with length scales so short that e^(sqrt3 x / l) would overflow: it
+        # takes the loop with exps, the others stay exact in the same call
+        short = GpSurrogate.from_state({**s.components[1].state(), "lengthscales": [2e-3, 3e-3]})
+        s.components[1] = short
+        one_by_one[:, 1] = short.predict_mean(test, fused=False)
+        np.testing.assert_allclose(s._scores(test), one_by_one, rtol=0, atol=1e-9 * scale)
+
+
 def test_state_round_trip_and_guard(fitted):
     x, s = fitted
     back = restore_surrogate(s.state())

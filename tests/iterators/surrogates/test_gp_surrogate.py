@@ -132,7 +132,7 @@ def test_fused_numba_mean_equals_numpy_blocks(trained):
         np.testing.assert_allclose(
             gp.predict_mean(x[:m], fused=True), gp.predict_mean(x[:m], fused=False), atol=1e-9
         )
-    if gp.ard:  # length scales so short that e^(sqrt3 x / l) would overflow: numpy blocks
+    if gp.ard:  # length scales so short that e^(sqrt3 x / l) would overflow: the exp loop
         state = {**gp.state(), "lengthscales": np.array([2e-3, 3e-3])}
         short = GpSurrogate.from_state(state)
         assert np.abs(short._standardise(x)).max() * np.sqrt(3) / 2e-3 > 300
