@@ -278,11 +278,15 @@ class ResidualSurrogate(ExtrapolationGuard):
         the same runs: then the standardised particles are computed once)."""
         if "_shared" not in self.__dict__:
             a = self.components[0]
+            eye = np.eye(len(a.x_mean))
             self._shared = all(
                 np.array_equal(gp.x_mean, a.x_mean)
                 and np.array_equal(gp.x_std, a.x_std)
                 and (gp.rotation is None) == (a.rotation is None)
-                and (gp.rotation is None or np.array_equal(gp.rotation, a.rotation))
+                and np.array_equal(
+                    eye if gp.rotation is None else gp.rotation,
+                    eye if a.rotation is None else a.rotation,
+                )
                 for gp in self.components
             )
         return bool(self._shared)
