@@ -178,6 +178,10 @@ class DaskExecutor:
                 "threads_per_worker": 1,
                 "processes": True,
                 "dashboard_address": None,
+                # the scheduler's HTTP server (health, metrics) starts even without a
+                # dashboard, on port 8787 by default: a second cluster warned "port 8787 in
+                # use"; any free port of this machine only
+                "scheduler_kwargs": {"dashboard_address": "127.0.0.1:0"},
                 "silence_logs": logging.ERROR,  # no warnings about tasks cancelled by Ctrl-C
                 **cluster_options,
             }
