@@ -64,3 +64,19 @@ def test_benchmark_smoke_run(capsys):
     out = capsys.readouterr().out
     assert "converged" in out and "quadrature" in out
     assert "SUMMARY 2d: pipeline" in out and "fixed Sobol at the paper's budget" in out
+
+
+def test_checks_benchmark_smoke_run(capsys):
+    """benchmarks/bench_bayes_checks.py (issue 30 item 6): right/wrong against the exact
+    reference by the written rule, crossed with gp_smc's status; counts add up."""
+    import bench_bayes_checks as checks
+
+    assert checks.main(["--quick", "--seeds", "1", "--only", "2d_inflow_ray_starved"]) == 0
+    out = capsys.readouterr().out
+    assert "2d_inflow_ray_starved" in out and "silently wrong" in out
+    row = [line for line in out.splitlines() if line.startswith("  2d_inflow_ray_starved:")]
+    assert len(row) == 1 and row[0].count("/") == 1  # one seed: right|wrong / its status
+    outcome = checks.Outcome("c", 0, False, "completed", 1.0, 2.0, 3.0, 2.0, 1.0, 0.1, 10, 1.0)
+    right = checks.Outcome("c", 1, True, "completed", *[0.0] * 6, 1, 0.0)
+    table = checks.confusion([outcome, right])
+    assert "silently wrong (wrong and 'completed'): 1" in table

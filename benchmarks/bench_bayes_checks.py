@@ -1,0 +1,225 @@
+"""Benchmark: does gp_smc's status say when its posterior is wrong? (issue 30 item 6)
+
+gp_smc reports ``completed`` or ``unreliable`` from its own diagnostics: the surrogate's RMSE
+in L at forward runs at posterior draws (``RELIABLE_RMSE``), the share of failed runs there,
+and the posterior averaged over the GP's sample paths (``MAX_SHIFT``, ``MAX_STD_RATIO`` in
+``fbia.iterators.surrogates.uncertainty``).  Those limits are only useful if they separate
+right posteriors from wrong ones.  This benchmark measures that against exact posteriors: for
+every configuration below (a case of ``bayes_models``, a measure, sigma_N and gp_smc options;
+some with the default budget, some starved so that the posterior can be wrong) and several
+gp_smc seeds, it calls a posterior
+
+* **right** by the rule of ``bench_bayes_targets`` written down before the runs: every
+  posterior mean of x within 0.3 exact posterior std of the exact one and every std within a
+  factor 1.5 (theta, the inflow, is not judged: the targets concern q(x | Y));
+* **wrong** otherwise,
+
+and prints the confusion table of (right, wrong) x (completed, unreliable) with the two rates
+that matter: right posteriors that say ``completed`` (the checks do not cry wolf) and wrong
+posteriors that say ``unreliable`` (the checks catch them; a wrong ``completed`` is a silently
+wrong result).  The exact reference is ``fbia.smc`` on the vectorised eq. 5 (two seeds,
+20 000 particles, checked converged), as in ``bench_bayes_targets``.
+
+    .venv/bin/python benchmarks/bench_bayes_checks.py            # all configurations
+    .venv/bin/python benchmarks/bench_bayes_checks.py --quick    # smoke run, < 1 min
+    .venv/bin/python benchmarks/bench_bayes_checks.py --only 7d_cpp --seeds 2
+
+The exit status is 0 whatever the rates.
+
+Measured on 2026-11-28 (idle 2 cores, gp_smc seeds 0-2, 10 configurations, 30 runs; 21 min):
+
+* at the issues' budgets (2d_inflow ray and cpp, 7d ray, cpp and ray at sigma_N = 2 um): 15
+  right posteriors, 14 say ``completed``; one false alarm (7d_ray_sharp seed 2: right to
+  0.03 std, check RMSE 1.06 in L at 8 draws; the sample paths move it 0.03 std);
+* starved (fixed Sobol designs of 30 and 150 runs): 7 wrong posteriors (0.4-3.4 std off,
+  std factors 1.6-10), all 7 ``unreliable`` (check RMSE 5-1200 in L); 2 right by luck
+  (0.20, 0.23 std off), ``unreliable`` (RMSE 5.9, 10.9);
+* stopped by a short budget (adaptive, 120 and 150 runs): 1 wrong, ``unreliable``; 5 right,
+  all ``unreliable`` (the GP's sample paths widen the posterior x2-8 and move it 0.8-1.7
+  std: the design had not converged, so nothing vouches for them);
+* silently wrong (wrong and ``completed``): 0 of 30.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from bayes_models import build_case  # next to this file
+from bench_bayes_targets import (
+    QUICK_REFERENCE,
+    REFERENCE,
+    TARGET_FACTOR,
+    TARGET_SHIFT,
+    exact_reference,
+    resolve,
+    run_pipeline,
+)
+
+import fbia
+
+
+@dataclass(frozen=True)
+class Config:
+    """One calibration problem and the gp_smc options it runs with."""
+
+    label: str
+    case: str
+    measure: str
+    sigma_n: float
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+#: the configurations (defaults at the issue's budgets, and starved ones that can be wrong)
+CONFIGS = (
+    Config("2d_inflow_ray", "2d_inflow", "ray", 0.01, {"n_train": 92}),
+    Config("2d_inflow_cpp", "2d_inflow", "cpp", 0.002, {"n_train": 92}),
+    Config("7d_ray", "7d", "ray", 0.01, {"n_train": 992, "ard": True}),
+    Config("7d_cpp", "7d", "cpp", 0.002, {"n_train": 992, "ard": True}),
+    Config("7d_ray_sharp", "7d", "ray", 0.002, {"n_train": 992, "ard": True}),
+    # starved: a fixed Sobol design far below what the posterior needs
+    Config("2d_inflow_ray_starved", "2d_inflow", "ray", 0.01, {"design": "sobol", "n_train": 30}),
+    Config("2d_inflow_cpp_starved", "2d_inflow", "cpp", 0.002, {"design": "sobol", "n_train": 30}),
+    Config("7d_cpp_starved", "7d", "cpp", 0.002, {"design": "sobol", "n_train": 150, "ard": True}),
+    # stopped early: the adaptive design with a budget below its convergence
+    Config("7d_ray_short", "7d", "ray", 0.01, {"n_train": 120, "ard": True}),
+    Config("7d_cpp_short", "7d", "cpp", 0.002, {"n_train": 150, "ard": True}),
+)
+#: --quick: small SMC settings and two cheap configurations
+QUICK = {"n_particles": 500, "n_rejuvenation": 3, "zeta": 0.8}
+QUICK_CONFIGS = ("2d_inflow_ray", "2d_inflow_ray_starved")
+
+
+@dataclass
+class Outcome:
+    config: str
+    seed: int
+    right: bool
+    status: str
+    shift: float  # worst |dmean| / exact std over x
+    ratio: float  # worst std ratio (max(r, 1/r)) over x
+    rmse: float  # the check's RMSE in L at posterior draws
+    centred: float  # the same without the mean error (a constant error leaves the posterior)
+    widen: float  # the sample-path check: largest std ratio (expected / mean-only posterior)
+    move: float  # and largest |mean shift| / std
+    runs: int
+    seconds: float
+
+
+def judge(ref_mean, ref_std, mean, std, n_x: int) -> tuple[bool, float, float]:
+    """The rule (module docstring): right, worst shift, worst std factor over x."""
+    shift = np.abs(mean[:n_x] - ref_mean[:n_x]) / ref_std[:n_x]
+    ratio = std[:n_x] / ref_std[:n_x]
+    factor = np.maximum(ratio, 1.0 / ratio)
+    right = bool(np.all(shift <= TARGET_SHIFT) and np.all(factor <= TARGET_FACTOR))
+    return right, float(shift.max()), float(factor.max())
+
+
+#: exact references by (case, measure, sigma_N): configurations of one problem share theirs
+_REFERENCES: dict[tuple[str, str, float], Any] = {}
+
+
+def run_config(config: Config, seeds: list[int], quick: bool) -> list[Outcome]:
+    case = build_case(config.case, sigma_n=config.sigma_n, measure=config.measure)
+    n_x = len(case.problem.parameters)
+    settings = QUICK_REFERENCE if quick else REFERENCE
+    key = (config.case, config.measure, config.sigma_n)
+    if key not in _REFERENCES:
+        _REFERENCES[key] = exact_reference(case, settings, None)
+    ref = _REFERENCES[key]
+    a, b = ref.seeds
+    spread = float(np.max(np.abs(a.mean - b.mean) / ref.moments.std))
+    print(
+        f"\n=== {config.label}: case {config.case}, {config.measure} measure, sigma_N "
+        f"{config.sigma_n} mm, gp_smc {config.options}; exact reference {ref.seconds:.0f} s "
+        f"(seeds differ by {spread:.3f} std)",
+        flush=True,
+    )
+    out = []
+    for seed in seeds:
+        options = {"design": "adaptive", "n_check": 8, **config.options, "seed": seed}
+        if quick:
+            options.update(QUICK)
+        opts, _ = resolve(options)
+        run = run_pipeline(case, config.label, opts, [])
+        if run.moments is None:
+            print(f"  seed {seed}: no result ({run.error})")
+            continue
+        right, shift, ratio = judge(
+            ref.moments.mean, ref.moments.std, run.moments.mean, run.moments.std, n_x
+        )
+        res = run.result
+        check, unc = res.check, res.uncertainty
+        rmse = float("nan") if check is None else float(check.rmse)
+        centred = math.sqrt(max(rmse**2 - check.mean_error**2, 0.0)) if check else math.nan
+        widen = math.nan if unc is None else float(np.max(unc.std_ratio))
+        move = math.nan if unc is None else float(np.max(np.abs(unc.mean_shift_relative)))
+        outcome = Outcome(
+            config.label, seed, right, res.status, shift, ratio, rmse, centred, widen, move,
+            run.nfev, run.seconds_excluding_runs,
+        )  # fmt: skip
+        print(
+            f"  seed {seed}: {'right' if right else 'WRONG'} (max |dmean|/std {shift:.2f}, "
+            f"worst std factor {ratio:.2f}), status {res.status!r}: check RMSE {rmse:.3g} "
+            f"(centred {centred:.3g}), sample paths widen x{widen:.3g}, move {move:.2g} std; "
+            f"{run.nfev} runs, {run.seconds_excluding_runs:.0f} s excl. runs",
+            flush=True,
+        )
+        out.append(outcome)
+    return out
+
+
+def confusion(outcomes: list[Outcome]) -> str:
+    def count(right: bool, status: str) -> int:
+        return sum(1 for o in outcomes if o.right == right and o.status == status)
+
+    statuses = sorted({o.status for o in outcomes} | {"completed", "unreliable"})
+    lines = [f"  {'':<8}" + "".join(f"{s:>12}" for s in statuses)]
+    for right in (True, False):
+        word = "right" if right else "wrong"
+        lines.append(f"  {word:<8}" + "".join(f"{count(right, s):>12}" for s in statuses))
+    n_right = sum(o.right for o in outcomes)
+    n_wrong = len(outcomes) - n_right
+    ok_right, caught = count(True, "completed"), count(False, "unreliable")
+    lines.append(
+        f"  right posteriors that say 'completed': {ok_right} of {n_right}; wrong posteriors "
+        f"that say 'unreliable': {caught} of {n_wrong}; silently wrong (wrong and "
+        f"'completed'): {count(False, 'completed')}"
+    )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    labels = [c.label for c in CONFIGS]
+    ap.add_argument("--only", choices=labels, nargs="+", help="these configurations")
+    ap.add_argument("--seeds", type=int, default=3, help="gp_smc seeds 0 .. n-1 per config")
+    ap.add_argument("--quick", action="store_true", help="small sizes: a smoke run")
+    args = ap.parse_args(argv)
+    chosen = args.only or (QUICK_CONFIGS if args.quick else labels)
+    print(
+        f"fbia {fbia.__version__}; {len(os.sched_getaffinity(0))} usable cores; rule: right = "
+        f"every x mean within {TARGET_SHIFT} exact std and std within x{TARGET_FACTOR}"
+    )
+    t0 = time.perf_counter()
+    outcomes: list[Outcome] = []
+    for config in CONFIGS:
+        if config.label in chosen:
+            outcomes += run_config(config, list(range(args.seeds)), args.quick)
+    print(f"\nall runs ({time.perf_counter() - t0:.0f} s):")
+    print(confusion(outcomes))
+    for label in chosen:
+        mine = [o for o in outcomes if o.config == label]
+        words = ", ".join(f"{'right' if o.right else 'wrong'}/{o.status}" for o in mine)
+        print(f"  {label}: {words}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
