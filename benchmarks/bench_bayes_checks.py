@@ -45,6 +45,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -110,6 +111,7 @@ class Outcome:
     move: float  # and largest |mean shift| / std
     runs: int
     seconds: float
+    repairs: int = 0  # failed checks repaired before the last (gp_smc's check_repairs)
 
 
 def judge(ref_mean, ref_std, mean, std, n_x: int) -> tuple[bool, float, float]:
@@ -160,15 +162,18 @@ def run_config(config: Config, seeds: list[int], quick: bool) -> list[Outcome]:
         centred = math.sqrt(max(rmse**2 - check.mean_error**2, 0.0)) if check else math.nan
         widen = math.nan if unc is None else float(np.max(unc.std_ratio))
         move = math.nan if unc is None else float(np.max(np.abs(unc.mean_shift_relative)))
+        said = re.search(r"(\d+) check\(s\) at posterior draws failed", res.message)
+        repairs = int(said.group(1)) if said else 0
         outcome = Outcome(
             config.label, seed, right, res.status, shift, ratio, rmse, centred, widen, move,
-            run.nfev, run.seconds_excluding_runs,
+            run.nfev, run.seconds_excluding_runs, repairs,
         )  # fmt: skip
         print(
             f"  seed {seed}: {'right' if right else 'WRONG'} (max |dmean|/std {shift:.2f}, "
             f"worst std factor {ratio:.2f}), status {res.status!r}: check RMSE {rmse:.3g} "
             f"(centred {centred:.3g}), sample paths widen x{widen:.3g}, move {move:.2g} std; "
-            f"{run.nfev} runs, {run.seconds_excluding_runs:.0f} s excl. runs",
+            f"{run.nfev} runs ({repairs} failed checks repaired), "
+            f"{run.seconds_excluding_runs:.0f} s excl. runs",
             flush=True,
         )
         out.append(outcome)

@@ -61,10 +61,8 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Generator, Mapping, Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -83,8 +81,9 @@ from ..surrogates.feasibility import feasibility_note, feasibility_summary, fit_
 from ..surrogates.gp import GpSurrogate
 from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link
 from ..surrogates.uncertainty import marginalise_surrogate_uncertainty
-from .adaptive import distinct_draws, soft_floor
+from .adaptive import soft_floor
 from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, adaptive_design
+from .check import posterior_check, repair_note, repairable, training_values, with_check_runs
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
 from .result import (
@@ -92,7 +91,6 @@ from .result import (
     DesignRuns,
     GpSmcResult,
     ParticlePosterior,
-    PosteriorCheck,
     SmcSummary,
     SurrogateFit,
 )
@@ -193,18 +191,26 @@ class GpSmcIterator(IteratorBase):
             fit = yield from self._surrogate_stage(run, design, gp, floor)
             log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean_guarded
         else:
-            design, fit, gp = None, None, None
+            design, fit, gp, floor = None, None, None, None
             log_likelihood = run.forward_log_likelihood
-        trained = None
-        if gp is not None and run.noise is None:
-            trained = (float(gp.y_train.min()), float(gp.y_train.max()))
         # the SMC target: L (or its profile over sigma_N) where the forward model runs
         target = run.joint(log_likelihood) if gp is None else gp.feasible(run.joint(log_likelihood))
-        post = yield from self._smc_stage(run, target, trained)
-        check = None
-        if opts.mode == "surrogate" and opts.n_check:
-            assert gp is not None
-            check = yield from self._check_stage(run, post, gp)
+        post = yield from self._smc_stage(run, target, _trained(run, gp))
+        check, failed = None, list[float]()
+        while opts.mode == "surrogate" and opts.n_check:
+            assert gp is not None and design is not None
+            rng = np.random.default_rng([opts.seed, 2, *([len(failed)] if failed else [])])
+            check = yield from posterior_check(run, post, gp, opts.n_check, rng)
+            budget, limit = opts.n_train, opts.check_repairs
+            if not repairable(check, design, adaptive is not None, budget, len(failed), limit):
+                break
+            failed.append(check.rmse)  # its runs join the design and train the surrogate
+            statuses = [ev.status for ev in run.evaluations[-len(check.x) :]]
+            design = with_check_runs(design, check, statuses)
+            gp = self._refit(run, design, gp, post, floor)
+            fit = yield from self._surrogate_stage(run, design, gp, floor)
+            target = gp.feasible(run.joint(gp.predict_mean_guarded))
+            post = yield from self._smc_stage(run, target, _trained(run, gp))
         posterior_particles, uncertainty = post, None
         wanted = opts.surrogate_uncertainty == "expected_posterior"
         if gp is not None and run.noise is None and (wanted or opts.uncertainty_check):
@@ -237,6 +243,7 @@ class GpSmcIterator(IteratorBase):
                 + (f"; {self.surrogate_note}" if self.surrogate_note else "")
                 + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
+                + repair_note(failed)
                 + _noise_note(run, posterior)
                 + ("" if gp is None else _extrapolation_note(post, gp))
                 + ("" if gp is None else feasibility_note(gp.feasibility))
@@ -379,6 +386,22 @@ class GpSmcIterator(IteratorBase):
             trend=opts.gp_trend,
         ).fit(x, y, rng=rng, start=None if start and "components" in start else start, axes=axes)
 
+    def _refit(
+        self, run: SmcRun, design: DesignRuns, gp: Surrogate, post: SmcResult, floor: float | None
+    ) -> Surrogate:
+        """The surrogate on every training run of ``design``, from ``gp``'s hyperparameters
+        (a repaired check, :mod:`.check`); its kernel along ``post``'s axes with gp_axes =
+        "posterior", the feasibility classifier refitted with failures = "classify"."""
+        train = design.train_mask
+        records = [run.evaluations[i] for i in np.flatnonzero(train)]
+        axes = np.atleast_2d(post.cov) if self.options.gp_axes == "posterior" else None
+        y = training_values(design, floor)
+        new = self._fit_gp(run, design.points[train], y[train], gp.hyperparameters(), records, axes)
+        if self.options.failures == "classify":
+            new.feasibility = fit_feasibility(design.points[train], design.ok[train])
+        self.surrogate = new
+        return new
+
     def _round_smc(
         self, run: SmcRun, log_likelihood: Callable[[FloatArray], FloatArray], n_particles: int
     ) -> SmcResult:
@@ -465,39 +488,6 @@ class GpSmcIterator(IteratorBase):
             yield GpSmcState("smc", str(state), run.record("smc", **state.__dict__))
         self.posterior = post
         return post
-
-    def _check_stage(
-        self, run: SmcRun, post: SmcResult, gp: Surrogate
-    ) -> Generator[GpSmcState, None, PosteriorCheck]:
-        """Forward runs at ``n_check`` distinct posterior draws: the surrogate's error there.
-
-        The held-out Sobol points measure the error over the whole box; what decides whether
-        the posterior is right is the error where the posterior mass is, in units of L (an
-        error of order 1 changes posterior ratios by a factor e).
-        """
-        rng = np.random.default_rng([self.options.seed, 2])
-        x = distinct_draws(post, self.options.n_check, rng)[:, : len(run.inputs)]
-        evs = run.evaluate(x)
-        loglik = run.log_likelihoods(evs)
-        ok = np.isfinite(loglik)
-        err = gp.predict_mean(x[ok]) - loglik[ok]
-        n_ok = int(ok.sum())
-        check = PosteriorCheck(
-            n=n_ok,
-            n_failed=int((~ok).sum()),
-            x=x,
-            log_likelihood=loglik,
-            rmse=float(np.sqrt(np.mean(err**2))) if n_ok else math.nan,
-            max_abs=float(np.max(np.abs(err))) if n_ok else math.nan,
-            mean_error=float(np.mean(err)) if n_ok else math.nan,
-        )
-        run.evaluations = [*run.evaluations, *evs]
-        yield GpSmcState(
-            "check",
-            f"surrogate at {check.n} posterior draws: RMSE {check.rmse:.3g} in L",
-            run.record("check", **{k: v for k, v in asdict(check).items() if k != "x"}),
-        )
-        return check
 
     def _finish_failed(self, run: SmcRun, design: DesignRuns) -> GpSmcResult:
         evaluations = run.evaluations
@@ -596,3 +586,10 @@ def _extrapolation_note(post: SmcResult, gp: Surrogate) -> str:
         f"; {mass:.0%} of the posterior lies where the surrogate extrapolates above its "
         "training values (capped there): add runs there, or check the result"
     )
+
+
+def _trained(run: SmcRun, gp: Surrogate | None) -> tuple[float, float] | None:
+    """The surrogate's training range of L for the SMC's messages (known sigma_N only)."""
+    if gp is None or run.noise is not None:
+        return None
+    return float(gp.y_train.min()), float(gp.y_train.max())

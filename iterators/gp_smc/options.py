@@ -32,6 +32,13 @@ class GpSmcOptions(PluginOptions):
         "surrogate's error where the posterior is; a RMSE in L not below 0.5 makes the "
         "status 'unreliable' (surrogate mode; 0 skips the check, status 'unchecked') [-]",
     )
+    check_repairs: int = Field(
+        2,
+        ge=0,
+        description="with design = 'adaptive': when the check at posterior draws fails and "
+        "n_train leaves room, its runs join the design, the surrogate is refitted and the "
+        "posterior and a fresh check computed again, at most this often (0: never) [-]",
+    )
     n_test: int = Field(
         0,
         ge=0,

@@ -2,6 +2,7 @@
 exact posterior by quadrature."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -137,3 +138,37 @@ def test_posterior_axes_meet_the_2d_target_and_need_an_adaptive_design(exact_2d)
     assert np.all((got_std < 1.5 * std) & (got_std > std / 1.5))
     with pytest.raises(fbia.ConfigError, match="design = 'adaptive'"):
         fbia.iterator("gp_smc", gp_axes="posterior", design="sobol", n_train=8).run(problem)
+
+
+def test_a_failed_check_is_repaired_with_its_runs_within_the_budget(exact_2d, monkeypatch):
+    """issue 30: a check at posterior draws that fails adds its runs to the adaptive design,
+    the surrogate is refitted and a fresh check drawn, at most check_repairs times; only the
+    last check decides the status."""
+    import fbia.iterators.gp_smc.result as result_module
+
+    problem, _, _ = exact_2d
+    opts = {"n_train": 200, "n_particles": 400, "n_rejuvenation": 3, "zeta": 0.9}
+    opts["round_particles"] = 400
+    # as it comes: each failed check costs n_check runs more, at most two
+    plain = fbia.iterator("gp_smc", **opts).run(problem)
+    said = re.search(r"(\d) check\(s\) at posterior draws failed", plain.message)
+    failed = int(said.group(1)) if said else 0
+    with monkeypatch.context() as patch:
+        patch.setattr(result_module, "RELIABLE_RMSE", 0.0)  # every check fails
+        once = fbia.iterator("gp_smc", check_repairs=0, **opts).run(problem)
+        repaired = fbia.iterator("gp_smc", **opts).run(problem)
+    assert plain.nfev == once.nfev + 8 * failed
+    assert plain.status == "completed"  # the 2-D posterior is easy; after a repair if need be
+    # check_repairs = 0: the first failed check decides
+    assert once.status == "unreliable" and "check(s) at posterior" not in once.message
+    n_design = int(once.design.train_mask.sum())
+    assert n_design + 16 <= 200  # room for two repairs
+    assert repaired.status == "unreliable"
+    assert "2 check(s) at posterior draws failed" in repaired.message
+    assert repaired.nfev == once.nfev + 16
+    # the failed checks' runs trained the last surrogate, the first of them once's check
+    assert int(repaired.design.train_mask.sum()) == n_design + 16
+    np.testing.assert_array_equal(repaired.design.points[n_design : n_design + 8], once.check.x)
+    # the last check's draws are fresh: none of them is a training run
+    last = repaired.check.x
+    assert not any(np.any(np.all(repaired.design.points == row, axis=1)) for row in last)
