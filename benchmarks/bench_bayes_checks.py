@@ -26,11 +26,14 @@ wrong result).  The exact reference is ``fbia.smc`` on the vectorised eq. 5 (two
 
 The exit status is 0 whatever the rates.
 
-Measured on 2026-11-28 (idle 2 cores, gp_smc seeds 0-2, 10 configurations, 30 runs; 21 min):
+Measured on 2026-11-28 (idle 2 cores, gp_smc seeds 0-2, 10 configurations, 30 runs; 18 min),
+with the repair of failed checks (gp_smc ``check_repairs = 2``):
 
-* at the issues' budgets (2d_inflow ray and cpp, 7d ray, cpp and ray at sigma_N = 2 um): 15
-  right posteriors, 14 say ``completed``; one false alarm (7d_ray_sharp seed 2: right to
-  0.03 std, check RMSE 1.06 in L at 8 draws; the sample paths move it 0.03 std);
+* at the issues' budgets (2d_inflow ray and cpp, 7d ray and cpp, 7d ray at sigma_N = 2 um):
+  15 right posteriors (max 0.08 std off, std factors <= 1.04), all 15 ``completed``.  Before
+  the repair one of them said ``unreliable`` (7d_ray_sharp seed 2: right to 0.03 std, its 8
+  check draws had a RMSE of 1.06 in L); now its failed check's runs join the design and a
+  fresh check passes (272 runs instead of 264);
 * starved (fixed Sobol designs of 30 and 150 runs): 7 wrong posteriors (0.4-3.4 std off,
   std factors 1.6-10), all 7 ``unreliable`` (check RMSE 5-1200 in L); 2 right by luck
   (0.20, 0.23 std off), ``unreliable`` (RMSE 5.9, 10.9);
