@@ -146,12 +146,6 @@ def principal_axes(cov: ArrayLike, x_std: NDArray[np.float64]) -> NDArray[np.flo
     return np.asarray(vectors, dtype=np.float64)
 
 
-def _cho_solve(chol: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    from scipy.linalg import cho_solve
-
-    return np.asarray(cho_solve((chol, True), b))
-
-
 class GpSurrogate(ExtrapolationGuard):
     """GP regression model of the log-likelihood L(x) (Paper B, eq. 26-29).
 
@@ -326,11 +320,7 @@ class GpSurrogate(ExtrapolationGuard):
                 subset=self.subset,
                 trend=self.trend_kind,
             ).fit(x[: self.subset], y[: self.subset], rng, axes=axes)
-            hp = pre.hyperparameters()
-            ratio = np.asarray(hp["x_std"]) / self.x_std
-            ells = np.asarray(hp["lengthscales"]) * (ratio if self.ard else ratio.mean())
-            var = float(np.clip(hp["signal_variance"] / self.scale**2, *VARIANCE_BOUNDS))
-            starts = [(var, np.clip(ells, *LENGTHSCALE_BOUNDS))]
+            starts = [self._carried(pre.hyperparameters())]
             max_iters = self.polish_iters
             self.info["subset_search"] = pre.describe()
         else:
@@ -392,16 +382,32 @@ class GpSurrogate(ExtrapolationGuard):
     def _warm_starts(
         self, hp: Mapping[str, Any], rng: np.random.Generator
     ) -> list[tuple[float, NDArray[np.float64]]]:
-        """Earlier hyperparameters in this fit's units (the input and output scales moved
-        with the data), then ``restarts`` log-uniform perturbations of them."""
-        ratio = np.asarray(hp["x_std"]) / self.x_std
-        ells = np.asarray(hp["lengthscales"]) * (ratio if self.ard else ratio.mean())
-        var = float(np.clip(hp["signal_variance"] / self.scale**2, *VARIANCE_BOUNDS))
-        guesses = [(var, np.clip(ells, *LENGTHSCALE_BOUNDS))]
+        """Earlier hyperparameters in this fit's units (:meth:`_carried`), then ``restarts``
+        log-uniform perturbations of them."""
+        var, ells = self._carried(hp)
+        guesses = [(var, ells)]
         for _ in range(self.restarts):
             f_ell = 10.0 ** rng.uniform(-0.5, 0.5, size=len(ells))
             guesses.append((var * 10.0 ** rng.uniform(-1.0, 1.0), guesses[0][1] * f_ell))
         return guesses
+
+    def _carried(self, hp: Mapping[str, Any]) -> tuple[float, NDArray[np.float64]]:
+        """Hyperparameters ``hp`` of another fit in this fit's units: the same variance in L^2
+        and, with a product kernel, the length scales whose quadratic form R diag(l^-2) R^T
+        (R: the kernel's axes) is the other fit's, moved to this fit's standardisation and
+        read along this fit's axes (the axes turn between adaptive rounds, gp_axes)."""
+        ratio = np.asarray(hp["x_std"], dtype=float) / self.x_std  # old std / new std
+        ells = np.asarray(hp["lengthscales"], dtype=float)
+        if not self.ard:
+            ells = ells * ratio.mean()
+        else:
+            eye = np.eye(len(ratio))
+            old = eye if hp.get("rotation") is None else np.asarray(hp["rotation"], dtype=float)
+            new = eye if self.rotation is None else self.rotation
+            precision = (old / ells**2) @ old.T / np.outer(ratio, ratio)
+            ells = 1.0 / np.sqrt(np.einsum("ik,ij,jk->k", new, precision, new))
+        var = float(np.clip(hp["signal_variance"] / self.scale**2, *VARIANCE_BOUNDS))
+        return var, np.clip(ells, *LENGTHSCALE_BOUNDS)
 
     def _set_hyper(self, variance: float, lengthscale: NDArray[np.float64]) -> None:
         self.model.kern.variance[:] = variance
@@ -419,6 +425,7 @@ class GpSurrogate(ExtrapolationGuard):
             "prior_mean": self.mean_value,
             "x_mean": self.x_mean.tolist(),
             "x_std": self.x_std.tolist(),
+            **({} if self.rotation is None else {"rotation": self.rotation.tolist()}),
         }
 
     def _precompute(self) -> None:
@@ -561,6 +568,8 @@ class GpSurrogate(ExtrapolationGuard):
     @classmethod
     def from_state(cls, state: Mapping[str, Any]) -> GpSurrogate:
         """Rebuild a trained surrogate from :meth:`state` (conditioning by Cholesky in numpy)."""
+        from scipy.linalg import cho_solve
+
         gp = cls(ard=bool(state["ard"]))
         gp.x_train = np.asarray(state["x_train"], dtype=float)
         gp.y_train = np.asarray(state["y_train"], dtype=float)
@@ -582,7 +591,7 @@ class GpSurrogate(ExtrapolationGuard):
         chol = np.asarray(np.linalg.cholesky(k), dtype=np.float64)
         gp._chol = chol
         ys = (gp.y_train - gp._prior_mean(gp.x_train)) / gp.scale
-        gp._alpha = _cho_solve(chol, ys)
+        gp._alpha = np.asarray(cho_solve((chol, True), ys))
         gp.info = {"n_train": len(ys), "restored": True}
         return gp
 

@@ -241,3 +241,31 @@ def test_rotated_axes_follow_a_narrow_ridge_across_the_inputs():
     np.testing.assert_allclose(again.predict_mean(post), rotated.predict_mean(post), atol=tol)
     with pytest.raises(fbia.ConfigError, match="axes"):
         GpSurrogate(ard=True).fit(x, ridge(x), rng=0, axes=np.eye(3))
+
+
+def test_warm_start_carries_length_scales_to_turned_axes():
+    """An adaptive round warm-starts from the last round's hyperparameters while its kernel
+    axes turn (gp_axes = "posterior"): the carried length scales describe the same kernel
+    widths along the new axes (stop 38's note: they were rescaled along the input axes)."""
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0.0, 1.0, (60, 2))
+    y = np.sin(12.0 * x[:, 0]) + np.sin(2.0 * x[:, 1])  # short along x0, long along x1
+    gp = GpSurrogate(ard=True).fit(x, y, rng=0)
+    hp = gp.hyperparameters()
+    assert "rotation" not in hp  # input axes
+    ells = np.array(hp["lengthscales"])
+    assert ells[1] > 2.0 * ells[0]
+    # the same data on axes turned by 90 degrees (the smaller variance's axis comes first):
+    # the two length scales trade places
+    turned = GpSurrogate(ard=True)
+    turned.fit(x, y, rng=0, axes=np.diag([4.0, 1.0]) * np.outer(x.std(0), x.std(0)))
+    assert np.allclose(np.abs(turned.rotation), [[0.0, 1.0], [1.0, 0.0]])
+    _, carried = turned._carried(hp)
+    expect = np.abs(turned.rotation.T) @ ells  # each new axis is one of the old ones
+    np.testing.assert_allclose(carried, expect, rtol=1e-9)
+    # back again: a fit on the turned axes carries its own scales to the input axes
+    plain = GpSurrogate(ard=True).fit(x, y, rng=0)
+    hp_t = turned.hyperparameters()
+    assert "rotation" in hp_t
+    _, back = plain._carried(hp_t)
+    np.testing.assert_allclose(back, np.abs(turned.rotation) @ hp_t["lengthscales"], rtol=1e-9)
