@@ -4,6 +4,7 @@ _studies.py), and the thread share of a pytest-xdist worker."""
 from __future__ import annotations
 
 import os
+import signal
 
 import pytest
 from _studies import write_study
@@ -36,6 +37,18 @@ def _share_the_cores_among_xdist_workers() -> None:
 
 
 _share_the_cores_among_xdist_workers()
+
+
+def _ctrl_c_raises() -> None:
+    """Ctrl-C raises KeyboardInterrupt in the test processes, as at a terminal.  A shell that
+    starts a job in the background (``make test &``, ``nohup``) without job control sets
+    SIGINT to "ignore", which the test processes inherit: the tests of Ctrl-C handling then
+    failed (measured 2026-11-28: four of them, a fresh clone's .ci/run started with &)."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+_ctrl_c_raises()
 
 
 @pytest.fixture
