@@ -280,7 +280,7 @@ class GpSurrogate(ExtrapolationGuard):
         self.scale = y_range if y_range > 0 else max(1.0, abs(float(y_fit.max())))
         self.mean_value = float(y.min() - self.mean_offset * y_range) if self.trend is None else 0.0
         self.nugget = self.nugget_factor * (y_range if y_range > 0 else self.scale)
-        xs = self._standardise(x)
+        xs = self.standardise(x)
         ys = ((y_fit - self.mean_value) / self.scale)[:, None]
         gpy = _gpy()
         d = x.shape[1]
@@ -356,7 +356,8 @@ class GpSurrogate(ExtrapolationGuard):
         }
         return self
 
-    def _standardise(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    def standardise(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The rows of ``x`` as the kernel sees them: standardised, then turned (axes)."""
         u = (np.asarray(x, dtype=float) - self.x_mean) / self.x_std
         return u if self.rotation is None else u @ self.rotation
 
@@ -435,7 +436,7 @@ class GpSurrogate(ExtrapolationGuard):
         self._alpha = np.asarray(self.model.posterior.woodbury_vector, dtype=float).ravel()
         self._ell = np.asarray(hp["lengthscales"], dtype=float)
         self._var = hp["signal_variance"] / self.scale**2
-        self._xs = self._standardise(self.x_train)
+        self._xs = self.standardise(self.x_train)
 
     # -- prediction -----------------------------------------------------------------------
     def kernel_terms(self) -> KernelTerms:
@@ -453,19 +454,19 @@ class GpSurrogate(ExtrapolationGuard):
         """
         if not hasattr(self, "_alpha"):
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
-        xs = self._standardise(np.atleast_2d(x))
+        xs = self.standardise(np.atleast_2d(x))
         if fused is not False and (fused or len(xs) >= 64):
-            return self._prior_mean(x) + fused_mean(self.kernel_terms(), xs)
+            return self.prior_mean(x) + fused_mean(self.kernel_terms(), xs)
         out = np.empty(len(xs))
         rows = max(1, _BLOCK // max(1, len(self._xs)))
         for i in range(0, len(xs), rows):
             k = matern32_cross(xs[i : i + rows], self._xs, self._ell, self._var, self.ard)
             out[i : i + rows] = k @ self._alpha
-        return self._prior_mean(x) + self.scale * out
+        return self.prior_mean(x) + self.scale * out
 
     __call__ = predict_mean
 
-    def _prior_mean(self, x: ArrayLike) -> NDArray[np.float64]:
+    def prior_mean(self, x: ArrayLike) -> NDArray[np.float64]:
         """The GP's prior mean of L at the rows of ``x``: constant, or the quadratic trend."""
         if self.trend is None:
             return np.full(len(np.atleast_2d(x)), self.mean_value)
@@ -473,7 +474,7 @@ class GpSurrogate(ExtrapolationGuard):
 
     def predict(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Posterior mean and variance of L (eq. 28a-b), through GPy (for plots, checks)."""
-        xs = self._standardise(np.atleast_2d(x))
+        xs = self.standardise(np.atleast_2d(x))
         if self.model is None and self._chol is not None:  # restored from a state: numpy only
             k = matern32_cross(xs, self._xs, self._ell, self._var, self.ard)
             v = np.linalg.solve(self._chol, k.T)
@@ -481,7 +482,7 @@ class GpSurrogate(ExtrapolationGuard):
             return self.predict_mean(x), np.maximum(var_s, 0.0) * self.scale**2
         mean, var = self.model.predict(xs, include_likelihood=False)
         return (
-            self._prior_mean(x) + self.scale * mean.ravel(),
+            self.prior_mean(x) + self.scale * mean.ravel(),
             np.maximum(var.ravel(), 0.0) * self.scale**2,
         )
 
@@ -491,8 +492,8 @@ class GpSurrogate(ExtrapolationGuard):
         point of ``b`` removes from the variance at ``a`` (an adaptive design's criterion)."""
         from scipy.linalg import solve_triangular
 
-        xa = self._standardise(np.atleast_2d(a))
-        xb = self._standardise(np.atleast_2d(b))
+        xa = self.standardise(np.atleast_2d(a))
+        xb = self.standardise(np.atleast_2d(b))
         # k(a, b) - v_a^T v_b with v = L^-1 k(X, .), L the Cholesky factor of K + sigma_n^2 I:
         # the triangular solves keep the small variances near the data accurate, where the
         # explicit inverse loses them to cancellation
@@ -585,12 +586,12 @@ class GpSurrogate(ExtrapolationGuard):
         gp.nugget = float(state["nugget_variance"])
         gp._ell = np.asarray(state["lengthscales"], dtype=float)
         gp._var = float(state["signal_variance"]) / gp.scale**2
-        gp._xs = gp._standardise(gp.x_train)
+        gp._xs = gp.standardise(gp.x_train)
         k = matern32_cross(gp._xs, gp._xs, gp._ell, gp._var, gp.ard)
         k[np.diag_indices_from(k)] += gp.nugget / gp.scale**2
         chol = np.asarray(np.linalg.cholesky(k), dtype=np.float64)
         gp._chol = chol
-        ys = (gp.y_train - gp._prior_mean(gp.x_train)) / gp.scale
+        ys = (gp.y_train - gp.prior_mean(gp.x_train)) / gp.scale
         gp._alpha = np.asarray(cho_solve((chol, True), ys))
         gp.info = {"n_train": len(ys), "restored": True}
         return gp

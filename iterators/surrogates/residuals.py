@@ -268,8 +268,8 @@ class ResidualSurrogate(ExtrapolationGuard):
         x = np.atleast_2d(np.asarray(x, dtype=float))
         first = self.components[0]
         if len(x) >= 64 and self.ard and self._shared_inputs():
-            raw = fused_means([gp.kernel_terms() for gp in self.components], first._standardise(x))
-            prior = np.column_stack([gp._prior_mean(x) for gp in self.components])
+            raw = fused_means([gp.kernel_terms() for gp in self.components], first.standardise(x))
+            prior = np.column_stack([gp.prior_mean(x) for gp in self.components])
             return np.asarray(prior + raw)
         return np.column_stack([gp.predict_mean(x) for gp in self.components])
 
