@@ -324,8 +324,9 @@ def build_case(
     y_data[[0, -1]] = 0.0  # the bonded feet
     rays = np.arange(1, n_points - 1, 2)
     points = np.c_[model.x[rays], y_data[rays]]
+    observed = np.c_[model.x, y_data]
     obs = fbia.Observation(
-        interface=fbia.Interface.polyline(np.c_[model.x, y_data]),
+        interface=fbia.Interface.polyline(observed),
         points=points,
         directions=np.tile([0.0, 1.0], (len(rays), 1)),
         name=f"{name} at q = {TRUE_INFLOW:g} mm^2/s",
@@ -344,7 +345,6 @@ def build_case(
         noise_std=sigma_n,
         **extra,
     )
-    observed = np.c_[model.x, y_data]
     return Case(name, problem, model, rays, y_data[rays], truth, measure, observed)
 
 

@@ -86,6 +86,13 @@ def soft_floor(y: FloatArray, floor: float) -> FloatArray:
     return out
 
 
+def floored(loglik: FloatArray, floor: float) -> FloatArray:
+    """What the surrogate is trained on: L with the soft floor, a failed run (L = -inf) at
+    the floor (the models fail at extreme parameters: not a region to send runs to)."""
+    loglik = np.asarray(loglik, dtype=float)
+    return soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
+
+
 def floor_depth(l_max: float, log_evidence: float | None) -> float:
     """How far below the best run the floor goes: deep enough that the floored region, whose
     prior mass is at most 1, holds at most 1e-3 of the evidence Z = integral e^L p

@@ -33,9 +33,9 @@ from ..surrogates.uncertainty import marginalise_surrogate_uncertainty
 from .adaptive import (
     Moments,
     floor_depth,
+    floored,
     posterior_shift,
     select_batch,
-    soft_floor,
     validation_error,
 )
 from .options import GpSmcOptions
@@ -134,7 +134,7 @@ def adaptive_design(
         floor = l_max - floor_depth(l_max, log_z)
         # a failed design run counts as an unlikely point (at the floor): the models fail at
         # extreme parameters, and the criterion must not send batch after batch there
-        y = soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
+        y = floored(loglik, floor)
         records = [run.evaluations[i] for i in np.flatnonzero(train)]
         gp = fit_gp(points[train], y[train], hyper, records, axes)
         if opts.failures == "classify":

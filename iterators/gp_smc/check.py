@@ -23,15 +23,12 @@ from collections.abc import Generator, Sequence
 from dataclasses import asdict, replace
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..smc.sampler import SmcResult
 from ..surrogates.residuals import Surrogate
-from .adaptive import distinct_draws, soft_floor
+from .adaptive import distinct_draws
 from .result import DesignRuns, PosteriorCheck
 from .run import GpSmcState, SmcRun
-
-FloatArray = NDArray[np.float64]
 
 
 def posterior_check(
@@ -86,15 +83,6 @@ def with_check_runs(design: DesignRuns, check: PosteriorCheck, status: Sequence[
         status=[*design.status, *status],
         train_mask=np.concatenate([design.train_mask, np.ones(len(check.x), dtype=bool)]),
     )
-
-
-def training_values(design: DesignRuns, floor: float | None) -> FloatArray:
-    """What a GP of L is trained on: L, with the adaptive design's soft ``floor`` (a failed
-    run counts as a run at the floor, as in the rounds)."""
-    loglik = design.log_likelihood
-    if floor is None or not math.isfinite(floor):
-        return loglik
-    return soft_floor(np.where(np.isfinite(loglik), loglik, floor), floor)
 
 
 def repair_note(failed: Sequence[float]) -> str:

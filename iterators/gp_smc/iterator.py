@@ -81,9 +81,9 @@ from ..surrogates.feasibility import feasibility_note, feasibility_summary, fit_
 from ..surrogates.gp import GpSurrogate
 from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link
 from ..surrogates.uncertainty import marginalise_surrogate_uncertainty
-from .adaptive import soft_floor
+from .adaptive import floored, soft_floor
 from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, adaptive_design
-from .check import posterior_check, repair_note, repairable, training_values, with_check_runs
+from .check import posterior_check, repair_note, repairable, with_check_runs
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
 from .result import (
@@ -207,7 +207,8 @@ class GpSmcIterator(IteratorBase):
             failed.append(check.rmse)  # its runs join the design and train the surrogate
             statuses = [ev.status for ev in run.evaluations[-len(check.x) :]]
             design = with_check_runs(design, check, statuses)
-            gp = self._refit(run, design, gp, post, floor)
+            assert adaptive is not None  # repairable: only an adaptive design
+            gp = self._refit(run, design, gp, post, adaptive.floor)
             fit = yield from self._surrogate_stage(run, design, gp, floor)
             target = gp.feasible(run.joint(gp.predict_mean_guarded))
             post = yield from self._smc_stage(run, target, _trained(run, gp))
@@ -267,6 +268,7 @@ class GpSmcIterator(IteratorBase):
             adaptive=adaptive,
             surrogate=fit,
             check=check,
+            failed_checks=failed,
             uncertainty=uncertainty,
             posterior=posterior,
             smc=SmcSummary(
@@ -387,7 +389,7 @@ class GpSmcIterator(IteratorBase):
         ).fit(x, y, rng=rng, start=None if start and "components" in start else start, axes=axes)
 
     def _refit(
-        self, run: SmcRun, design: DesignRuns, gp: Surrogate, post: SmcResult, floor: float | None
+        self, run: SmcRun, design: DesignRuns, gp: Surrogate, post: SmcResult, floor: float
     ) -> Surrogate:
         """The surrogate on every training run of ``design``, from ``gp``'s hyperparameters
         (a repaired check, :mod:`.check`); its kernel along ``post``'s axes with gp_axes =
@@ -395,7 +397,7 @@ class GpSmcIterator(IteratorBase):
         train = design.train_mask
         records = [run.evaluations[i] for i in np.flatnonzero(train)]
         axes = np.atleast_2d(post.cov) if self.options.gp_axes == "posterior" else None
-        y = training_values(design, floor)
+        y = floored(design.log_likelihood, floor)
         new = self._fit_gp(run, design.points[train], y[train], gp.hyperparameters(), records, axes)
         if self.options.failures == "classify":
             new.feasibility = fit_feasibility(design.points[train], design.ok[train])

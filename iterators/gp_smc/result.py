@@ -286,6 +286,9 @@ class GpSmcResult(Result):
         The stages' records (see the module docstring); ``adaptive`` only with the
         adaptive design, ``uncertainty`` only with ``surrogate_uncertainty =
         "expected_posterior"`` (then ``posterior`` is the expected posterior).
+    failed_checks
+        RMSE in L of each check at posterior draws that failed and was repaired before
+        ``check`` (gp_smc's ``check_repairs``; empty when the first check decided).
     seconds
         Wall time of the analysis.
     """
@@ -301,6 +304,7 @@ class GpSmcResult(Result):
     uncertainty: SurrogateUncertainty | None = field(default=None, repr=False)
     posterior: ParticlePosterior | None = field(default=None, repr=False)
     smc: SmcSummary | None = field(default=None, repr=False)
+    failed_checks: list[float] = field(default_factory=list)
     seconds: float = 0.0
 
     def summary(self) -> str:
@@ -385,6 +389,7 @@ class GpSmcResult(Result):
             "n_x": self.n_x,
             "mode": self.mode,
             "priors": self.priors,
+            "failed_checks": self.failed_checks,
             "seconds": self.seconds,
         }
         for name in ("design", "adaptive", "surrogate", "check", "uncertainty", "posterior", "smc"):

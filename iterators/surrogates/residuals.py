@@ -282,7 +282,6 @@ class ResidualSurrogate(ExtrapolationGuard):
             self._shared = all(
                 np.array_equal(gp.x_mean, a.x_mean)
                 and np.array_equal(gp.x_std, a.x_std)
-                and (gp.rotation is None) == (a.rotation is None)
                 and np.array_equal(
                     eye if gp.rotation is None else gp.rotation,
                     eye if a.rotation is None else a.rotation,

@@ -2,7 +2,6 @@
 exact posterior by quadrature."""
 
 import math
-import re
 
 import numpy as np
 import pytest
@@ -17,9 +16,11 @@ from fbia.iterators.gp_smc.adaptive import (
     select_batch,
     soft_floor,
 )
+from fbia.iterators.gp_smc.result import GpSmcResult
 from fbia.iterators.gp_smc.run import log_prior
 from fbia.iterators.smc.sampler import smc
 from fbia.iterators.surrogates.gp import GpSurrogate
+from fbia.studies.result_io import from_dict
 
 
 # -- the pieces -------------------------------------------------------------------------------
@@ -151,8 +152,8 @@ def test_a_failed_check_is_repaired_with_its_runs_within_the_budget(exact_2d, mo
     opts["round_particles"] = 400
     # as it comes: each failed check costs n_check runs more, at most two
     plain = fbia.iterator("gp_smc", **opts).run(problem)
-    said = re.search(r"(\d) check\(s\) at posterior draws failed", plain.message)
-    failed = int(said.group(1)) if said else 0
+    failed = len(plain.failed_checks)
+    assert f"{failed} check(s) at posterior draws failed" in plain.message or not failed
     with monkeypatch.context() as patch:
         patch.setattr(result_module, "RELIABLE_RMSE", 0.0)  # every check fails
         once = fbia.iterator("gp_smc", check_repairs=0, **opts).run(problem)
@@ -160,10 +161,13 @@ def test_a_failed_check_is_repaired_with_its_runs_within_the_budget(exact_2d, mo
     assert plain.nfev == once.nfev + 8 * failed
     assert plain.status == "completed"  # the 2-D posterior is easy; after a repair if need be
     # check_repairs = 0: the first failed check decides
-    assert once.status == "unreliable" and "check(s) at posterior" not in once.message
+    assert once.status == "unreliable" and once.failed_checks == []
+    assert "check(s) at posterior" not in once.message
     n_design = int(once.design.train_mask.sum())
     assert n_design + 16 <= 200  # room for two repairs
-    assert repaired.status == "unreliable"
+    assert repaired.status == "unreliable" and len(repaired.failed_checks) == 2
+    back = from_dict(GpSmcResult, repaired.to_dict())  # result.json keeps them
+    assert back.failed_checks == repaired.failed_checks
     assert "2 check(s) at posterior draws failed" in repaired.message
     assert repaired.nfev == once.nfev + 16
     # the failed checks' runs trained the last surrogate, the first of them once's check

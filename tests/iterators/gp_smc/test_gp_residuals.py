@@ -89,9 +89,20 @@ def test_variance_vanishes_at_runs_and_covariance_is_consistent(fitted):
 
 
 @pytest.mark.parametrize("ard", [True, False])
-def test_components_predicted_in_one_call_equal_one_by_one(ard):
+def test_components_predicted_in_one_call_equal_one_by_one(ard, monkeypatch):
     """The batched compiled loop over the principal components (issue 30) gives each
-    component's own posterior mean, also where a component has its own length scales."""
+    component's own posterior mean, also where a component has its own length scales;
+    isotropic components are predicted one by one."""
+    import fbia.iterators.surrogates.residuals as residuals_module
+
+    calls = []
+    batched = residuals_module.fused_means
+
+    def spy(terms, xs):
+        calls.append(len(terms))
+        return batched(terms, xs)
+
+    monkeypatch.setattr(residuals_module, "fused_means", spy)
     rng = np.random.default_rng(3)
     x = rng.uniform(0.0, 0.6, (60, 2))
     link, r, _ = residual_link(_records(x), [SIGMA], None)
@@ -104,6 +115,7 @@ def test_components_predicted_in_one_call_equal_one_by_one(ard):
     # nearly interpolating GP is large and alternating, so they agree to ~1e-10 of the scores
     scale = np.abs(one_by_one).max()
     np.testing.assert_allclose(s._scores(test), one_by_one, rtol=0, atol=1e-9 * scale)
+    assert calls == ([len(s.components)] if ard else [])  # one call for all components
     if ard:  # the components differ in their length scales, so the batch is not one kernel
         ells = np.array([gp.hyperparameters()["lengthscales"] for gp in s.components])
         assert np.ptp(ells, axis=0).max() > 0.1 * ells.min()
@@ -113,6 +125,7 @@ def test_components_predicted_in_one_call_equal_one_by_one(ard):
         s.components[1] = short
         one_by_one[:, 1] = short.predict_mean(test, fused=False)
         np.testing.assert_allclose(s._scores(test), one_by_one, rtol=0, atol=1e-9 * scale)
+        assert calls == [len(s.components)] * 2
 
 
 def test_state_round_trip_and_guard(fitted):
