@@ -13,7 +13,17 @@ The iteration (what ``ale_fsi`` needs, stiff coupled systems solved to a toleran
 * after every undamped step the factorised Jacobian is tried again (a chord step: one residual
   and one back-substitution); its update is taken if it is below 0.1 and at most a quarter of
   the previous one, else the Jacobian is assembled afresh at the same point.  A solve that
-  starts after a converged one tries the old factorisation the same way (a warm start);
+  starts after a converged one (a warm start) takes the old factorisation's first update if
+  it is below 2.5e-4 (:class:`ChordRule`, the default).  Where a fresh Jacobian costs tens of
+  chord steps (:meth:`ChordRule.costly_jacobian`) chord steps go on while the updates halve,
+  and a warm start's first update is taken up to 0.1 on trust: the second update measures its
+  contraction, and if it is larger than the first the first is undone before the fresh
+  Jacobian.  Measured on ``ale_fsi``'s 3-D dome (order 3, 2 threads), a fresh Jacobian costs
+  1.7 + 5.7 s (assembly, factorisation), a chord step ~0.1 s; with the default rule its LM
+  with forward differences assembled a Jacobian in nearly every run (158 s; 66 s with the
+  costly-Jacobian rule, ``benchmarks/bench_lm_tangents.py``).  On its 2-D flow cell (23 + 9
+  ms against ~3 ms) that rule gained nothing.  The converged state meets the tolerance either
+  way (a chord-converged one does not overshoot it as a quadratic Newton step does);
 * an update that leads to an inadmissible state (an inverted element, a porosity outside
   (0, 1)) is halved, up to ``max_halvings`` times (default 5);
 * at most ``max_jacobians`` Jacobians are assembled; updates that diverge (1e3 times the
@@ -39,12 +49,38 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "ChordRule",
     "NewtonFailure",
     "NewtonSolver",
     "NonlinearSystem",
     "StepReport",
     "sparse_direct_solver",
 ]
+
+#: A chord update larger than this (scaled) is never taken.
+CHORD_MAX_UPDATE = 0.1
+
+
+@dataclass(frozen=True)
+class ChordRule:
+    """When :class:`NewtonSolver` takes a step with its last factorisation (module docstring).
+
+    The default suits a system whose fresh Jacobian costs a few chord steps;
+    :meth:`costly_jacobian` one whose Jacobian costs tens of them.
+    """
+
+    #: chord steps go on while each update is at most this fraction of the one before
+    contraction: float = 0.25
+    #: a warm solve takes the old factorisation's first update if it is below this
+    warm_update: float = 2.5e-4
+    #: and undoes it when the next update is larger (the factorisation was too far off)
+    undo_worse: bool = False
+
+    @classmethod
+    def costly_jacobian(cls) -> ChordRule:
+        """Chord steps while the updates halve; a warm first update up to the largest chord
+        update, undone if the next one is larger."""
+        return cls(contraction=0.5, warm_update=CHORD_MAX_UPDATE, undo_worse=True)
 
 
 @dataclass
@@ -125,6 +161,8 @@ class NewtonSolver:
         If given, a callable returning the free dofs of each block (NGSolve BitArrays): the
         Jacobian is then solved by GMRes with a block Gauss-Seidel preconditioner whose blocks
         ``linear_solver`` factorises (:class:`~fbia.plugins.fem.krylov.BlockGMResInverse`).
+    chord
+        When the factorisation is reused (default :class:`ChordRule`).
     """
 
     def __init__(
@@ -137,6 +175,7 @@ class NewtonSolver:
         max_halvings: int = 5,
         inadmissible: str = "ale_jacobian",
         blocks: Callable[[], list[Any]] | None = None,
+        chord: ChordRule | None = None,
     ) -> None:
         self.system = system
         self.tol = tol
@@ -144,6 +183,8 @@ class NewtonSolver:
         self.linear_solver = linear_solver
         self.max_halvings = max_halvings
         self.inadmissible = inadmissible
+        #: when the factorisation is reused (:class:`ChordRule`)
+        self.chord = chord or ChordRule()
         self.blocks = blocks
         #: seconds spent assembling and solving, summed over every solve
         self.timings = {"assembly": 0.0, "solve": 0.0}
@@ -170,6 +211,7 @@ class NewtonSolver:
         x_np = vec.FV().NumPy()
         try_chord = self.inverse is not None and self.chord_ok
         newton_norms: list[float] = []  # updates of the steps with a fresh Jacobian
+        before: NDArray[np.float64] | None = None  # the state before a tentative chord step
         refine = False  # refine every solve, not only those of fresh Jacobians (linear_solve)
         try:
             for it in range(1, 4 * self.max_jacobians + 1):
@@ -180,10 +222,15 @@ class NewtonSolver:
                 if try_chord:  # a step with the last factorised Jacobian
                     self.linear_solve(du, res, where, refine)
                     norm = self.scaled_norm(du)
-                    previous = rep.norms[-1] if rep.norms else 1e-3
-                    chord = norm <= min(0.25 * previous, 0.1)
+                    previous = rep.norms[-1] if rep.norms else None
+                    chord = self._chord_taken(norm, previous)
                     rep.solve_time += time.perf_counter() - t0
                     t0 = time.perf_counter()
+                    if not chord and before is not None and previous is not None:
+                        if norm > previous:  # the warm first step made it worse
+                            x_np[:] = before
+                            system.residual(res)
+                    before = None
                 if not chord:  # a Newton step with a fresh Jacobian
                     if rep.jacobians >= self.max_jacobians:
                         break
@@ -199,6 +246,8 @@ class NewtonSolver:
                 rep.norms.append(norm)
                 step = du.FV().NumPy()
                 x0 = x_np.copy()
+                if chord and len(rep.norms) == 1 and self.chord.undo_worse:
+                    before = x0  # a warm solve's first step, not yet proven
                 factor = 1.0
                 for _ in range(self.max_halvings + 1):
                     x_np[:] = x0 - factor * step
@@ -238,6 +287,14 @@ class NewtonSolver:
             # the factorisation may serve the next solve only if this one ended converged
             self.chord_ok = rep.converged
         return rep
+
+    def _chord_taken(self, norm: float, previous: float | None) -> bool:
+        """Whether a chord update is taken (module docstring)."""
+        if norm > CHORD_MAX_UPDATE:
+            return False
+        if previous is None:
+            return norm <= self.chord.warm_update
+        return norm <= self.chord.contraction * previous
 
     @staticmethod
     def _check_progress(norms: list[float], where: str) -> None:

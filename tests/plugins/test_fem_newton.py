@@ -10,7 +10,7 @@ import pytest
 
 ngs = pytest.importorskip("ngsolve")
 
-from fbia.plugins.fem.newton import NewtonFailure, NewtonSolver  # noqa: E402
+from fbia.plugins.fem.newton import ChordRule, NewtonFailure, NewtonSolver  # noqa: E402
 
 
 class Cubic:
@@ -87,3 +87,55 @@ def test_inadmissible_updates_are_halved_then_fail_with_the_systems_reason() -> 
         solver.solve("cubic")
     assert err.value.reason == "too_big"
     assert np.max(system.gfu.vec.FV().NumPy()) < 1e-3  # the last admissible state is kept
+
+
+def test_a_warm_start_may_take_the_old_factorisation_farther_from_the_solution() -> None:
+    """A 1 % change of the state (first update 0.05) costs a fresh Jacobian under the default
+    chord rule, none under ``ChordRule.costly_jacobian`` (``ale_fsi`` in 3-D: the first update
+    taken up to 0.1, chord steps while the updates halve); both converge to the tolerance."""
+    reports, states = [], []
+    for rule in (ChordRule(), ChordRule.costly_jacobian()):
+        system = Cubic()
+        solver = NewtonSolver(system, 1e-10, 12, "umfpack", chord=rule)
+        solver.solve()
+        solution = system.gfu.vec.FV().NumPy().copy()
+        system.gfu.vec.FV().NumPy()[:] *= 1.01
+        reports.append(solver.solve())
+        states.append(system.gfu.vec.FV().NumPy() - solution)
+    default, warm = reports
+    assert default.converged and default.jacobians == 1
+    assert warm.converged and warm.jacobians == 0 and 0.01 < warm.norms[0] < 0.1
+    assert all(np.max(np.abs(e)) < 1e-9 for e in states)  # the solution, to the tolerance
+
+
+class Recording(Cubic):
+    """Cubic that records the state at each Jacobian assembly."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.assembled_at: list[np.ndarray] = []
+
+    def assemble_jacobian(self) -> None:
+        self.assembled_at.append(self.gfu.vec.FV().NumPy().copy())
+        super().assemble_jacobian()
+
+
+def test_a_warm_first_step_that_makes_it_worse_is_undone() -> None:
+    """A factorisation far from the state (the Jacobian at u = 0, where the cubic term is
+    missing) gives a first update below 0.1 that overshoots: the second update is larger, so
+    the first is undone and the fresh Jacobian is assembled at the start state."""
+    system = Recording()
+    solver = NewtonSolver(system, 1e-10, 12, "umfpack", chord=ChordRule.costly_jacobian())
+    solver.solve()
+    solution = system.gfu.vec.FV().NumPy().copy()
+    system.gfu.vec.FV().NumPy()[:] = 0.0
+    system.assemble_jacobian()
+    solver.factorise("test")
+    start = 1.001 * solution
+    system.gfu.vec.FV().NumPy()[:] = start
+    system.assembled_at.clear()
+    rep = solver.solve()
+    assert rep.converged and rep.jacobians == 1
+    assert 0.01 < rep.norms[0] < 0.1  # the first (chord) update, taken on trust
+    assert np.array_equal(system.assembled_at[0], start)
+    assert np.max(np.abs(system.gfu.vec.FV().NumPy() - solution)) < 1e-9
