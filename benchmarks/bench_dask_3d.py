@@ -58,6 +58,28 @@ every run was a cold fork (2026-11-26, loaded machine, against about 3 s warm th
 1.98x warm serial, with the warm helper alone, whose forked runs each factorised their first
 Jacobian (2026-11-28, load 2.4-4.1).  The 2-D runs take 0.08 s: Dask's own cost per task shows
 (1.43x with 2 workers).
+
+Since ``ale_fsi`` keeps its factorisation longer in 3-D (``ChordRule.costly_jacobian``, the
+same day, idle, 8 runs; twice, the same figures to 0.1 s):
+
+    isolated (the Dask default)
+    model          workers  runs  wall [s]  runs/s speed-up efficiency  s/run x workers vs warm serial
+    3-D dome        serial     8       4.9   1.620                               0.62 s/run
+    3-D dome             1     8       5.0   1.591     1.00       100%           1.02x
+    3-D dome             2     8       4.0   2.017     1.27        63%           1.61x
+    2-D flow cell   serial     8       0.6  13.482                               0.07 s/run
+    2-D flow cell        1     8       0.6  12.360     1.00       100%           1.09x
+    2-D flow cell        2     8       0.4  19.215     1.55        78%           1.40x
+
+(16 runs: 0.55 s/run serial, 1.71x with 2 workers.)  Every 3-D figure is faster than before
+(warm serial 1.21 -> 0.62 s a run, 2 workers 5.4 -> 4.0 s for the batch), but issue 30's
+1.3x is no longer met, because the anchor gained most.  Measured cause (16 runs, the runs'
+own times and Jacobians): a warm serial run now rarely assembles a Jacobian (3 in 16 runs,
+~0.85 s each on this mesh, against 0.2-0.4 s for a run of chord steps), and with 2 workers
+each worker's chain of warm states is half as dense, so its first runs assemble their own
+(5 in 16); and the runs themselves take 10-30 % longer with 2 workers than with 1 (0.29
+against 0.21 s, 0.46 against 0.30 s), cause not found: two serial batches side by side in
+two processes do not slow each other (0.62 and 0.63 s a run).
 """
 
 from __future__ import annotations
