@@ -63,7 +63,7 @@ Since ``ale_fsi`` keeps its factorisation longer in 3-D (``ChordRule.costly_jaco
 same day, idle, 8 runs; twice, the same figures to 0.1 s):
 
     isolated (the Dask default)
-    model          workers  runs  wall [s]  runs/s speed-up efficiency  s/run x workers vs warm serial
+    model          workers  runs  wall [s]  runs/s speed-up efficiency  s/run x workers / serial
     3-D dome        serial     8       4.9   1.620                               0.62 s/run
     3-D dome             1     8       5.0   1.591     1.00       100%           1.02x
     3-D dome             2     8       4.0   2.017     1.27        63%           1.61x
