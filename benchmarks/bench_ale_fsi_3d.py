@@ -63,7 +63,7 @@ model = AleFsiForwardModel(geometry="dome_3d", mesh_size=duct, interface_mesh_si
 t, cpu = time.perf_counter(), time.process_time()
 sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tempfile.mkdtemp())
 d = sol.diagnostics
-inverse = model.solver._newton.inverse
+inverse = model.solver.newton_solver.inverse
 print(json.dumps({
     "ndof": d["ndof"], "wall": time.perf_counter() - t, "cpu": time.process_time() - cpu,
     "assembly": d["assembly_time"], "solve": d["solve_time"],

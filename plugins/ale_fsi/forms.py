@@ -294,6 +294,12 @@ class AleFsiProblem:
             self._lam[region].Set(lam)
         self.materials = dict(materials)
 
+    def lame_parameter(self, region: str, which: str) -> Any:
+        """The NGSolve ``Parameter`` of a solid region's Lamé constant ``which`` (``"mu"`` or
+        ``"lam"``), which :meth:`set_materials` sets and the tangents perturb; the residual
+        is linear in each (:mod:`fbia.plugins.ale_fsi.sensitivities`)."""
+        return (self._mu if which == "mu" else self._lam)[region]
+
     def preconditioner_blocks(self) -> list[Any]:
         """Free dofs of the displacement block, then of the fluid block (velocity, pressure):
         the blocks of the Gauss-Seidel preconditioner of ``linear_solver = "block_gmres"``."""

@@ -144,9 +144,9 @@ def _residual_derivative(
     solver: Any, region: str, which: str, r0: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """dR/dμ_r or dR/dλ_r: the residual is linear in each (module docstring)."""
-    param = solver._mu[region] if which == "mu" else solver._lam[region]
+    param = solver.lame_parameter(region, which)
     value = float(param.Get())
-    mu = float(solver._mu[region].Get())
+    mu = float(solver.lame_parameter(region, "mu").Get())
     delta = abs(value) if value != 0.0 else mu
     try:
         param.Set(value + delta)
@@ -162,7 +162,7 @@ def _solve(
     """J^-1 b on the free dofs (zero elsewhere): Newton's factorisation refined against the
     assembled Jacobian; a fresh factorisation (once per state: ``fresh[0]`` says it is
     done) where that does not contract."""
-    newton = solver._newton
+    newton = solver.newton_solver
     free = solver.free_mask
     rhs = solver.vector.CreateVector()
     rhs.FV().NumPy()[:] = np.where(free, b, 0.0)

@@ -86,6 +86,12 @@ class AleFsiSolver(AleFsiProblem):
         return self._newton.solve(where)
 
     @property
+    def newton_solver(self) -> NewtonSolver:
+        """The Newton solver, with the factorisation of its last Jacobian (the tangents solve
+        with it: :mod:`fbia.plugins.ale_fsi.sensitivities`)."""
+        return self._newton
+
+    @property
     def timings(self) -> dict[str, float]:
         """Seconds spent assembling and solving (Newton and continuation), since the last
         reset (assign a fresh dict)."""

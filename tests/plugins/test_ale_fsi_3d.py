@@ -189,7 +189,7 @@ def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_pa
     d_direct = _vertex_displacement(dome[0])
     d_gmres = _vertex_displacement(model)
     assert np.abs(d_gmres - d_direct).max() < 1e-8 * np.abs(d_direct).max()
-    assert 0 < max(model.solver._newton.inverse.iterations) < 30
+    assert 0 < max(model.solver.newton_solver.inverse.iterations) < 30
 
 
 def test_dome_passes_the_forward_model_conformance_checks(tmp_path):
