@@ -54,12 +54,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...core.errors import ConfigError
 from .guard import ExtrapolationGuard, GuardCounts
-from .mean import KernelTerms, fused_mean
+from .mean import SQRT3, KernelTerms, fused_mean
 from .trend import QuadraticTrend
 
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
-_SQRT3 = math.sqrt(3.0)
 OPTIMIZERS = ("lbfgsb", "scg")
 #: Bounds of the length scales (standardised inputs) and of the signal variance (in units of
 #: (max L - min L)^2) during training.
@@ -107,15 +106,15 @@ def matern32_cross(
         r2 = (sa * sa).sum(1)[:, None] + (sb * sb).sum(1)[None, :] - 2.0 * (sa @ sb.T)
         np.maximum(r2, 0.0, out=r2)
         r = np.sqrt(r2, out=r2)
-        r *= _SQRT3
+        r *= SQRT3
         k = 1.0 + r
         np.negative(r, out=r)
         np.exp(r, out=r)
         k *= r
         k *= variance
         return k
-    sa = a * (_SQRT3 / lengthscale)
-    sb = b * (_SQRT3 / lengthscale)
+    sa = a * (SQRT3 / lengthscale)
+    sb = b * (SQRT3 / lengthscale)
     total = np.zeros((len(a), len(b)))
     prod = np.ones((len(a), len(b)))
     t = np.empty((len(a), len(b)))

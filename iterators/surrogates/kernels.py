@@ -21,7 +21,6 @@ True
 
 from __future__ import annotations
 
-import math
 import warnings
 from typing import Any
 
@@ -29,13 +28,13 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .mean import SQRT3
+
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from GPy.core.parameterization import Param
     from GPy.kern import Kern
     from paramz.transformations import Logexp
-
-_SQRT3 = math.sqrt(3.0)
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
@@ -107,7 +106,7 @@ class Matern32Product(Kern):
         self, x: NDArray[np.float64], x2: NDArray[np.float64] | None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Inputs scaled by sqrt(3) / l: a (n, d) and b^T (d, m), C-contiguous."""
-        scale = _SQRT3 / np.asarray(self.lengthscale, dtype=float)
+        scale = SQRT3 / np.asarray(self.lengthscale, dtype=float)
         a = np.ascontiguousarray(x * scale)
         bt = np.ascontiguousarray((a if x2 is None else x2 * scale).T)
         return a, bt
@@ -168,8 +167,8 @@ class Matern32Product(Kern):
         out = np.empty_like(x)
         for j in range(x.shape[1]):
             diff = x[:, j, None] - x2[None, :, j]
-            r = np.abs(diff) * (_SQRT3 / ell[j])
-            dk = -r / (1.0 + r) * (_SQRT3 / ell[j]) * np.sign(diff)
+            r = np.abs(diff) * (SQRT3 / ell[j])
+            dk = -r / (1.0 + r) * (SQRT3 / ell[j]) * np.sign(diff)
             out[:, j] = np.sum(w * dk, axis=1)
         return out
 

@@ -37,7 +37,8 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 
-_SQRT3 = math.sqrt(3.0)
+#: The Matérn-3/2 kernel's factor, k(r) = (1 + √3 r/l) exp(-√3 r/l) (also gp.py, kernels.py).
+SQRT3 = math.sqrt(3.0)
 #: Largest |scaled input| for the exp-free product-kernel loop (e^a e^-b stays far from
 #: overflow and underflow: e^(2 * 300) ~ 1e260).
 EXP_FREE_RANGE = 300.0
@@ -64,7 +65,7 @@ class KernelTerms:
     ) -> KernelTerms:  # fmt: skip
         d = xs_train.shape[1]
         ell = np.asarray(lengthscale, dtype=float)
-        scale = _SQRT3 / (ell if product else np.full(d, ell[0]))
+        scale = SQRT3 / (ell if product else np.full(d, ell[0]))
         xt_t = np.ascontiguousarray((xs_train * scale).T)
         return cls(product, scale, xt_t, np.ascontiguousarray(alpha, dtype=float), float(factor))
 
