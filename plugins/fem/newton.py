@@ -20,9 +20,10 @@ The iteration (what ``ale_fsi`` needs, stiff coupled systems solved to a toleran
   contraction, and if it is larger than the first the first is undone before the fresh
   Jacobian.  Measured on ``ale_fsi``'s 3-D dome (order 3, 2 threads), a fresh Jacobian costs
   1.7 + 5.7 s (assembly, factorisation), a chord step ~0.1 s; with the default rule its LM
-  with forward differences assembled a Jacobian in nearly every run (158 s; 66 s with the
+  with forward differences assembled a Jacobian in nearly every run (158 s; 75 s with the
   costly-Jacobian rule, ``benchmarks/bench_lm_tangents.py``).  On its 2-D flow cell (23 + 9
-  ms against ~3 ms) that rule gained nothing.  The converged state meets the tolerance either
+  ms against ~3 ms) that rule gained nothing, nor where a chord step is itself an iterative
+  solve (``ale_fsi``'s ``block_gmres``: slower).  The converged state meets the tolerance either
   way (a chord-converged one does not overshoot it as a quadratic Newton step does);
 * an update that leads to an inadmissible state (an inverted element, a porosity outside
   (0, 1)) is halved, up to ``max_halvings`` times (default 5);
