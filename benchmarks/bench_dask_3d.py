@@ -82,7 +82,10 @@ against 0.21 s, 0.46 against 0.30 s), cause not found: two serial batches side b
 two processes do not slow each other (0.62 and 0.63 s a run), and the CPU time of an isolated
 2-worker batch of 16 is the two run processes' (13.6 of 15.2 CPU-s in 8.1 s wall; Dask's
 processes, the helpers and the client 1.6 s).  Without isolation (``--no-isolate``, 16 runs)
-2 workers are 1.37x warm serial.
+2 workers are 1.37x warm serial; the same 16-run batch measured again back to back took 5.9 s
+isolated and 6.2 s not (1.40x and 1.45x of 8.5 s serial, the same 5 Jacobians): isolation
+costs nothing measurable, and the 2-worker figures scatter (1.4-1.7x) with which worker gets
+which point (one isolated batch had a run of 4.2 s with 3 Jacobians).
 """
 
 from __future__ import annotations
