@@ -28,5 +28,6 @@ def test_a_serial_fem_calibration_repeats_bit_for_bit() -> None:
     assert first.nfev == second.nfev > 3 and first.x == second.x
     for a, b in zip(first.evaluations, second.evaluations, strict=True):
         assert a.x == b.x and a.ok and b.ok
+        assert a.jacobian is not None and b.jacobian is not None  # J from the tangents
         assert np.array_equal(a.residuals, b.residuals)
         assert np.array_equal(a.jacobian, b.jacobian)

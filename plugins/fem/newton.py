@@ -227,10 +227,9 @@ class NewtonSolver:
                     chord = self._chord_taken(norm, previous)
                     rep.solve_time += time.perf_counter() - t0
                     t0 = time.perf_counter()
-                    if not chord and before is not None and previous is not None:
-                        if norm > previous:  # the warm first step made it worse
-                            x_np[:] = before
-                            system.residual(res)
+                    if not chord and before is not None and norm > rep.norms[-1]:
+                        x_np[:] = before  # the warm first step made it worse: undone
+                        system.residual(res)
                     before = None
                 if not chord:  # a Newton step with a fresh Jacobian
                     if rep.jacobians >= self.max_jacobians:
