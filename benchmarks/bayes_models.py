@@ -75,6 +75,11 @@ LAYERS = {3: ((0.5, 1.0), (0.15, 0.5), (0.0, 0.15)), 1: ((0.0, 1.0),)}
 TRUTH_2D = {"E": 400.0, "nu": 0.3}
 TRUTH_7D = {"E1": 500.0, "nu1": 0.2, "E2": 200.0, "nu2": 0.1, "E3": 1000.0, "nu3": 0.3}
 TRUE_INFLOW = 100.0  # mm^2/s
+#: the shape-map cases (ShapeMapModel): a on the banana's arm, +-a the two modes
+TRUTH_SHAPE = {"banana": {"a": 0.3, "b": 0.2}, "bimodal": {"a": 0.6, "b": 0.3}}
+#: every case build_case knows: the layered mound in 2-D, 2 + 1-D, 6 + 1-D, and the shape maps
+#: with the inflow known (2-D) or uncertain (2 + 1-D)
+CASE_NAMES = ("2d", "2d_inflow", "7d", "banana", "banana_inflow", "bimodal", "bimodal_inflow")
 
 
 class LayeredMoundForwardModel(fbia.Configurable):
@@ -174,6 +179,88 @@ class LayeredMoundForwardModel(fbia.Configurable):
         return fbia.Solution.from_pairs(pairs)
 
 
+class ShapeMapModel(fbia.Configurable):
+    """A mound whose lean and settlement follow two shape inputs ``a``, ``b`` through a map
+    that bends or splits the posterior (issue 42's family: banana-shaped and bimodal cases with
+    exact posteriors).  With s = q / 100 (the inflow ``inflow_rate`` scales both responses):
+
+        banana:   U = LEAN s a,        V = SETTLE s (b + a^2)
+        bimodal:  U = LEAN_2 s a^2,    V = SETTLE s b
+
+        Y(x) = f0(x - U f0(x) / h),    y(x) = Y(x) (1 - V)          [mm]
+
+    The lean U probes a weakly (banana: a broad marginal), the settlement V probes b + a^2
+    sharply, so the posterior lies along the parabola b = c - a^2; in the bimodal case only
+    a^2 is seen, so +a and -a fit equally well (two modes of equal mass)."""
+
+    dim = 2
+
+    class Options(fbia.PluginOptions):
+        shape: Literal["banana", "bimodal"] = Field("banana", description="the map [-]")
+        n_points: int = Field(41, ge=5, description="vertices of the interface polyline [-]")
+        inflow_rate: float = Field(100.0, description="q when not given [mm^2/s]")
+        height: float = Field(0.5, gt=0, description="crest height h [mm]")
+        width: float = Field(0.8, gt=0, description="footprint width w [mm]")
+        centre: float = Field(1.0, description="footprint centre x0 [mm]")
+
+    options: Options
+    #: lean per unit a (banana) and per unit a^2 (bimodal) at q = 100 [mm]; settlement per
+    #: unit b [-]
+    LEAN, LEAN_2, SETTLE = 0.005, 0.02, 0.05
+    material_names = ["a", "b"]
+
+    def __init__(self, options: fbia.PluginOptions | None = None, /, **kwargs: Any) -> None:
+        super().__init__(options, **kwargs)
+        o = self.options
+        self.x = np.linspace(o.centre - o.width / 2, o.centre + o.width / 2, o.n_points)
+
+    def parameter_names(self) -> Sequence[str]:
+        """``a``, ``b`` [-] and ``inflow_rate`` [mm^2/s]."""
+        return ["a", "b", "inflow_rate"]
+
+    def reference_height(self, x: FloatArray) -> FloatArray:
+        o = self.options
+        s = np.clip((x - o.centre) / (o.width / 2), -1.0, 1.0)
+        return np.asarray(o.height * np.cos(0.5 * math.pi * s))
+
+    def heights(self, a: FloatArray, b: FloatArray, q: FloatArray) -> FloatArray:
+        """Deformed heights y(x_j), shape (N, n_points), for a, b of shape (N, 1) and q (N,)."""
+        s = (np.asarray(q, dtype=float) / 100.0)[:, None]
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        if self.options.shape == "banana":
+            lean, settle = self.LEAN * s * a, self.SETTLE * s * (b + a * a)
+        else:
+            lean, settle = self.LEAN_2 * s * a * a, self.SETTLE * s * b
+        f0 = self.reference_height(self.x)[None, :]
+        Y = self.reference_height(self.x[None, :] - lean * f0 / self.options.height)
+        return np.asarray(Y * (1.0 - settle))
+
+    def split(self, values: Mapping[str, float] | FloatArray, names: Sequence[str] | None = None):
+        """(a, b, q) arrays from one input dict, or from rows of ``values`` named ``names``."""
+        if isinstance(values, Mapping):
+            row = np.array([[float(values[n]) for n in self.parameter_names()]])
+        else:
+            assert names is not None
+            cols = [list(names).index(n) for n in self.parameter_names()]
+            row = np.asarray(values, dtype=float)[:, cols]
+        return row[:, 0:1], row[:, 1:2], row[:, 2]
+
+    def solve(
+        self,
+        parameters: Mapping[str, float],
+        coordinates: Sequence[Mapping[str, float]],
+        workdir: Path,
+    ) -> fbia.Solution:
+        """One deformed interface per coordinate (a coordinate's inflow_rate overrides)."""
+        pairs = []
+        for coordinate in coordinates:
+            values = {"inflow_rate": self.options.inflow_rate, **parameters, **coordinate}
+            a, b, q = self.split(values)
+            y = self.heights(a, b, q)[0]
+            pairs.append((coordinate, fbia.Interface.polyline(np.c_[self.x, y])))
+        return fbia.Solution.from_pairs(pairs)
+
+
 # -- the benchmark cases --------------------------------------------------------------------------
 @dataclass
 class Case:
@@ -181,7 +268,7 @@ class Case:
 
     name: str
     problem: fbia.InverseProblem
-    model: LayeredMoundForwardModel
+    model: LayeredMoundForwardModel | ShapeMapModel
     rays: NDArray[np.intp]  # grid indices of the measurement points
     y_obs: FloatArray  # observed heights there
     truth: dict[str, float]
@@ -295,28 +382,38 @@ def build_case(
     seed: int = 0,
     measure: str = "ray",
 ) -> Case:
-    """``"2d"`` (E, nu at q = 100), ``"2d_inflow"`` (E, nu under the uncertain q) or ``"7d"``
-    (E_k, nu_k of three layers under the uncertain q): the model, synthetic data with
+    """``"2d"`` (E, nu at q = 100), ``"2d_inflow"`` (E, nu under the uncertain q), ``"7d"``
+    (E_k, nu_k of three layers under the uncertain q), or a :class:`ShapeMapModel` case
+    (``"banana"``, ``"bimodal"`` at q = 100, ``..._inflow`` under the uncertain q; uniform
+    priors on [-1, 1]): the model, synthetic data with
     ``noise_obs`` [mm] (Paper B eq. 16: 1 um), the ray measure at every other interior vertex,
     sigma_N = ``sigma_n`` [mm] (eq. 5; Paper B uses 0.01 mm with the ray measure), and the
     priors of Paper B (uniform E [100, 800] Pa in 2-D, [100, 1500] Pa per layer in 7-D;
     uniform nu [-0.8, 0.5]; the Beta inflow of Fig. 10).  ``measure="cpp"``: the cpp measure
     (eq. 7, one residual per simulated vertex) against the observed polyline instead of rays
     (issue 30's 6 + 1-D case: cpp with sigma_N = 2 um)."""
-    if name not in ("2d", "2d_inflow", "7d"):
-        raise ValueError(f"unknown case {name!r}; valid: 2d, 2d_inflow, 7d")
+    if name not in CASE_NAMES:
+        raise ValueError(f"unknown case {name!r}; valid: {', '.join(CASE_NAMES)}")
     if measure not in ("ray", "cpp"):
         raise ValueError(f"unknown measure {measure!r}; valid: ray, cpp")
     layered = name == "7d"
-    model = LayeredMoundForwardModel(subdomains=3 if layered else 1, n_points=n_points)
-    truth = dict(TRUTH_7D if layered else TRUTH_2D)
-    e_max = 1500.0 if layered else 800.0
+    shape = name.removesuffix("_inflow")
+    model: LayeredMoundForwardModel | ShapeMapModel
     parameters = []
-    for n in model.material_names:
-        lo, hi = (100.0, e_max) if n.startswith("E") else (-0.8, 0.5)
-        parameters.append(
-            fbia.Parameter(n, bounds=(lo, hi), unit="Pa" if n.startswith("E") else "-")
-        )
+    if shape in ("banana", "bimodal"):
+        model = ShapeMapModel(shape=shape, n_points=n_points)
+        truth = dict(TRUTH_SHAPE[shape])
+        for n in model.material_names:
+            parameters.append(fbia.Parameter(n, bounds=(-1.0, 1.0), unit="-"))
+    else:
+        model = LayeredMoundForwardModel(subdomains=3 if layered else 1, n_points=n_points)
+        truth = dict(TRUTH_7D if layered else TRUTH_2D)
+        e_max = 1500.0 if layered else 800.0
+        for n in model.material_names:
+            lo, hi = (100.0, e_max) if n.startswith("E") else (-0.8, 0.5)
+            parameters.append(
+                fbia.Parameter(n, bounds=(lo, hi), unit="Pa" if n.startswith("E") else "-")
+            )
     E, nu, q = model.split({**truth, "inflow_rate": TRUE_INFLOW})
     y_true = model.heights(E, nu, q)[0]
     rng = np.random.default_rng(seed)
@@ -332,7 +429,7 @@ def build_case(
         name=f"{name} at q = {TRUE_INFLOW:g} mm^2/s",
     )
     extra: dict[str, Any]
-    if name == "2d":
+    if name in ("2d", "banana", "bimodal"):
         extra = {"fixed": {"inflow_rate": TRUE_INFLOW}}
     else:
         extra = {"uncertain": [inflow_parameter()]}

@@ -78,15 +78,36 @@ class Config:
     measure: str
     sigma_n: float
     options: dict[str, Any] = field(default_factory=dict)
+    n_points: int = 41  # vertices of the model's interface (cpp: residuals per run)
 
 
-#: the configurations (defaults at the issue's budgets, and starved ones that can be wrong)
+#: issue 42's budgets in forward runs, design + the 8 check runs: <= 100 in 2-D, <= 200 in
+#: 2 + 1-D, <= 1000 in 6 + 1-D
+N_TRAIN = {2: 92, 3: 192, 7: 992}
+_2D, _3D, _7D = (
+    {"n_train": N_TRAIN[2]},
+    {"n_train": N_TRAIN[3]},
+    {"n_train": N_TRAIN[7], "ard": True},
+)
+
+#: the configurations: the family of issue 42 at its budgets (sharp, broad and weakly
+#: identified, banana-shaped, bimodal; 2-D, 2 + 1-D, 6 + 1-D; ray and cpp), then starved and
+#: stopped-early runs that can be wrong
 CONFIGS = (
-    Config("2d_inflow_ray", "2d_inflow", "ray", 0.01, {"n_train": 92}),
-    Config("2d_inflow_cpp", "2d_inflow", "cpp", 0.002, {"n_train": 92}),
-    Config("7d_ray", "7d", "ray", 0.01, {"n_train": 992, "ard": True}),
-    Config("7d_cpp", "7d", "cpp", 0.002, {"n_train": 992, "ard": True}),
-    Config("7d_ray_sharp", "7d", "ray", 0.002, {"n_train": 992, "ard": True}),
+    Config("2d_ray", "2d", "ray", 0.01, _2D),
+    Config("banana_ray", "banana", "ray", 0.01, _2D),
+    Config("bimodal_cpp", "bimodal", "cpp", 0.01, _2D),
+    Config("2d_inflow_ray", "2d_inflow", "ray", 0.01, _3D),
+    Config("2d_inflow_cpp", "2d_inflow", "cpp", 0.002, _3D),
+    Config("banana_inflow_cpp", "banana_inflow", "cpp", 0.01, _3D),
+    Config("bimodal_inflow_ray", "bimodal_inflow", "ray", 0.01, _3D),
+    Config("7d_ray", "7d", "ray", 0.01, _7D),
+    Config("7d_cpp", "7d", "cpp", 0.002, _7D),
+    Config("7d_ray_sharp", "7d", "ray", 0.002, _7D),
+    # broad and weakly identified: E1, E3 posterior std 24-26 % of the prior range, nu_k
+    # 0.15-0.37, only E2 sharp
+    Config("7d_cpp_broad", "7d", "cpp", 0.02, _7D, n_points=61),
+    Config("7d_cpp61", "7d", "cpp", 0.002, _7D, n_points=61),
     # starved: a fixed Sobol design far below what the posterior needs
     Config("2d_inflow_ray_starved", "2d_inflow", "ray", 0.01, {"design": "sobol", "n_train": 30}),
     Config("2d_inflow_cpp_starved", "2d_inflow", "cpp", 0.002, {"design": "sobol", "n_train": 30}),
@@ -118,16 +139,26 @@ class Outcome:
 
 
 #: exact references by (case, measure, sigma_N): configurations of one problem share theirs
-_REFERENCES: dict[tuple[str, str, float], Any] = {}
+_REFERENCES: dict[tuple[str, str, float, int], Any] = {}
 
 
 def run_config(config: Config, seeds: list[int], quick: bool) -> list[Outcome]:
-    case = build_case(config.case, sigma_n=config.sigma_n, measure=config.measure)
+    case = build_case(
+        config.case, sigma_n=config.sigma_n, measure=config.measure, n_points=config.n_points
+    )
     n_x = len(case.problem.parameters)
     settings = QUICK_REFERENCE if quick else REFERENCE
-    key = (config.case, config.measure, config.sigma_n)
+    key = (config.case, config.measure, config.sigma_n, config.n_points)
     if key not in _REFERENCES:
-        _REFERENCES[key] = exact_reference(case, settings, None)
+        # up to 3 inputs: quadrature on a grid is the reference (SMC's pooled seeds beside
+        # it; a bimodal posterior's mode weights are what quadrature gets exactly)
+        grid = None if len(case.names) > 3 else ((60, 40) if quick else (300, 120))
+        ref = exact_reference(
+            case, settings, (grid[0], grid[1] if len(case.names) == 3 else None) if grid else None
+        )
+        if ref.grid is not None:
+            ref.moments = ref.grid
+        _REFERENCES[key] = ref
     ref = _REFERENCES[key]
     a, b = ref.seeds
     spread = float(np.max(np.abs(a.mean - b.mean) / ref.moments.std))

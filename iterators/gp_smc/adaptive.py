@@ -4,7 +4,7 @@
 then repeats rounds of: GP on the runs so far -> SMC on the surrogate -> a batch of new
 forward runs where they make the posterior most certain -> refit, until the posterior stops
 changing and the surrogate is right at posterior draws (the loop is in
-:mod:`fbia.iterators.gp_smc.iterator`; this module holds its numerics):
+:mod:`fbia.iterators.gp_smc.adaptive_loop`; this module holds its numerics):
 
 * **The batch** (:func:`select_batch`): half are distinct draws from the current surrogate
   posterior (they put runs where the posterior mass is, and before they are used for
@@ -33,11 +33,15 @@ changing and the surrogate is right at posterior draws (the loop is in
   decreasing, so the ordering is kept). T is chosen so the floored region cannot hold more
   than 1e-3 of the evidence (:func:`floor_depth`); this is the thresholding of low
   log-density values that GP surrogates of log-posteriors use (Acerbi 2018, VBMC).
-* **Stopping** (:func:`posterior_shift`): the posterior mean moved by less than ``tol``
-  posterior standard deviations, no standard deviation changed by more than a factor
-  1 + ``tol`` and log Z by more than 0.5 (+ twice its standard error) since the last round,
-  and the surrogate's error at the new posterior draws
-  (predicted before they were used) is below :data:`~fbia.iterators.gp_smc.result.RELIABLE_RMSE`.
+* **Stopping** (:func:`posterior_change`, :func:`centred_rmse`): the last round's posterior,
+  reweighted on its own particles from the surrogate that chose the batch to the one refitted
+  with it, moved no mean or 5/50/95 % quantile by ``tol`` posterior standard deviations, no
+  standard deviation by a factor 1 + ``tol`` and log Z by 0.5, and the surrogate's error at
+  the batch's posterior draws (predicted before they were used), without its mean, is below
+  :data:`~fbia.iterators.gp_smc.result.RELIABLE_RMSE`. Reweighting the same particles
+  measures what the new runs changed and nothing else: two separate SMC runs differ by their
+  Monte Carlo noise, which on a broad 6 + 1-D posterior with the rounds' coarse SMC exceeded
+  0.1 std every round, so that such a design never stopped (issue 42: 1000 of 1000 runs).
 
 References: Järvenpää, Gutmann, Vehtari, Marttinen (2019), Bayesian Analysis 14(2) 595-622;
 Ginsbourger, Le Riche, Carraro (2010), in Computational Intelligence in Expensive
@@ -53,7 +57,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -114,17 +118,6 @@ class Moments:
         return cls(post.mean, np.sqrt(np.maximum(np.diag(post.cov), 0.0)))
 
 
-def posterior_shift(previous: Moments, current: Moments) -> tuple[float, float]:
-    """The largest move of a posterior mean in current standard deviations, and the largest
-    relative change of a standard deviation (|log ratio|), between two rounds."""
-    std = np.maximum(current.std, 1e-300)
-    moved = float(np.max(np.abs(current.mean - previous.mean) / std))
-    ratio = float(
-        np.max(np.abs(np.log(np.maximum(current.std, 1e-300) / np.maximum(previous.std, 1e-300))))
-    )
-    return moved, ratio
-
-
 def distinct_draws(post: SmcResult, n: int, rng: np.random.Generator) -> FloatArray:
     """Up to ``n`` distinct particles drawn in proportion to their weights."""
     order = rng.choice(len(post.weights), size=len(post.weights), p=post.weights)
@@ -132,13 +125,130 @@ def distinct_draws(post: SmcResult, n: int, rng: np.random.Generator) -> FloatAr
     return np.asarray(post.particles[order[np.sort(first)][:n]])
 
 
-def validation_error(gp: Surrogate, x: FloatArray, log_likelihood: FloatArray) -> tuple[float, int]:
-    """RMSE of the GP mean against L at points it was not trained on (finite L only)."""
+@dataclass(frozen=True)
+class Validation:
+    """A surrogate against forward runs it was not trained on (posterior draws)."""
+
+    n: int  # points with finite L
+    rmse: float  # of the GP mean against L
+    centred: float  # the same without the mean error (:func:`centred_rmse`)
+    z_rms: float  # root mean square of error / GP standard deviation (1: calibrated)
+
+
+def validation_error(gp: Surrogate, x: FloatArray, log_likelihood: FloatArray) -> Validation:
+    """The surrogate's errors in L at points it was not trained on (finite L only), and how
+    they compare with its own standard deviation there."""
     ok = np.isfinite(log_likelihood)
     if not ok.any():
-        return math.nan, 0
-    err = gp.predict_mean(x[ok]) - log_likelihood[ok]
-    return float(np.sqrt(np.mean(err**2))), int(ok.sum())
+        return Validation(0, math.nan, math.nan, math.nan)
+    mean, var = gp.predict(x[ok])
+    err = mean - log_likelihood[ok]
+    z = err / np.sqrt(np.maximum(var, 1e-300))
+    return Validation(
+        int(ok.sum()),
+        float(np.sqrt(np.mean(err**2))),
+        centred_rmse(err),
+        float(np.sqrt(np.mean(z**2))),
+    )
+
+
+def centred_rmse(errors: FloatArray) -> float:
+    """The spread of a surrogate's errors in L at posterior draws (their standard deviation,
+    n - 1 in the denominator): what changes the posterior. An error that is the same
+    everywhere cancels when the posterior is normalised, and an error e(x) that varies moves
+    a posterior mean by at most sd(e^e) / E(e^e) ~ sd(e) of its posterior standard
+    deviations (Cauchy-Schwarz: |Cov(x, w)| <= std(x) sd(w)). NaN for fewer than 2."""
+    errors = np.asarray(errors, dtype=float)
+    return float(np.std(errors, ddof=1)) if len(errors) >= 2 else math.nan
+
+
+@dataclass(frozen=True)
+class PosteriorChange:
+    """How a refitted surrogate changes a posterior, measured on that posterior's own
+    particles (:func:`posterior_change`): free of the Monte Carlo noise that two separate SMC
+    runs differ by."""
+
+    mean_shift: float  # largest |change of a mean| in posterior std
+    std_change: float  # largest |log| ratio of a std
+    quantile_shift: float  # largest move of a 5, 50 or 95 % quantile, in posterior std
+    evidence_change: float  # |change of log Z|
+    ess_fraction: float  # ESS of the new weights over the ESS of the old ones
+
+    def settled(self, tol: float) -> bool:
+        """Whether the posterior stopped moving: means and quantiles within ``tol`` std, std
+        within a factor 1 + ``tol``, log Z within :data:`EVIDENCE_TOL`, and the new weights
+        still spread over at least :data:`MIN_ESS_FRACTION` of the particles (else the
+        particles no longer describe the new posterior and nothing is measured)."""
+        return bool(
+            self.mean_shift < tol
+            and self.quantile_shift < tol
+            and self.std_change < math.log1p(tol)
+            and self.evidence_change < EVIDENCE_TOL
+            and self.ess_fraction >= MIN_ESS_FRACTION
+        )
+
+
+#: the largest change of log Z between rounds that counts as "the evidence stopped changing"
+EVIDENCE_TOL = 0.5
+#: reweighted particles with fewer effective ones than this share of before: not converged
+MIN_ESS_FRACTION = 0.5
+#: the quantiles whose moves :class:`PosteriorChange` measures
+QUANTILES = (0.05, 0.5, 0.95)
+
+
+def posterior_change(
+    post: SmcResult, target: Callable[[FloatArray], FloatArray]
+) -> tuple[SmcResult, PosteriorChange]:
+    """``post`` (SMC on an earlier surrogate: its ``log_likelihood`` is that target at the
+    particles) reweighted to the log-target ``target`` of a refitted surrogate, w_i ~ w_i
+    exp(target(x_i) - old_i), and how its moments, quantiles and evidence changed."""
+    new = np.asarray(target(post.particles), dtype=float)
+    with np.errstate(invalid="ignore"):
+        delta = new - post.log_likelihood
+    delta = np.where(np.isfinite(delta), delta, -np.inf)
+    log_w = np.log(np.maximum(post.weights, 1e-300)) + delta
+    top = float(np.max(log_w))
+    if not math.isfinite(top):
+        change = PosteriorChange(math.inf, math.inf, math.inf, math.inf, 0.0)
+        return post, change
+    w = np.exp(log_w - top)
+    total = float(w.sum())
+    w /= total
+    old_mean, old_std = _weighted_moments(post.particles, post.weights)
+    mean, std = _weighted_moments(post.particles, w)
+    shift = float(np.max(np.abs(mean - old_mean) / old_std))
+    spread = float(np.max(np.abs(np.log(std / old_std))))
+    q_old = _weighted_quantiles(post.particles, post.weights)
+    q_new = _weighted_quantiles(post.particles, w)
+    q_shift = float(np.max(np.abs(q_new - q_old) / old_std))
+    ess_old = 1.0 / float(np.sum(post.weights**2))
+    ess_new = 1.0 / float(np.sum(w**2))
+    # log Z_new / Z_old = log sum_i W_i exp(delta_i), W the old normalised weights
+    d_log_z = top + math.log(total)
+    reweighted = replace(
+        post,
+        weights=w,
+        log_likelihood=new,
+        log_evidence=post.log_evidence + d_log_z,
+    )
+    change = PosteriorChange(shift, spread, q_shift, abs(d_log_z), ess_new / ess_old)
+    return reweighted, change
+
+
+def _weighted_moments(x: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    mean = w @ x
+    return mean, np.sqrt(np.maximum(w @ (x - mean) ** 2, 1e-300))
+
+
+def _weighted_quantiles(x: FloatArray, w: FloatArray) -> FloatArray:
+    """The :data:`QUANTILES` of every column of ``x`` under weights ``w``, (3, d)."""
+    out = np.empty((len(QUANTILES), x.shape[1]))
+    for j in range(x.shape[1]):
+        order = np.argsort(x[:, j], kind="stable")
+        cdf = np.cumsum(w[order])
+        idx = np.minimum(np.searchsorted(cdf, np.asarray(QUANTILES) * cdf[-1]), len(cdf) - 1)
+        out[:, j] = x[order[idx], j]
+    return out
 
 
 def select_batch(

@@ -1,13 +1,24 @@
-"""The rounds of ``gp_smc``'s adaptive design (the numerics are in :mod:`.gp_adaptive`).
+"""The rounds of ``gp_smc``'s adaptive design (the numerics are in :mod:`.adaptive`).
 
 A Sobol start of ``n_initial`` runs (+ ``n_test`` held-out points), then per round: GP on
-the runs so far (L with a soft floor) -> SMC on the GP mean (``round_particles``, a coarse
-tempering) -> stop if the last round converged or the budget ``n_train`` is spent -> a batch
-of runs (posterior draws, draws from the tempered posterior exp(mu / 4) p, the EIV rule)
-through the evaluator in one call (parallel
-workers) -> the surrogate's error at the posterior draws, predicted before they are used; a round
-that looks converged is also checked against the posterior averaged over the GP's sample
-paths (the GP must not be unsure where the posterior ends).
+the runs so far (L with a soft floor; its hyperparameters optimised again only when the
+design has grown by :data:`REOPTIMISE_GROWTH`, else kept and the GP conditioned on the new
+runs) -> has the design converged? -> SMC on the GP mean (``round_particles``, a coarse
+tempering that keeps its particles at gamma = 1/4 on the way) -> a batch of runs (posterior
+draws, draws of the tempered posterior exp(mu / 4) p, the EIV rule) through the evaluator in
+one call (parallel workers) -> the surrogate's error at the posterior draws, predicted
+before they are used.
+
+**Converged** means what the user gets stopped changing: the last round's posterior,
+reweighted on its own particles from the surrogate that chose the batch to the one refitted
+with it (:func:`~.adaptive.posterior_change`: no Monte Carlo noise between two SMC runs to
+mistake for a change), moved no mean or 5/50/95 % quantile by ``adaptive_tol`` posterior std,
+no std by a factor 1 + ``adaptive_tol`` and log Z by 0.5; the surrogate's error at the
+batch's posterior draws, without its mean (:func:`~.adaptive.centred_rmse`: a constant
+error cancels in the posterior), was below
+:data:`~fbia.iterators.gp_smc.result.RELIABLE_RMSE`; and the posterior averaged over the
+GP's sample paths does not differ from it (the GP must not be unsure where the posterior
+ends). Otherwise the rounds go on until ``n_train`` runs are spent.
 The last GP is always trained on every run; the final SMC (``n_particles``, ``zeta``, ...)
 and the posterior check are the iterator's.
 """
@@ -34,7 +45,7 @@ from .adaptive import (
     Moments,
     floor_depth,
     floored,
-    posterior_shift,
+    posterior_change,
     select_batch,
     validation_error,
 )
@@ -44,23 +55,37 @@ from .run import GpSmcState, SmcRun, log_prior
 
 FloatArray = NDArray[np.float64]
 
-#: the largest change of log Z between rounds (plus twice its standard error) that counts
-#: as "the evidence stopped changing"
-EVIDENCE_TOL = 0.5
 #: the rounds' SMC: a coarse tempering (its posterior only steers the design)
 ROUND_ZETA = 0.9
 ROUND_REJUVENATION = 5
 #: the tempering of the wide posterior exp(beta mu) p that a quarter of each batch is drawn
-#: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further)
+#: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further):
+#: the round's SMC keeps its particles at gamma = beta on its way to 1 (``keep_gamma``), so
+#: they cost no second run (the factor of where the model runs, gp_feasibility, is tempered
+#: with the mean there)
 WIDE_TEMPERATURE = 0.25
+#: the hyperparameters are optimised again when the design has grown by this factor since
+#: they last were; in the rounds between, the surrogate keeps them and is only conditioned on
+#: the new runs (hyperparameters change slowly with the data, and an evidence maximisation of
+#: a residual emulator costs 20 GPs x tens of Cholesky factorisations)
+REOPTIMISE_GROWTH = 1.5
 #: fits the surrogate to (x, y) and the runs' records (a residual emulator uses their
 #: residuals), warm-started from earlier hyperparameters when given, its kernel's axes along
-#: the principal axes of a covariance when given (GpSurrogate.fit's axes)
+#: the principal axes of a covariance when given (GpSurrogate.fit's axes), the
+#: hyperparameters optimised (True) or kept and only conditioned on the runs (False)
 FitGp = Callable[
-    [FloatArray, FloatArray, Mapping[str, Any] | None, Sequence[Evaluation], FloatArray | None],
+    [
+        FloatArray,
+        FloatArray,
+        Mapping[str, Any] | None,
+        Sequence[Evaluation],
+        FloatArray | None,
+        bool,
+    ],
     Surrogate,
 ]
-#: SMC on a log-likelihood with a number of particles (the rounds' coarse settings)
+#: SMC on a log-likelihood with a number of particles (the rounds' coarse settings), keeping
+#: its particles at gamma = WIDE_TEMPERATURE (SmcResult.tempered)
 Sample = Callable[[Callable[[FloatArray], FloatArray], int], SmcResult]
 
 
@@ -117,13 +142,13 @@ def adaptive_design(
     slots = parallel_slots(run.evaluator)
     rng = np.random.default_rng([opts.seed, 3])
     rounds: list[AdaptiveRound] = []
-    previous: Moments | None = None
     hyper: Mapping[str, Any] | None = None
     log_z: float | None = None
-    converged = False
     gp: Surrogate | None = None
     floor = -math.inf
     axes: FloatArray | None = None  # gp_axes = "posterior": the last round's covariance
+    optimised_at = 0  # design runs when the hyperparameters were last optimised
+    last: tuple[SmcResult, float] | None = None  # the last round's posterior, its check
     while True:
         t0 = time.perf_counter()
         use = train & np.isfinite(loglik)
@@ -136,64 +161,69 @@ def adaptive_design(
         # extreme parameters, and the criterion must not send batch after batch there
         y = floored(loglik, floor)
         records = [run.evaluations[i] for i in np.flatnonzero(train)]
-        gp = fit_gp(points[train], y[train], hyper, records, axes)
+        n_design = int(train.sum())
+        optimise = hyper is None or n_design >= REOPTIMISE_GROWTH * optimised_at
+        gp = fit_gp(points[train], y[train], hyper, records, axes, optimise)
+        optimised_at = n_design if optimise else optimised_at
         if opts.failures == "classify":
             gp.feasibility = fit_feasibility(points[train], np.isfinite(loglik[train]))
-        n_design = int(train.sum())
-        if converged or n_design >= opts.n_train:
-            reason = "converged" if converged else "budget"
+        target = gp.feasible(gp.predict_mean_guarded)
+        change = None
+        if last is not None:
+            # what the last batch did to the last round's posterior, on its own particles
+            reweighted, change = posterior_change(last[0], target)
+            converged = change.settled(opts.adaptive_tol) and last[1] < RELIABLE_RMSE
+            if converged and run.noise is None and opts.uncertainty_check:
+                # and the GP's own uncertainty does not move the posterior either (the
+                # final status's check; with sigma_N inferred the GP models its profile)
+                converged = not _gp_unsure(gp, reweighted, run, opts, rng)
+            if converged:
+                reason = "converged"
+                break
+        if n_design >= opts.n_train:
+            reason = "budget"
             break
-        post = sample(gp.feasible(gp.predict_mean_guarded), opts.round_particles)
-        evidence_change = math.inf if log_z is None else abs(post.log_evidence - log_z)
+        post = sample(target, opts.round_particles)
         log_z = post.log_evidence
         moments = Moments.of(post)
-        moved, spread = (
-            (math.inf, math.inf) if previous is None else posterior_shift(previous, moments)
-        )
         n_batch = min(batch_size(opts, n_design, slots), opts.n_train - n_design)
-        wide = sample(_tempered(gp, WIDE_TEMPERATURE), opts.round_particles)
+        wide = post.tempered  # the round's SMC passed through exp(mu / 4) p on its way
         batch, n_draws = select_batch(
             gp, post, n_batch, run.inputs, lambda z: log_prior(run.inputs, z), rng, wide
         )
         new = run.evaluate(batch)
         new_loglik = run.log_likelihoods(new)
-        rmse, n_valid = validation_error(gp, batch[:n_draws], new_loglik[:n_draws])
+        check = validation_error(gp, batch[:n_draws], new_loglik[:n_draws])
         run.evaluations.extend(new)
         points = np.vstack([points, batch])
         loglik = np.concatenate([loglik, new_loglik])
         train = np.concatenate([train, np.ones(len(batch), dtype=bool)])
-        converged = bool(
-            moved < opts.adaptive_tol
-            and spread < math.log1p(opts.adaptive_tol)
-            and evidence_change < EVIDENCE_TOL + 2.0 * post.log_evidence_se
-            and n_valid > 0
-            and rmse < RELIABLE_RMSE
-        )
-        if converged and run.noise is None and opts.uncertainty_check:
-            # and the GP's own uncertainty does not move the posterior either (the final
-            # status's check; with sigma_N inferred the GP models its profile, not L)
-            converged = not _gp_unsure(gp, post, run, opts, rng)
+        last = (post, check.centred if check.n >= 2 else math.inf)
         entry = AdaptiveRound(
             round=len(rounds) + 1,
             n_runs=n_design,
             n_batch=len(batch),
             mean=moments.mean,
             std=moments.std,
-            mean_shift=moved,
-            std_change=spread,
-            validation_rmse=rmse,
+            mean_shift=math.inf if change is None else change.mean_shift,
+            std_change=math.inf if change is None else change.std_change,
+            validation_rmse=check.rmse,
             log_evidence=log_z,
-            evidence_change=evidence_change,
+            evidence_change=math.inf if change is None else change.evidence_change,
             floor=floor,
             seconds=time.perf_counter() - t0,
+            validation_centred=check.centred,
+            validation_z=check.z_rms,
+            quantile_shift=math.inf if change is None else change.quantile_shift,
+            ess_fraction=math.nan if change is None else change.ess_fraction,
+            optimised=optimise,
         )
         rounds.append(entry)
         hyper = gp.hyperparameters()
-        previous = moments
         if opts.gp_axes == "posterior":
             axes = np.atleast_2d(post.cov)
         yield GpSmcState("round", entry.describe(), run.record("round", **entry.to_record()))
-    summary = AdaptiveDesign(n_initial, rounds, reason, floor)
+    summary = AdaptiveDesign(n_initial, rounds, reason, floor, change)
     return AdaptiveOutcome(_design(points, loglik, run, train), gp, summary)
 
 
@@ -214,11 +244,6 @@ def _gp_unsure(
         },
     )
     return uncertainty.moves_posterior
-
-
-def _tempered(gp: Surrogate, beta: float) -> Callable[[FloatArray], FloatArray]:
-    """beta times the guarded mean, where the forward model runs (the factor untempered)."""
-    return gp.feasible(lambda z: beta * gp.predict_mean_guarded(z))
 
 
 def _design(points: FloatArray, loglik: FloatArray, run: SmcRun, train: Any) -> DesignRuns:

@@ -2,8 +2,15 @@
 
 After SMC on the surrogate, ``gp_smc`` runs the forward model at ``n_check`` distinct
 posterior draws and measures the surrogate's error there in units of L (an error of order 1
-changes posterior ratios by a factor e); a RMSE not below
+changes posterior ratios by a factor e); a spread of the errors (their standard deviation: a
+constant error cancels in the posterior) not below
 :data:`~fbia.iterators.gp_smc.result.RELIABLE_RMSE` makes the result ``unreliable``.
+
+The GP's own uncertainty is checked too (:mod:`fbia.iterators.surrogates.uncertainty`): when
+the posterior averaged over its sample paths differs from the posterior, the GP puts mass
+where no run has been, and only runs can say whether it is there. With the adaptive design
+and budget left, ``n_check`` runs at draws of that averaged posterior join the design as a
+repair (below) instead of ending the study as ``unreliable`` at once.
 
 A check that fails has found where the surrogate is wrong inside the posterior, and its runs
 are the most informative ones the design could get: with the adaptive design and budget left
@@ -56,7 +63,8 @@ def posterior_check(
     run.evaluations = [*run.evaluations, *evs]
     yield GpSmcState(
         "check",
-        f"surrogate at {check.n} posterior draws: RMSE {check.rmse:.3g} in L",
+        f"surrogate at {check.n} posterior draws: error {check.centred_rmse:.3g} in L "
+        f"(RMSE {check.rmse:.3g})",
         run.record("check", **{k: v for k, v in asdict(check).items() if k != "x"}),
     )
     return check
@@ -66,10 +74,12 @@ def repairable(
     check: PosteriorCheck, design: DesignRuns | None, adaptive: bool, n_train: int, done: int,
     limit: int,
 ) -> bool:  # fmt: skip
-    """Whether a failed ``check`` is repaired (module docstring): the surrogate's error, not
-    failed runs, made it fail; an adaptive design; the check's runs fit into ``n_train``;
-    fewer than ``limit`` repairs ``done``."""
-    if check.reliable or check.n == 0 or check.fails_often or design is None or not adaptive:
+    """Whether a failed ``check`` (or the runs at draws of the posterior averaged over the
+    GP's sample paths, ``cause = "uncertainty"``) is repaired (module docstring): the
+    surrogate's error or its uncertainty, not failed runs, made it fail; an adaptive design;
+    the runs fit into ``n_train``; fewer than ``limit`` repairs ``done``."""
+    passed = check.reliable and check.cause == "check"
+    if passed or check.n == 0 or check.fails_often or design is None or not adaptive:
         return False
     return done < limit and int(design.train_mask.sum()) + len(check.x) <= n_train
 
@@ -86,11 +96,12 @@ def with_check_runs(design: DesignRuns, check: PosteriorCheck, status: Sequence[
 
 
 def repair_note(failed: Sequence[float]) -> str:
-    """For the result message: the failed checks that were repaired (their RMSE in L)."""
+    """For the result message: the failed checks that were repaired (their error in L)."""
     if not failed:
         return ""
     rmse = ", ".join(f"{r:.3g}" for r in failed)
     return (
-        f"; {len(failed)} check(s) at posterior draws failed (RMSE {rmse} in L): their runs "
-        "joined the design and the posterior was computed again"
+        f"; {len(failed)} repair(s): a failed check at posterior draws, or draws where the "
+        f"GP's sample paths moved the posterior (surrogate error there {rmse} in L): their "
+        "runs joined the design and the posterior was computed again"
     )

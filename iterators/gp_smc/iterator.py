@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Generator, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -80,9 +81,9 @@ from ..surrogates.design import finite_bounds, sobol_design
 from ..surrogates.feasibility import feasibility_note, feasibility_summary, fit_feasibility
 from ..surrogates.gp import GpSurrogate
 from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link
-from ..surrogates.uncertainty import marginalise_surrogate_uncertainty
+from ..surrogates.uncertainty import SurrogateUncertainty, marginalise_surrogate_uncertainty
 from .adaptive import floored, soft_floor
-from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, adaptive_design
+from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, WIDE_TEMPERATURE, adaptive_design
 from .check import posterior_check, repair_note, repairable, with_check_runs
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
@@ -180,7 +181,7 @@ class GpSmcIterator(IteratorBase):
                 outcome = yield from adaptive_design(
                     run,
                     opts,
-                    lambda x, y, s, recs, axes: self._fit_gp(run, x, y, s, recs, axes),
+                    lambda x, y, s, recs, axes, opt: self._fit_gp(run, x, y, s, recs, axes, opt),
                     lambda ll, n: self._round_smc(run, ll, n),
                 )
                 design, gp, adaptive = outcome.design, outcome.gp, outcome.summary
@@ -197,33 +198,39 @@ class GpSmcIterator(IteratorBase):
         target = run.joint(log_likelihood) if gp is None else gp.feasible(run.joint(log_likelihood))
         post = yield from self._smc_stage(run, target, _trained(run, gp))
         check, failed = None, list[float]()
+        wanted = opts.surrogate_uncertainty == "expected_posterior"
+        uncertain = gp is not None and run.noise is None and (wanted or opts.uncertainty_check)
+        expected, uncertainty = post, None
         while opts.mode == "surrogate" and opts.n_check:
             assert gp is not None and design is not None
             rng = np.random.default_rng([opts.seed, 2, *([len(failed)] if failed else [])])
             check = yield from posterior_check(run, post, gp, opts.n_check, rng)
             budget, limit = opts.n_train, opts.check_repairs
-            if not repairable(check, design, adaptive is not None, budget, len(failed), limit):
+            repair = check
+            if check.reliable and uncertain:
+                expected, uncertainty = self._uncertainty(run, post, gp)
+                if uncertainty.moves_posterior and opts.uncertainty_check:
+                    # the GP's sample paths put posterior mass where no run has been: runs at
+                    # draws of that averaged posterior say whether it is there
+                    repair = yield from posterior_check(run, expected, gp, opts.n_check, rng)
+                    repair = replace(repair, cause="uncertainty")
+            if repair is check and check.reliable:
                 break
-            failed.append(check.rmse)  # its runs join the design and train the surrogate
-            statuses = [ev.status for ev in run.evaluations[-len(check.x) :]]
-            design = with_check_runs(design, check, statuses)
+            if not repairable(repair, design, adaptive is not None, budget, len(failed), limit):
+                break
+            failed.append(repair.centred_rmse)  # its runs join the design, train the surrogate
+            statuses = [ev.status for ev in run.evaluations[-len(repair.x) :]]
+            design = with_check_runs(design, repair, statuses)
             assert adaptive is not None  # repairable: only an adaptive design
             gp = self._refit(run, design, gp, post, adaptive.floor)
             fit = yield from self._surrogate_stage(run, design, gp, floor)
             target = gp.feasible(run.joint(gp.predict_mean_guarded))
             post = yield from self._smc_stage(run, target, _trained(run, gp))
-        posterior_particles, uncertainty = post, None
-        wanted = opts.surrogate_uncertainty == "expected_posterior"
-        if gp is not None and run.noise is None and (wanted or opts.uncertainty_check):
-            expected, uncertainty = marginalise_surrogate_uncertainty(
-                post,
-                gp,
-                run.sampled_priors,
-                np.random.default_rng([opts.seed, 5]),
-                smc_options=self._smc_settings(len(run.sampled_priors)),
-            )
-            if wanted:
-                posterior_particles = expected
+            expected, uncertainty = post, None
+        if uncertain and uncertainty is None:
+            assert gp is not None
+            expected, uncertainty = self._uncertainty(run, post, gp)
+        posterior_particles = expected if wanted else post
         laplace = opts.laplace and opts.mode == "surrogate" and not wanted
         posterior = summarise(
             posterior_particles,
@@ -283,6 +290,19 @@ class GpSmcIterator(IteratorBase):
                 table=post.table,
             ),
             seconds=time.perf_counter() - run.t_start,
+        )
+
+    def _uncertainty(
+        self, run: SmcRun, post: SmcResult, gp: Surrogate
+    ) -> tuple[SmcResult, SurrogateUncertainty]:
+        """The posterior averaged over the GP's sample paths and how it differs from ``post``
+        (:mod:`fbia.iterators.surrogates.uncertainty`)."""
+        return marginalise_surrogate_uncertainty(
+            post,
+            gp,
+            run.sampled_priors,
+            np.random.default_rng([self.options.seed, 5]),
+            smc_options=self._smc_settings(len(run.sampled_priors)),
         )
 
     def write_files(self, result: Result, folder: Path) -> list[Path]:
@@ -345,12 +365,14 @@ class GpSmcIterator(IteratorBase):
         start: Mapping[str, Any] | None,
         records: Sequence[Evaluation],
         axes: FloatArray | None = None,
+        optimise: bool = True,
     ) -> Surrogate:
         """The surrogate on the runs ``records`` at ``x`` (``y``: what a GP of L is trained
         on): the residual emulator (option ``surrogate``) or the GP of eq. 26-29; ``start``:
         earlier hyperparameters (a round of the adaptive design), which then also take one
         restart instead of ``gp_restarts``; ``axes``: a covariance whose principal axes the
-        kernel follows (option ``gp_axes``)."""
+        kernel follows (option ``gp_axes``); ``optimise = False``: keep ``start`` and only
+        condition on the runs."""
         opts = self.options
         restarts = opts.gp_restarts if start is None else min(1, opts.gp_restarts)
         rng = np.random.default_rng(opts.seed if opts.gp_seed is None else opts.gp_seed)
@@ -376,6 +398,7 @@ class GpSmcIterator(IteratorBase):
                 rng=rng,
                 start=start if start and "components" in start else None,
                 axes=axes,
+                optimise=optimise or not (start and "components" in start),
             )
         return GpSurrogate(
             ard=opts.ard,
@@ -386,7 +409,14 @@ class GpSmcIterator(IteratorBase):
             subset=opts.gp_subset,
             polish_iters=opts.gp_polish_iters,
             trend=opts.gp_trend,
-        ).fit(x, y, rng=rng, start=None if start and "components" in start else start, axes=axes)
+        ).fit(
+            x,
+            y,
+            rng=rng,
+            start=None if start and "components" in start else start,
+            axes=axes,
+            optimise=optimise or not (start and "components" not in start),
+        )
 
     def _refit(
         self, run: SmcRun, design: DesignRuns, gp: Surrogate, post: SmcResult, floor: float
@@ -398,7 +428,10 @@ class GpSmcIterator(IteratorBase):
         records = [run.evaluations[i] for i in np.flatnonzero(train)]
         axes = np.atleast_2d(post.cov) if self.options.gp_axes == "posterior" else None
         y = floored(design.log_likelihood, floor)
-        new = self._fit_gp(run, design.points[train], y[train], gp.hyperparameters(), records, axes)
+        # a repair adds n_check runs: the hyperparameters stay, the surrogate is conditioned
+        new = self._fit_gp(
+            run, design.points[train], y[train], gp.hyperparameters(), records, axes, False
+        )
         if self.options.failures == "classify":
             new.feasibility = fit_feasibility(design.points[train], design.ok[train])
         self.surrogate = new
@@ -419,6 +452,7 @@ class GpSmcIterator(IteratorBase):
             ess_min=opts.ess_min,
             rng=np.random.default_rng([opts.seed, 4]),
             max_steps=opts.max_smc_steps,
+            keep_gamma=WIDE_TEMPERATURE,
         ).run()
 
     def _surrogate_stage(

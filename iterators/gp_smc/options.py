@@ -35,9 +35,10 @@ class GpSmcOptions(PluginOptions):
     check_repairs: int = Field(
         2,
         ge=0,
-        description="with design = 'adaptive': when the check at posterior draws fails and "
-        "n_train leaves room, its runs join the design, the surrogate is refitted and the "
-        "posterior and a fresh check computed again, at most this often (0: never) [-]",
+        description="with design = 'adaptive': when the check at posterior draws fails, or "
+        "the GP's sample paths move the posterior (runs at draws of the averaged posterior), "
+        "and n_train leaves room, those runs join the design, the surrogate is refitted and "
+        "the posterior and a fresh check computed again, at most this often (0: never) [-]",
     )
     n_test: int = Field(
         0,

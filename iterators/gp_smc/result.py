@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from ...core.problem import Result, jsonable
 from ..surrogates.residuals import KeepsSurrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
+from .adaptive import PosteriorChange
 
 FloatArray = NDArray[np.float64]
 
@@ -90,13 +91,21 @@ class AdaptiveRound:
     evidence_change: float  # |change of log Z| since the last round
     floor: float  # the soft floor of the round's training values
     seconds: float
+    validation_centred: float = float("nan")  # the same without its mean error (what counts)
+    quantile_shift: float = float("inf")  # largest move of a 5/50/95 % quantile, in std
+    ess_fraction: float = float("nan")  # the last posterior's reweighting: ESS new / old
+    optimised: bool = True  # the GP's hyperparameters optimised (else kept, conditioned)
+    validation_z: float = float("nan")  # rms of error / GP std there (1: calibrated)
 
     def describe(self) -> str:
         return (
-            f"round {self.round}: GP on {self.n_runs} runs, posterior mean moved "
-            f"{self.mean_shift:.3g} std, std changed {self.std_change:.3g}, log Z changed "
-            f"{self.evidence_change:.3g}, surrogate RMSE "
-            f"{self.validation_rmse:.3g} in L at new posterior draws; {self.n_batch} runs added"
+            f"round {self.round}: GP on {self.n_runs} runs"
+            f"{'' if self.optimised else ' (hyperparameters kept)'}, the last posterior "
+            f"moved {self.mean_shift:.3g} std (quantiles {self.quantile_shift:.3g}), std "
+            f"changed {self.std_change:.3g}, log Z {self.evidence_change:.3g}; surrogate "
+            f"error {self.validation_centred:.3g} in L at new posterior draws (RMSE "
+            f"{self.validation_rmse:.3g} with its mean, {self.validation_z:.3g} GP std); "
+            f"{self.n_batch} runs added"
         )
 
     def to_record(self) -> dict[str, Any]:
@@ -115,6 +124,8 @@ class AdaptiveDesign:
     rounds: list[AdaptiveRound]
     stop_reason: str
     floor: float  # the final GP's soft floor (L below it is compressed)
+    #: what the last batch did to the last round's posterior (the stopping measures)
+    final_change: PosteriorChange | None = None
 
     @property
     def converged(self) -> bool:
@@ -143,8 +154,10 @@ class SurrogateFit(KeepsSurrogate):
     best_log_likelihood: float
 
 
-#: the largest surrogate RMSE in L at posterior draws that counts as "well below 1": an error
-#: of 0.5 changes posterior density ratios by up to a factor e^0.5 = 1.65
+#: the largest spread of the surrogate's errors in L at posterior draws (their standard
+#: deviation; a constant error cancels in the posterior) that counts as "well below 1": an
+#: error varying by 0.5 changes posterior density ratios by up to a factor e^0.5 = 1.65, and
+#: moves a posterior mean by at most about 0.5 posterior std (adaptive.centred_rmse)
 RELIABLE_RMSE = 0.5
 #: the largest share of posterior draws at which the forward model may fail: more (3 or more
 #: of 8) says the posterior holds mass where the model produces no state (for a share of 10 %
@@ -164,13 +177,26 @@ class PosteriorCheck:
     rmse: float
     max_abs: float
     mean_error: float
+    #: why the draws were run: "check" (draws of the posterior) or "uncertainty" (draws of the
+    #: posterior averaged over the GP's sample paths, which moved it: a repair's runs)
+    cause: str = "check"
+
+    @property
+    def centred_rmse(self) -> float:
+        """The errors' standard deviation (n - 1 in the denominator): the RMSE without the
+        mean error, which cancels when the posterior is normalised; NaN for n < 2."""
+        if self.n < 2:
+            return float("nan")
+        var = max(self.rmse**2 - self.mean_error**2, 0.0) * self.n / (self.n - 1)
+        return float(np.sqrt(var))
 
     @property
     def reliable(self) -> bool:
-        """Whether the surrogate's error at the posterior draws is well below 1 in L
-        (:data:`RELIABLE_RMSE`) and the model ran at all but a few of them
-        (:data:`RELIABLE_FAILED_SHARE`); False when no draw could be checked."""
-        return bool(self.n > 0 and self.rmse < RELIABLE_RMSE and not self.fails_often)
+        """Whether the spread of the surrogate's errors at the posterior draws is well below
+        1 in L (:attr:`centred_rmse` < :data:`RELIABLE_RMSE`) and the model ran at all but a
+        few of them (:data:`RELIABLE_FAILED_SHARE`); False when fewer than 2 draws could be
+        checked."""
+        return bool(self.n >= 2 and self.centred_rmse < RELIABLE_RMSE and not self.fails_often)
 
     @property
     def fails_often(self) -> bool:
@@ -184,7 +210,10 @@ class PosteriorCheck:
                 f"; the surrogate could not be checked: all {self.n_failed} forward runs at "
                 "posterior draws failed (the posterior is not reliable)"
             )
-        text = f"; surrogate RMSE {self.rmse:.3g} in L at {self.n} posterior draws"
+        text = (
+            f"; surrogate error {self.centred_rmse:.3g} in L at {self.n} posterior draws "
+            f"(RMSE {self.rmse:.3g} with the mean error {self.mean_error:.3g}, which cancels)"
+        )
         if self.fails_often:
             text += (
                 f"; the forward model failed at {self.n_failed} of {self.n + self.n_failed} "
@@ -196,6 +225,8 @@ class PosteriorCheck:
             text += (
                 f" (not well below 1, limit {RELIABLE_RMSE:g}: the posterior is not reliable; "
                 "train on more runs)"
+                if self.n >= 2
+                else " (fewer than 2 draws could be checked: the posterior is not reliable)"
             )
         return text
 

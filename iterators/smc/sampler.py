@@ -137,6 +137,10 @@ class SmcResult:
         With tabulated log-densities (``table_points``): the table's size, build time and
         its error against the real L at the final particles (:mod:`fbia.iterators.smc.table`);
         or ``{"note": why no table was used}``; None without ``table_points``.
+    tempered
+        With ``keep_gamma``: the weighted particles of the tempered density exp(gamma L) p at
+        that gamma, after its step's moves (their ``log_likelihood`` is L, their
+        ``log_evidence`` that of exp(gamma L) p); None otherwise.
     """
 
     particles: NDArray[np.float64]
@@ -152,6 +156,7 @@ class SmcResult:
     names: list[str]
     history: list[dict[str, Any]] = field(default_factory=list)
     table: dict[str, Any] | None = None
+    tempered: SmcResult | None = None
 
     @property
     def log_posterior(self) -> NDArray[np.float64]:
@@ -236,6 +241,10 @@ class SequentialMonteCarlo:
         grids, and run the moves in one compiled kernel (:mod:`fbia.iterators.smc.table`):
         for at most three inputs with bounded priors; the result's ``table`` gives the table's
         error against L at the final particles. None: L is called directly.
+    keep_gamma
+        A gamma in (0, 1) where the tempering stops on its way (a step ends exactly there)
+        and whose weighted particles the result keeps as ``tempered``: a draw from exp(gamma
+        L) p for free, instead of a second run (the adaptive design's wide draws).
     """
 
     def __init__(
@@ -253,6 +262,7 @@ class SequentialMonteCarlo:
         rejuvenate: str = "every_step",
         training_range: tuple[float, float] | None = None,
         table_points: int | None = None,
+        keep_gamma: float | None = None,
     ) -> None:
         if not callable(log_likelihood):
             raise ConfigError("log_likelihood must be callable: (N, d) array -> (N,) array", "smc")
@@ -291,6 +301,9 @@ class SequentialMonteCarlo:
         if table_points is not None and int(table_points) < 4:
             raise ConfigError(f"table_points must be >= 4 or None, got {table_points}", "smc")
         self.table_points = None if table_points is None else int(table_points)
+        if keep_gamma is not None and not 0.0 < keep_gamma < 1.0:
+            raise ConfigError(f"keep_gamma must lie in (0, 1), got {keep_gamma}", "smc")
+        self.keep_gamma = keep_gamma
         self.tables: LogTables | None = None
         self.nfev = 0
         self.n_nonfinite = 0
@@ -380,12 +393,15 @@ class SequentialMonteCarlo:
         seg_gamma, seg_ess, seg_log_z = 0.0, float(n), 0.0
         acceptance = 1.0
         step = 0
+        tempered: SmcResult | None = None
         while gamma < 1.0:
             t0 = time.perf_counter()
             step += 1
             if step > self.max_steps:
                 raise ConfigError(self._stalled(gamma, loglik, log_w, history), "smc")
             new_gamma = tempering.next_gamma(gamma, log_w, loglik, ess_now)
+            if self.keep_gamma is not None and gamma < self.keep_gamma < new_gamma:
+                new_gamma = self.keep_gamma  # a step ends exactly there (ESS above zeta's)
             t_gamma = time.perf_counter() - t0
             if seg_start is None:
                 seg_start, seg_gamma, seg_ess, seg_log_z = log_w.copy(), gamma, ess_now, 0.0
@@ -433,6 +449,20 @@ class SequentialMonteCarlo:
             gammas.append(gamma)
             ess_hist.append(current_ess)
             accept_hist.append(acceptance)
+            if gamma == self.keep_gamma:
+                tempered = SmcResult(
+                    particles=x.copy(),
+                    weights=np.exp(log_w - logsumexp(log_w)),
+                    log_likelihood=loglik.copy(),
+                    log_prior=log_prior.copy(),
+                    log_evidence=log_evidence,
+                    log_evidence_se=math.sqrt(log_evidence_var),
+                    gammas=list(gammas),
+                    ess=list(ess_hist),
+                    acceptance=list(accept_hist),
+                    nfev=self.nfev,
+                    names=self.names,
+                )
             history.append(
                 {
                     "step": step,
@@ -465,6 +495,7 @@ class SequentialMonteCarlo:
             names=self.names,
             history=history,
             table=table,
+            tempered=tempered,
         )
 
     def _build_tables(self) -> str | None:

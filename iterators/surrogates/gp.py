@@ -145,6 +145,29 @@ def principal_axes(cov: ArrayLike, x_std: NDArray[np.float64]) -> NDArray[np.flo
     return np.asarray(vectors, dtype=np.float64)
 
 
+def gaussian_paths(
+    mean: NDArray[np.float64], cov: NDArray[np.float64], n_paths: int, rng: np.random.Generator
+) -> tuple[NDArray[np.float64], float]:
+    """``n_paths`` draws of N(mean, cov) as columns (M, K), and the jitter that was needed.
+
+    Close points make the covariance numerically singular: the diagonal grows from 1e-12 of
+    its largest entry by factors of 100 until the Cholesky factorisation succeeds (jitter up
+    to 1e-4 of the largest variance), else the eigenvalues are clipped at zero (jitter NaN).
+    """
+    cov = 0.5 * (cov + cov.T)
+    top = float(np.max(np.diag(cov), initial=0.0))
+    z = rng.standard_normal((len(mean), n_paths))
+    for rel in (0.0, 1e-12, 1e-10, 1e-8, 1e-6, 1e-4):
+        jitter = rel * top
+        try:
+            chol = np.linalg.cholesky(cov + jitter * np.eye(len(mean)))
+        except np.linalg.LinAlgError:
+            continue
+        return mean[:, None] + chol @ z, jitter
+    vals, vecs = np.linalg.eigh(cov)
+    return mean[:, None] + (vecs * np.sqrt(np.maximum(vals, 0.0))) @ z, math.nan
+
+
 class GpSurrogate(ExtrapolationGuard):
     """GP regression model of the log-likelihood L(x) (Paper B, eq. 26-29).
 
@@ -234,6 +257,7 @@ class GpSurrogate(ExtrapolationGuard):
         rng: np.random.Generator | int | None = None,
         start: Mapping[str, Any] | None = None,
         axes: ArrayLike | None = None,
+        optimise: bool = True,
     ) -> GpSurrogate:
         """Train on inputs ``x`` (n, d) and log-likelihood values ``y`` (n,); returns self.
 
@@ -241,10 +265,15 @@ class GpSurrogate(ExtrapolationGuard):
         adaptive design's previous round) as the first initial guess, instead of the data-based
         one and the search on a subset; ``restarts`` perturb it. ``axes``: a (d, d) covariance
         of the inputs (in their units) whose principal axes the kernel's axes follow (module
-        docstring); None: the input axes.
+        docstring); None: the input axes. ``optimise = False`` (with ``start``): keep those
+        hyperparameters and only condition on the data (one Cholesky factorisation instead
+        of an evidence maximisation, whose every step costs one; an adaptive design between
+        its re-optimisations).
         """
+        if not optimise and start is None:
+            raise ConfigError("a GP fit without optimisation needs start hyperparameters", "gp")
         with blas_single_thread():
-            return self._fit(x, y, rng, start, axes)
+            return self._fit(x, y, rng, start, axes, optimise)
 
     def _fit(
         self,
@@ -253,6 +282,7 @@ class GpSurrogate(ExtrapolationGuard):
         rng: np.random.Generator | int | None,
         start: Mapping[str, Any] | None = None,
         axes: ArrayLike | None = None,
+        optimise: bool = True,
     ) -> GpSurrogate:
         x = np.atleast_2d(np.asarray(x, dtype=float))
         y = np.asarray(y, dtype=float).ravel()
@@ -291,18 +321,25 @@ class GpSurrogate(ExtrapolationGuard):
             kern = gpy.kern.Matern32(d, ARD=False)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            model = gpy.models.GPRegression(xs, ys, kern, noise_var=self.nugget / self.scale**2)
-            model.Gaussian_noise.variance.fix()
             if not self.gpy_default:
                 # Bounds keep the evidence maximisation away from the degenerate limit
                 # l -> inf, sigma^2 -> inf that a nearly noise-free smooth L invites.
                 kern.lengthscale.constrain_bounded(*LENGTHSCALE_BOUNDS, warning=False)
                 kern.variance.constrain_bounded(*VARIANCE_BOUNDS, warning=False)
+            noise = gpy.likelihoods.Gaussian(variance=self.nugget / self.scale**2)
+            noise.variance.fix()
+            # constraints and the fixed nugget are set on the parts before the model exists:
+            # GPy conditions a model again (a Cholesky factorisation and an inverse) at every
+            # change of a parameter or constraint, here once at construction
+            model = gpy.core.GP(xs, ys, kern, noise, name="gp")
         self.model = model
         max_iters = self.max_iters
         starts: list[Any]
         if self.gpy_default:
             starts = [None]
+        elif not optimise:
+            assert start is not None
+            starts = [self._carried(start)]
         elif start is not None:
             starts = self._warm_starts(start, rng)
             if len(y) > self.subset:
@@ -331,7 +368,8 @@ class GpSurrogate(ExtrapolationGuard):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 try:
-                    model.optimize(self.optimizer, max_iters=max_iters, messages=False)
+                    if optimise:
+                        model.optimize(self.optimizer, max_iters=max_iters, messages=False)
                 except np.linalg.LinAlgError as exc:
                     runs.append({"start": guess, "error": str(exc)})
                     continue
@@ -341,14 +379,15 @@ class GpSurrogate(ExtrapolationGuard):
                 best, best_obj = model.param_array.copy(), obj
         if best is None:
             raise ConfigError("GP training failed from every initial guess", "gp")
-        model[:] = best
+        if not np.array_equal(model.param_array, best):
+            model[:] = best
         self._precompute()
         self.info = {
             **self.info,
             "seconds": time.perf_counter() - t0,
             "n_train": len(y),
             "neg_log_evidence": best_obj,
-            "optimizer": self.optimizer,
+            "optimizer": self.optimizer if optimise else "none (hyperparameters kept)",
             "restarts": len(runs),
             "runs": runs,
             **self.hyperparameters(),
@@ -410,13 +449,19 @@ class GpSurrogate(ExtrapolationGuard):
         return var, np.clip(ells, *LENGTHSCALE_BOUNDS)
 
     def _set_hyper(self, variance: float, lengthscale: NDArray[np.float64]) -> None:
-        self.model.kern.variance[:] = variance
-        self.model.kern.lengthscale[:] = lengthscale
+        """Signal variance and length scales at once (GPy conditions the model once)."""
+        values = np.array(self.model.param_array, dtype=float)
+        values[0] = variance
+        values[1 : 1 + len(lengthscale)] = lengthscale
+        self.model[:] = values
 
     def hyperparameters(self) -> dict[str, Any]:
         """Signal variance (in L^2), length scales (standardised inputs), nugget, prior mean."""
-        variance = float(self.model.kern.variance[0])
-        ells = [float(v) for v in np.atleast_1d(self.model.kern.lengthscale)]
+        if self.model is not None:
+            variance = float(self.model.kern.variance[0])
+            ells = [float(v) for v in np.atleast_1d(self.model.kern.lengthscale)]
+        else:  # trained (the GPy model is let go) or restored
+            variance, ells = float(self._var), [float(v) for v in self._ell]
         return {
             "kernel": "matern32_product" if self.ard else "matern32",
             "signal_variance": variance * self.scale**2,
@@ -429,13 +474,21 @@ class GpSurrogate(ExtrapolationGuard):
         }
 
     def _precompute(self) -> None:
-        """alpha = (K + sigma_n^2 I)^-1 (y - m) / scale and the kernel constants (eq. 28a)."""
+        """alpha = (K + sigma_n^2 I)^-1 (y - m) / scale, the Cholesky factor of K + sigma_n^2
+        I, the diagonal of its inverse (leave-one-out) and the kernel constants (eq. 28a);
+        then the GPy model is let go: it holds several n x n matrices (K, its inverse, the
+        gradient's), and a residual emulator has up to 20 such GPs (1.6 GB at 1000 runs,
+        where these need 160 MB)."""
         self.__dict__.pop("_terms", None)
         hp = self.hyperparameters()
-        self._alpha = np.asarray(self.model.posterior.woodbury_vector, dtype=float).ravel()
+        posterior = self.model.posterior
+        self._alpha = np.asarray(posterior.woodbury_vector, dtype=float).ravel()
+        self._chol = np.array(posterior.woodbury_chol, dtype=float)
+        self._kinv_diag = np.array(np.diag(posterior.woodbury_inv), dtype=float)
         self._ell = np.asarray(hp["lengthscales"], dtype=float)
         self._var = hp["signal_variance"] / self.scale**2
         self._xs = self.standardise(self.x_train)
+        self.model = None
 
     # -- prediction -----------------------------------------------------------------------
     def kernel_terms(self) -> KernelTerms:
@@ -472,18 +525,19 @@ class GpSurrogate(ExtrapolationGuard):
         return self.trend(np.atleast_2d(np.asarray(x, dtype=float)))
 
     def predict(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Posterior mean and variance of L (eq. 28a-b), through GPy (for plots, checks)."""
+        """Posterior mean and variance of L (eq. 28a-b) (for the design, plots, checks)."""
+        from scipy.linalg import solve_triangular
+
+        if self._chol is None:
+            raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
         xs = self.standardise(np.atleast_2d(x))
-        if self.model is None and self._chol is not None:  # restored from a state: numpy only
-            k = matern32_cross(xs, self._xs, self._ell, self._var, self.ard)
-            v = np.linalg.solve(self._chol, k.T)
-            var_s = self._var - np.sum(v * v, axis=0)
-            return self.predict_mean(x), np.maximum(var_s, 0.0) * self.scale**2
-        mean, var = self.model.predict(xs, include_likelihood=False)
-        return (
-            self.prior_mean(x) + self.scale * mean.ravel(),
-            np.maximum(var.ravel(), 0.0) * self.scale**2,
-        )
+        var_s = np.empty(len(xs))
+        rows = max(1, _BLOCK // max(1, len(self._xs)))
+        for i in range(0, len(xs), rows):
+            k = matern32_cross(self._xs, xs[i : i + rows], self._ell, self._var, self.ard)
+            v = solve_triangular(self._chol, k, lower=True)
+            var_s[i : i + rows] = self._var - np.sum(v * v, axis=0)
+        return self.predict_mean(x), np.maximum(var_s, 0.0) * self.scale**2
 
     def posterior_covariance(self, a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
         """Posterior covariance of L between the rows of ``a`` (M, d) and ``b`` (P, d)
@@ -496,11 +550,7 @@ class GpSurrogate(ExtrapolationGuard):
         # k(a, b) - v_a^T v_b with v = L^-1 k(X, .), L the Cholesky factor of K + sigma_n^2 I:
         # the triangular solves keep the small variances near the data accurate, where the
         # explicit inverse loses them to cancellation
-        chol = (
-            np.asarray(self.model.posterior.woodbury_chol, dtype=float)
-            if self.model is not None
-            else self._chol
-        )
+        chol = self._chol
         assert chol is not None
         kab = matern32_cross(xa, xb, self._ell, self._var, self.ard)
         v_a = solve_triangular(
@@ -520,6 +570,15 @@ class GpSurrogate(ExtrapolationGuard):
         (eq. 28a-b with x* a set of points), in units of L; for joint sample paths."""
         return self.predict_mean(x), self.posterior_covariance(x, x)
 
+    def sample_paths(
+        self, x: ArrayLike, n_paths: int, rng: np.random.Generator
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """``n_paths`` joint sample paths of L at the rows of ``x`` (M, K), L's posterior
+        standard deviation there (M,) and the jitter of the factorisation (eq. 28a-b)."""
+        mean, cov = self.predict_joint(x)
+        paths, jitter = gaussian_paths(mean, cov, n_paths, rng)
+        return paths, np.sqrt(np.maximum(np.diag(cov), 0.0)), jitter
+
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:
         """Leave-one-out errors (:meth:`loo_predictions`)."""
@@ -527,8 +586,13 @@ class GpSurrogate(ExtrapolationGuard):
 
     def loo_predictions(self) -> NDArray[np.float64]:
         """Leave-one-out predictions in closed form: y_i - alpha_i / [(K + sigma_n^2 I)^-1]_ii."""
-        kinv_diag = np.diag(np.asarray(self.model.posterior.woodbury_inv))
-        return np.asarray(self.y_train - self.scale * self._alpha / kinv_diag)
+        if "_kinv_diag" not in self.__dict__:  # restored: from the Cholesky factor, once
+            from scipy.linalg import solve_triangular
+
+            assert self._chol is not None
+            inv = solve_triangular(self._chol, np.eye(len(self._chol)), lower=True)
+            self._kinv_diag = np.sum(inv * inv, axis=0)
+        return np.asarray(self.y_train - self.scale * self._alpha / self._kinv_diag)
 
     def test_error(self, x: ArrayLike, y: ArrayLike) -> dict[str, float]:
         """Errors of the posterior mean at held-out points (Paper B Remark 9, Fig. 12)."""

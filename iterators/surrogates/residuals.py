@@ -38,7 +38,7 @@ from ...core.errors import ConfigError
 from ...core.likelihood import MIN_SQUARED_DISTANCE
 from ...core.problem import Evaluation
 from .feasibility import Feasibility
-from .gp import GpSurrogate
+from .gp import GpSurrogate, gaussian_paths
 from .guard import ExtrapolationGuard, GuardCounts
 from .mean import fused_means
 
@@ -199,11 +199,15 @@ class ResidualSurrogate(ExtrapolationGuard):
         rng: np.random.Generator | int | None = None,
         start: Mapping[str, Any] | None = None,
         axes: ArrayLike | None = None,
+        optimise: bool = True,
     ) -> ResidualSurrogate:
         """Train on inputs ``x`` (n, d) and residual vectors ``r`` (n, m) (rows with NaN:
         failed runs, left out); ``start``: an earlier fit's :meth:`hyperparameters`; ``axes``:
         a covariance of the inputs whose principal axes every component's kernel follows
-        (:meth:`GpSurrogate.fit`)."""
+        (:meth:`GpSurrogate.fit`); ``optimise = False``: the basis, the mean and each
+        component's hyperparameters of ``start`` are kept, and the components are only
+        conditioned on the data (without a basis in ``start`` a new one is computed and
+        every component optimised)."""
         x = np.atleast_2d(np.asarray(x, dtype=float))
         u = np.atleast_2d(np.asarray(r, dtype=float)) / self.link.sigma
         ok = np.all(np.isfinite(u), axis=1) if u.size else np.zeros(len(x), dtype=bool)
@@ -216,13 +220,26 @@ class ResidualSurrogate(ExtrapolationGuard):
         x, u = x[ok], u[ok]
         rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.x_train = x
-        self.u_mean = u.mean(axis=0)
-        centred = u - self.u_mean
-        _, sing, vt = np.linalg.svd(centred, full_matrices=False)
-        tail = np.append(np.cumsum((sing**2)[::-1])[::-1], 0.0) / len(u)
-        k = next((j for j in range(len(sing) + 1) if tail[j] < TRUNCATION), len(sing))
-        k = int(min(max(k, 1), MAX_COMPONENTS, len(sing)))
-        self.basis = np.asarray(vt[:k])  # (k, m), orthonormal rows
+        kept = None if optimise or start is None else start.get("basis")
+        if start is not None and kept is not None and np.shape(kept)[1] == u.shape[1]:
+            # conditioned only: the components stay the same functions (the basis and mean of
+            # the fit whose hyperparameters they keep), so those hyperparameters still fit them
+            self.u_mean = np.asarray(start["u_mean"], dtype=np.float64)
+            self.basis = np.asarray(kept, dtype=np.float64)
+            centred = u - self.u_mean
+            outside = centred - (centred @ self.basis.T) @ self.basis
+            k = len(self.basis)
+            tail = np.zeros(k + 1)
+            tail[k] = float(np.sum(outside**2)) / len(u)
+        else:
+            optimise = True
+            self.u_mean = u.mean(axis=0)
+            centred = u - self.u_mean
+            _, sing, vt = np.linalg.svd(centred, full_matrices=False)
+            tail = np.append(np.cumsum((sing**2)[::-1])[::-1], 0.0) / len(u)
+            k = next((j for j in range(len(sing) + 1) if tail[j] < TRUNCATION), len(sing))
+            k = int(min(max(k, 1), MAX_COMPONENTS, len(sing)))
+            self.basis = np.asarray(vt[:k])  # (k, m), orthonormal rows
         self._set_mean_parts()
         scores = centred @ self.basis.T
         starts = list((start or {}).get("components", []))
@@ -231,7 +248,10 @@ class ResidualSurrogate(ExtrapolationGuard):
         for j in range(k):
             warm = starts[j] if j < len(starts) else None
             gp = self._component()
-            self.components.append(gp.fit(x, scores[:, j], rng=rng, start=warm, axes=axes))
+            fitted = gp.fit(
+                x, scores[:, j], rng=rng, start=warm, axes=axes, optimise=optimise or not warm
+            )
+            self.components.append(fitted)
         self.y_train = self.log_likelihood(0.5 * np.sum(u * u, axis=1))
         self.truncation = float(tail[k])
         self.info = {
@@ -259,7 +279,13 @@ class ResidualSurrogate(ExtrapolationGuard):
         )
 
     def hyperparameters(self) -> dict[str, Any]:
-        return {"components": [gp.hyperparameters() for gp in self.components]}
+        """Each component's hyperparameters, with the basis and mean they belong to (a fit
+        that only conditions on new runs keeps all three)."""
+        return {
+            "components": [gp.hyperparameters() for gp in self.components],
+            "basis": self.basis,
+            "u_mean": self.u_mean,
+        }
 
     # -- prediction -----------------------------------------------------------------------
     def _scores(self, x: ArrayLike) -> FloatArray:
@@ -349,6 +375,30 @@ class ResidualSurrogate(ExtrapolationGuard):
             second += 0.5 * np.diag(c) ** 2
         cov[np.diag_indices_from(cov)] += second
         return mean, cov
+
+    def sample_paths(
+        self, x: ArrayLike, n_paths: int, rng: np.random.Generator
+    ) -> tuple[FloatArray, FloatArray, float]:
+        """``n_paths`` joint sample paths of L at the rows of ``x`` (M, K), L's standard
+        deviation over them (M,) and the largest jitter of the factorisations.
+
+        Each component's scores are drawn jointly from its GP (the components are
+        independent), and L of every path is computed from its residuals exactly,
+        L = C - |u|^2 / 2 (or the profile): never above the best fit, with the skew that a
+        large |u^| gives it. The first-order (delta-method) variance of :meth:`predict`
+        makes L symmetric instead, with an upper tail far from the runs that L cannot have,
+        where sample paths then invent posterior mass."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        t = np.empty((len(x), len(self.components), n_paths))
+        jitter = 0.0
+        for j, gp in enumerate(self.components):
+            mean, cov = gp.predict_joint(x)
+            t[:, j, :], jit = gaussian_paths(mean, cov, n_paths, rng)
+            jitter = max(jitter, jit) if math.isfinite(jit) else math.nan
+        coef = self._mean_coef[None, :, None] + t
+        half_sq = 0.5 * (self._mean_perp_sq + np.sum(coef * coef, axis=1))  # (M, K)
+        paths = self.log_likelihood(half_sq)
+        return paths, np.std(paths, axis=1), jitter
 
     # -- quality --------------------------------------------------------------------------
     def loo(self) -> dict[str, float]:

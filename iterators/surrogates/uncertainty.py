@@ -34,7 +34,7 @@ Estimator (self-normalised importance sampling, one weight vector per path):
    posterior: g = mu; :func:`tempered_proposal`: g = beta mu, wider; either + log c, the
    factor of where the forward model runs, :mod:`~fbia.iterators.surrogates.feasibility`);
 2. ``n_points`` distinct particles of it (all, or a systematic resampling), base weights w;
-3. ``n_paths`` joint sample paths f_k of the GP at these points (full posterior
+3. ``n_paths`` joint sample paths f_k of the surrogate at these points (full posterior
    covariance, Cholesky with jitter);
 4. per path, w_k ~ w exp(f_k + log c - g), normalised (the prior cancels); the result's weights are
    the average of the K normalised vectors.
@@ -66,7 +66,6 @@ the mass on the proposal's tail (a proposal too narrow for the GP's uncertainty)
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -251,8 +250,8 @@ def reweight_by_sample_paths(
     # the proposal's log-likelihood carries the factor of where the model runs (a prior-side
     # term, gp_feasibility): it stays in the target, only the GP's mean is replaced by paths
     g = proposal.log_likelihood[idx] - surrogate.log_feasibility(x)
-    mu, cov = surrogate.predict_joint(x)
-    paths, jitter = _sample_paths(mu, cov, n_paths, rng)
+    paths, sigma, jitter = surrogate.sample_paths(x, n_paths, rng)
+    mu = surrogate.predict_mean(x)
     with np.errstate(invalid="ignore", over="ignore"):
         log_w = np.log(base)[:, None] + (paths - g[:, None])  # (M, K)
     log_w = np.where(np.isnan(log_w), -np.inf, log_w)
@@ -276,7 +275,6 @@ def reweight_by_sample_paths(
         acceptance=list(proposal.acceptance),
         history=list(proposal.history),
     )
-    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
     return result, _diagnose(x, base, g, w, weights, sigma, log_z, jitter, t0)
 
 
@@ -301,30 +299,6 @@ def _distinct_points(
     draws = np.minimum(np.searchsorted(cumulative, positions, side="right"), len(mass) - 1)
     chosen, counts = np.unique(draws, return_counts=True)
     return keep[first[chosen]], counts / n_points
-
-
-def _sample_paths(
-    mean: FloatArray, cov: FloatArray, n_paths: int, rng: np.random.Generator
-) -> tuple[FloatArray, float]:
-    """``n_paths`` draws of N(mean, cov) as columns (M, K), and the jitter that was needed.
-
-    Close particles make the covariance numerically singular: the diagonal grows from
-    1e-12 of its largest entry by factors of 100 until the Cholesky factorisation succeeds
-    (jitter up to 1e-4 of the largest variance; in units of L^2 a jitter far below 1 does
-    not change posterior ratios), else the eigenvalues are clipped at zero.
-    """
-    cov = 0.5 * (cov + cov.T)
-    top = float(np.max(np.diag(cov), initial=0.0))
-    z = rng.standard_normal((len(mean), n_paths))
-    for rel in (0.0, 1e-12, 1e-10, 1e-8, 1e-6, 1e-4):
-        jitter = rel * top
-        try:
-            chol = np.linalg.cholesky(cov + jitter * np.eye(len(mean)))
-        except np.linalg.LinAlgError:
-            continue
-        return mean[:, None] + chol @ z, jitter
-    vals, vecs = np.linalg.eigh(cov)
-    return mean[:, None] + (vecs * np.sqrt(np.maximum(vals, 0.0))) @ z, math.nan
 
 
 def _diagnose(

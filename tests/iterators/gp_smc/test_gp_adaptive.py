@@ -2,6 +2,7 @@
 exact posterior by quadrature."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,15 +11,15 @@ from test_gp_smc import _problem
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
 from fbia.iterators.gp_smc.adaptive import (
-    Moments,
+    centred_rmse,
     floor_depth,
-    posterior_shift,
+    posterior_change,
     select_batch,
     soft_floor,
 )
-from fbia.iterators.gp_smc.result import GpSmcResult
+from fbia.iterators.gp_smc.result import GpSmcResult, PosteriorCheck
 from fbia.iterators.gp_smc.run import log_prior
-from fbia.iterators.smc.sampler import smc
+from fbia.iterators.smc.sampler import SmcResult, smc
 from fbia.iterators.surrogates.gp import GpSurrogate
 from fbia.studies.result_io import from_dict
 
@@ -39,11 +40,65 @@ def test_floor_is_deep_enough_for_the_evidence():
     assert floor_depth(10.0, -40.0) == pytest.approx(50.0 + math.log(1e3))
 
 
-def test_posterior_shift_in_posterior_std():
-    a = Moments(np.array([0.0, 10.0]), np.array([1.0, 2.0]))
-    b = Moments(np.array([0.5, 10.0]), np.array([1.0, 2.2]))
-    moved, spread = posterior_shift(a, b)
-    assert moved == pytest.approx(0.5) and spread == pytest.approx(math.log(1.1))
+def _gaussian_particles(n=200_000, seed=0):
+    """Equally weighted draws of N(0, 1) x N(5, 2^2) whose stored target is 0."""
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.standard_normal(n), 5.0 + 2.0 * rng.standard_normal(n)])
+    return SmcResult(
+        particles=x,
+        weights=np.full(n, 1.0 / n),
+        log_likelihood=np.zeros(n),
+        log_prior=np.zeros(n),
+        log_evidence=-1.0,
+        log_evidence_se=0.0,
+        gammas=[0.0, 1.0],
+        ess=[float(n)],
+        acceptance=[0.0],
+        nfev=0,
+        names=["a", "b"],
+    )
+
+
+def test_posterior_change_is_measured_on_the_same_particles():
+    post = _gaussian_particles()
+    # the same target: nothing moved, exactly (no Monte Carlo noise between two runs)
+    same, change = posterior_change(post, lambda z: np.zeros(len(z)))
+    assert (change.mean_shift, change.std_change, change.quantile_shift) == (0.0, 0.0, 0.0)
+    assert change.evidence_change == pytest.approx(0.0, abs=1e-12)
+    assert change.ess_fraction == pytest.approx(1.0) and change.settled(0.1)
+    assert same.log_evidence == pytest.approx(-1.0)
+    # a refit that tilts the target by 0.2 a: N(0, 1) e^(0.2 a) is N(0.2, 1): the mean of a
+    # moves 0.2 std (Monte Carlo error ~ 1 / sqrt(n) = 0.002), its std and b stay, and log Z
+    # changes by log E e^(0.2 a) = 0.02
+    tilted, change = posterior_change(post, lambda z: 0.2 * z[:, 0])
+    assert change.mean_shift == pytest.approx(0.2, abs=0.01)
+    assert change.quantile_shift == pytest.approx(0.2, abs=0.02)
+    assert change.std_change < 0.01 and change.evidence_change == pytest.approx(0.02, abs=0.005)
+    assert not change.settled(0.1) and change.settled(0.25)
+    np.testing.assert_allclose(tilted.log_likelihood, 0.2 * post.particles[:, 0])
+    # a refit under which the particles no longer describe the posterior is never settled
+    _, far = posterior_change(post, lambda z: 3.0 * z[:, 0])
+    assert far.ess_fraction < 0.5 and not far.settled(1e9)
+
+
+def test_a_constant_error_cancels_in_the_check():
+    # errors 2 +- 0.1: RMSE 2, but exp(mu) is exp(L) times e^2 up to +-0.1: the same posterior
+    err = 2.0 + 0.1 * np.array([1.0, -1.0, 0.5, -0.5, 0.0, 1.0, -1.0, 0.0])
+    assert centred_rmse(err) == pytest.approx(float(np.std(err, ddof=1)))
+    check = PosteriorCheck(
+        n=8,
+        n_failed=0,
+        x=np.zeros((8, 2)),
+        log_likelihood=np.zeros(8),
+        rmse=float(np.sqrt(np.mean(err**2))),
+        max_abs=float(np.max(np.abs(err))),
+        mean_error=float(np.mean(err)),
+    )
+    assert check.rmse > 1.9 and check.centred_rmse == pytest.approx(centred_rmse(err))
+    assert check.reliable and "which cancels" in check.note()
+    spread = replace(check, mean_error=0.0)  # the same RMSE as spread: not reliable
+    assert not spread.reliable and "not reliable" in spread.note()
+    assert not replace(check, n=1).reliable  # one draw measures no spread
 
 
 def test_batch_picks_distinct_points_near_the_posterior_where_the_gp_is_unsure():
@@ -153,7 +208,7 @@ def test_a_failed_check_is_repaired_with_its_runs_within_the_budget(exact_2d, mo
     # as it comes: each failed check costs n_check runs more, at most two
     plain = fbia.iterator("gp_smc", **opts).run(problem)
     failed = len(plain.failed_checks)
-    assert f"{failed} check(s) at posterior draws failed" in plain.message or not failed
+    assert f"{failed} repair(s)" in plain.message or not failed
     with monkeypatch.context() as patch:
         patch.setattr(result_module, "RELIABLE_RMSE", 0.0)  # every check fails
         once = fbia.iterator("gp_smc", check_repairs=0, **opts).run(problem)
@@ -162,13 +217,13 @@ def test_a_failed_check_is_repaired_with_its_runs_within_the_budget(exact_2d, mo
     assert plain.status == "completed"  # the 2-D posterior is easy; after a repair if need be
     # check_repairs = 0: the first failed check decides
     assert once.status == "unreliable" and once.failed_checks == []
-    assert "check(s) at posterior" not in once.message
+    assert "repair(s)" not in once.message
     n_design = int(once.design.train_mask.sum())
     assert n_design + 16 <= 200  # room for two repairs
     assert repaired.status == "unreliable" and len(repaired.failed_checks) == 2
     back = from_dict(GpSmcResult, repaired.to_dict())  # result.json keeps them
     assert back.failed_checks == repaired.failed_checks
-    assert "2 check(s) at posterior draws failed" in repaired.message
+    assert "2 repair(s)" in repaired.message
     assert repaired.nfev == once.nfev + 16
     # the failed checks' runs trained the last surrogate, the first of them once's check
     assert int(repaired.design.train_mask.sum()) == n_design + 16

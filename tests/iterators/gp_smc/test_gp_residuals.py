@@ -128,6 +128,44 @@ def test_components_predicted_in_one_call_equal_one_by_one(ard, monkeypatch):
         assert calls == [len(s.components)] * 2
 
 
+def test_conditioning_keeps_basis_and_hyperparameters(fitted):
+    """A fit that only conditions on more runs (the adaptive design between its
+    re-optimisations) keeps the basis, the mean and every component's hyperparameters, and
+    interpolates the new runs."""
+    x, s = fitted
+    more = np.vstack([x, np.random.default_rng(5).uniform(0.0, 0.6, (10, 2))])
+    link, r, _ = residual_link(_records(more), [SIGMA], None)
+    again = ResidualSurrogate(link).fit(more, r, rng=0, start=s.hyperparameters(), optimise=False)
+    np.testing.assert_array_equal(again.basis, s.basis)
+    np.testing.assert_array_equal(again.u_mean, s.u_mean)
+    for a, b in zip(again.components, s.components, strict=True):
+        # the same length scale in the inputs' units (standardised by other stds now)
+        ratio = float(np.mean(b.x_std / a.x_std))
+        ha, hb = a.hyperparameters(), b.hyperparameters()
+        assert ha["lengthscales"][0] == pytest.approx(hb["lengthscales"][0] * ratio)
+        assert ha["signal_variance"] == pytest.approx(hb["signal_variance"])
+        assert a.model is None  # the GPy model is let go after the fit (memory)
+    assert np.max(np.abs(again.predict_mean(more[-10:]) - _exact(more[-10:]))) < 0.05
+
+
+def test_sample_paths_of_l_follow_the_residuals_exactly(fitted):
+    """Joint paths of the component scores, L of each path from its residuals: never above
+    the perfect fit C, and where the emulator is unsure (far from the runs) skewed below the
+    plug-in mean, which the delta method's symmetric variance is not."""
+    x, s = fitted
+    far = np.array([[0.95, 0.95], [0.9, 0.05]])
+    near = x[:2]
+    pts = np.vstack([near, far])
+    paths, sd, jitter = s.sample_paths(pts, 4000, np.random.default_rng(0))
+    assert paths.shape == (4, 4000) and math.isfinite(jitter)
+    assert np.all(paths <= s.link.constant + 1e-9)
+    mean = s.predict_mean(pts)
+    assert np.all(np.abs(paths[:2].mean(axis=1) - mean[:2]) < 0.05)  # at runs: the mean
+    _, var = s.predict(pts)
+    assert np.all(paths[2:].mean(axis=1) < mean[2:])  # E L < L(E u): L is concave in u
+    np.testing.assert_allclose(sd[:2], np.sqrt(var[:2]), atol=0.05)
+
+
 def test_state_round_trip_and_guard(fitted):
     x, s = fitted
     back = restore_surrogate(s.state())

@@ -352,3 +352,28 @@ def test_a_sharp_posterior_needs_thousands_of_steps_and_is_still_exact():
     np.testing.assert_allclose(np.sqrt(np.diag(post.cov)), sd, rtol=0.15)
     log_z = float(np.sum(stats.norm(0.0, math.sqrt(1 + s**2)).logpdf(y)))
     assert abs(post.log_evidence - log_z) < 4 * post.log_evidence_se + 0.05
+
+
+def test_keep_gamma_gives_the_tempered_posterior_on_the_way():
+    """A step ends exactly at keep_gamma, and its particles are draws of exp(gamma L) p: for
+    L = -x^2 / (2 s^2) under a wide uniform prior that is N(0, s^2 / gamma)."""
+    from fbia.iterators.smc.sampler import SequentialMonteCarlo
+
+    s = 0.05
+    sampler = SequentialMonteCarlo(
+        lambda z: -0.5 * (z[:, 0] / s) ** 2,
+        [fbia.priors.uniform(-1.0, 1.0)],
+        n_particles=4000,
+        zeta=0.9,
+        n_rejuvenation=5,
+        seed=3,
+        keep_gamma=0.25,
+    )
+    post = sampler.run()
+    assert post.tempered is not None and 0.25 in post.gammas
+    assert post.tempered.gammas[-1] == 0.25
+    tempered_std = float(np.sqrt(post.tempered.cov[0, 0]))
+    assert tempered_std == pytest.approx(s / 0.5, rel=0.1)  # s / sqrt(gamma) = 0.1
+    assert float(np.sqrt(post.cov[0, 0])) == pytest.approx(s, rel=0.1)
+    with pytest.raises(fbia.ConfigError, match="keep_gamma"):
+        SequentialMonteCarlo(lambda z: z[:, 0], [fbia.priors.uniform(0, 1)], keep_gamma=1.0)
