@@ -184,7 +184,7 @@ def run_config(config: Config, seeds: list[int], quick: bool) -> list[Outcome]:
         res = run.result
         check, unc = res.check, res.uncertainty
         rmse = float("nan") if check is None else float(check.rmse)
-        centred = math.sqrt(max(rmse**2 - check.mean_error**2, 0.0)) if check else math.nan
+        centred = float(check.centred_rmse) if check else math.nan
         widen = math.nan if unc is None else float(np.max(unc.std_ratio))
         move = math.nan if unc is None else float(np.max(np.abs(unc.mean_shift_relative)))
         repairs = len(getattr(res, "failed_checks", []))

@@ -186,8 +186,9 @@ class GpSmcOptions(PluginOptions):
         True,
         description="compare the posterior with its average over the GP's sample paths "
         "(gp_uncertainty): if the GP's own uncertainty moves a mean by more than 0.3 std or "
-        "a std by more than a factor 1.5, the status is 'unreliable' (surrogate mode, known "
-        "sigma_N; a few seconds) [-]",
+        "a std by more than a factor 1.5, runs at draws of the averaged posterior join the "
+        "design (check_repairs, adaptive design) and, if it still does, the status is "
+        "'unreliable' (surrogate mode, known sigma_N; a few seconds) [-]",
     )
     surrogate_uncertainty: Literal["none", "expected_posterior"] = Field(
         "none",
