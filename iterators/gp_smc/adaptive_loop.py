@@ -58,6 +58,10 @@ FloatArray = NDArray[np.float64]
 #: the rounds' SMC: a coarse tempering (its posterior only steers the design)
 ROUND_ZETA = 0.9
 ROUND_REJUVENATION = 5
+#: the rounds' check of the GP's sample paths: paths and distinct particles (the final check
+#: takes 200 and 2000; the joint paths cost ~ points^3 per residual component)
+ROUND_PATHS = 100
+ROUND_POINTS = 1000
 #: the tempering of the wide posterior exp(beta mu) p that a quarter of each batch is drawn
 #: from (along a weakly identified direction it reaches 1 / sqrt(beta) = 2 times further):
 #: the round's SMC keeps its particles at gamma = beta on its way to 1 (``keep_gamma``), so
@@ -237,6 +241,8 @@ def _gp_unsure(
         gp,
         run.priors,
         rng,
+        n_paths=ROUND_PATHS,
+        n_points=ROUND_POINTS,
         smc_options={
             "n_particles": opts.round_particles,
             "zeta": ROUND_ZETA,

@@ -370,11 +370,14 @@ class GpSmcIterator(IteratorBase):
         """The surrogate on the runs ``records`` at ``x`` (``y``: what a GP of L is trained
         on): the residual emulator (option ``surrogate``) or the GP of eq. 26-29; ``start``:
         earlier hyperparameters (a round of the adaptive design), which then also take one
-        restart instead of ``gp_restarts``; ``axes``: a covariance whose principal axes the
-        kernel follows (option ``gp_axes``); ``optimise = False``: keep ``start`` and only
-        condition on the runs."""
+        restart instead of ``gp_restarts`` (the residual emulator's components none);
+        ``axes``: a covariance whose principal axes the kernel follows (option
+        ``gp_axes``); ``optimise = False``: keep ``start`` and only condition on the runs."""
         opts = self.options
+        # a warm start (a round of the adaptive design) takes one restart for the GP of L and
+        # none for the residual emulator's components (up to 20 GPs, each warm from its own)
         restarts = opts.gp_restarts if start is None else min(1, opts.gp_restarts)
+        warm_components = 0 if start is not None else restarts
         rng = np.random.default_rng(opts.seed if opts.gp_seed is None else opts.gp_seed)
         link = None
         if opts.surrogate != "log_likelihood":
@@ -389,7 +392,7 @@ class GpSmcIterator(IteratorBase):
                 link,
                 ard=opts.ard,
                 optimizer=opts.gp_optimizer,
-                restarts=restarts,
+                restarts=warm_components,
                 subset=opts.gp_subset,
                 polish_iters=opts.gp_polish_iters,
             ).fit(
