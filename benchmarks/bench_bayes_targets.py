@@ -57,6 +57,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import resource
 import sys
 import time
 import typing
@@ -339,11 +340,18 @@ def print_run(case: Case, ref: Reference, run: PipelineRun, budget: int | None) 
     res = run.result
     check = res.check
     rmse = "n/a" if check is None else f"{check.rmse:.3g} at {check.n} draws"
+    per_1000 = 1000.0 * run.seconds_excluding_runs / max(run.nfev, 1)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB -> GB (Linux)
     print(
         f"    forward runs {run.nfev} (result.nfev {res.nfev}, failed {res.n_failed}); wall "
         f"{run.seconds:.1f} s, forward runs {run.forward_seconds:.1f} s, excluding them "
-        f"{run.seconds_excluding_runs:.1f} s"
+        f"{run.seconds_excluding_runs:.1f} s ({per_1000:.0f} s per 1000 runs; issue 42: <= 60); "
+        f"peak resident memory of this process so far {peak:.2f} GB (issue 42: <= 2)"
     )
+    if res.adaptive is not None:
+        print(
+            f"    adaptive design: {res.adaptive.stop_reason} in {len(res.adaptive.rounds)} rounds"
+        )
     smc = res.smc
     print(
         f"    gp_smc status {res.status!r}; check RMSE in L {rmse}; SMC {smc.n_steps} steps "

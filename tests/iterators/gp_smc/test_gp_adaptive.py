@@ -17,6 +17,7 @@ from fbia.iterators.gp_smc.adaptive import (
     select_batch,
     soft_floor,
 )
+from fbia.iterators.gp_smc.adaptive_loop import REOPTIMISE_GROWTH
 from fbia.iterators.gp_smc.result import GpSmcResult, PosteriorCheck
 from fbia.iterators.gp_smc.run import log_prior
 from fbia.iterators.smc.sampler import SmcResult, smc
@@ -166,9 +167,21 @@ def test_adaptive_design_meets_the_2d_target(exact_2d):
     assert np.all((got_std < 1.5 * std) & (got_std > std / 1.5))
     # the rounds are reported, each with the error at its new posterior draws
     rounds = result.adaptive.rounds
-    assert rounds and rounds[-1].validation_rmse < 0.5
+    assert rounds and rounds[-1].validation_centred < 0.5
     assert [r.n_runs for r in rounds] == sorted(r.n_runs for r in rounds)
     assert result.to_dict()["info"]["adaptive"]["stop_reason"] == "converged"
+    # the hyperparameters are optimised in the first round and again only once the design
+    # has grown by REOPTIMISE_GROWTH since they last were
+    last = None
+    for r in rounds:
+        assert r.optimised == (last is None or r.n_runs >= REOPTIMISE_GROWTH * last)
+        last = r.n_runs if r.optimised else last
+    # converged: the last batch moved the last posterior by less than adaptive_tol (0.1 std),
+    # measured on its own particles
+    change = result.adaptive.final_change
+    assert change is not None and change.settled(0.1)
+    back = from_dict(GpSmcResult, result.to_dict())  # result.json keeps the measures
+    assert back.adaptive.final_change == change
 
 
 def test_a_budget_too_small_to_converge_is_said(exact_2d):
