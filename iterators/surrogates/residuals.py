@@ -59,6 +59,9 @@ COMPONENT_NUGGET = 1e-6
 DISTANCE_TOL = 1e-6
 #: at least this many successful runs per component GP
 MIN_RUNS = 3
+#: a component whose uncertainty adds less than this to the variance of L (units of L^2) at
+#: every point is not sampled in :meth:`ResidualSurrogate.sample_paths` (sd 0.003 in L)
+PATH_VARIANCE = 1e-5
 
 
 def residual_vectors(evaluations: Sequence[Evaluation]) -> tuple[FloatArray, str]:
@@ -391,7 +394,18 @@ class ResidualSurrogate(ExtrapolationGuard):
         x = np.atleast_2d(np.asarray(x, dtype=float))
         t = np.empty((len(x), len(self.components), n_paths))
         jitter = 0.0
+        means, var = self._scores(x), np.empty((len(x), len(self.components)))
         for j, gp in enumerate(self.components):
+            var[:, j] = gp.predict(x)[1]
+        _, grad = self._gradients(x, means)
+        # a component whose uncertainty changes L by less than PATH_VARIANCE (in L^2) at
+        # every point keeps its mean: its joint paths (a Cholesky factorisation of M x M)
+        # would change no path
+        varies = np.max(grad**2 * var + 0.5 * var**2, axis=0) >= PATH_VARIANCE
+        for j, gp in enumerate(self.components):
+            if not varies[j]:
+                t[:, j, :] = means[:, j, None]
+                continue
             mean, cov = gp.predict_joint(x)
             t[:, j, :], jit = gaussian_paths(mean, cov, n_paths, rng)
             jitter = max(jitter, jit) if math.isfinite(jit) else math.nan
