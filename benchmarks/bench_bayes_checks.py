@@ -1,4 +1,4 @@
-"""Benchmark: does gp_smc's status say when its posterior is wrong? (issue 30 item 6)
+"""Benchmark: does gp_smc's status say when its posterior is wrong? (issues 30 and 42)
 
 gp_smc reports ``completed`` or ``unreliable`` from its own diagnostics: the surrogate's RMSE
 in L at forward runs at posterior draws (``RELIABLE_RMSE``), the share of failed runs there,
@@ -20,11 +20,40 @@ posteriors that say ``unreliable`` (the checks catch them; a wrong ``completed``
 wrong result).  The exact reference is ``fbia.smc`` on the vectorised eq. 5 (two seeds,
 20 000 particles, checked converged), as in ``bench_bayes_targets``.
 
+The configurations are issue 42's family of problems with exact posteriors at its budgets
+(<= 100 runs in 2-D, <= 200 in 2 + 1-D, <= 1000 in 6 + 1-D): sharp (the layered mound of
+``bayes_models``), broad and weakly identified (``7d_cpp_broad``: E1, E3 posterior std
+24-26 % of their prior range, the nu_k 0.15-0.37, only E2 sharp), banana-shaped and
+bimodal (``bayes_models.ShapeMapModel``, 2-D and 2 + 1-D), with the ray and cpp measures;
+then starved and stopped-early runs that can be wrong.  Up to three inputs the exact
+reference is quadrature on a grid (a bimodal posterior's mode weights exactly), beyond it
+``fbia.smc`` on the vectorised eq. 5 (two seeds).
+
     .venv/bin/python benchmarks/bench_bayes_checks.py            # all configurations
     .venv/bin/python benchmarks/bench_bayes_checks.py --quick    # smoke run, < 1 min
     .venv/bin/python benchmarks/bench_bayes_checks.py --only 7d_cpp --seeds 2
 
 The exit status is 0 whatever the rates.
+
+Measured on 2026-11-29 at f52487b (idle 2 cores, gp_smc seeds 0-2, 17 configurations, 51
+runs; 25 min, the exact references included), issue 42's family and rule:
+
+* at issue 42's budgets (11 configurations: sharp, broad, banana, bimodal; 2-D, 2 + 1-D,
+  6 + 1-D; ray and cpp): 33 right posteriors of 33 (max 0.09 std off, std factors <= 1.10),
+  all 33 ``completed``, with 32-61 runs in 2-D, 44-120 in 2 + 1-D, 221-452 in 6 + 1-D; the
+  broad 6 + 1-D case (``7d_cpp_broad``) 229-264 runs, 32-35 s excluding them;
+* starved (fixed Sobol designs of 30 and 150 runs): 7 wrong posteriors (0.4-3.4 std off,
+  std factors 1.6-10), all 7 ``unreliable`` (check errors 4.6-1190 in L); 2 right by luck
+  (0.19, 0.22 std off), ``unreliable`` (errors 5.8 and 10.2 in L: nothing vouches for them);
+* stopped by a short budget (adaptive, 120 and 150 runs): 6 right, 2 of them ``completed``
+  (7d_cpp_short, errors 0.31 and 0.37 in L at the check), 4 ``unreliable`` (errors 0.71-1.78);
+* silently wrong (wrong and ``completed``): 0 of 51. Right posteriors that say
+  ``completed``: 33 of 33 at the budgets, 38 of 44 over all configurations.
+
+Before issue 42's changes (the same family, partly, at e121958 and before): the broad
+6 + 1-D case used all 1000 runs without its design converging (two SMC runs' Monte Carlo
+noise exceeded 0.1 std every round), 609 s excluding runs, 2.85 GB, and with its sample
+paths computed by the delta method a right posterior said ``unreliable`` (x8.9 widening).
 
 Measured on 2026-11-28 (idle 2 cores, gp_smc seeds 0-2, 10 configurations, 30 runs; 18 min),
 with the repair of failed checks (gp_smc ``check_repairs = 2``):
