@@ -87,9 +87,11 @@ class GpSmcOptions(PluginOptions):
     adaptive_tol: float = Field(
         0.1,
         gt=0,
-        description="the adaptive design stops when no posterior mean moved by more than "
-        "this many posterior std and no std changed by more than this fraction in a round, "
-        "and the surrogate error at new posterior draws is below 0.5 in L [-]",
+        description="the adaptive design stops when the last round's batch, refitted into "
+        "the surrogate, moved no posterior mean or 5/50/95 % quantile by more than this many "
+        "posterior std and no std by more than this fraction (measured on the round's own "
+        "particles), and the spread of the surrogate's errors at the batch's posterior "
+        "draws is below 0.5 in L [-]",
     )
     round_particles: int = Field(
         2000,

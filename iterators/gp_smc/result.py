@@ -366,11 +366,24 @@ class GpSmcResult(Result):
                 f"  adaptive design: {self.adaptive.n_initial} start runs, "
                 f"{len(self.adaptive.rounds)} rounds, stopped: {self.adaptive.stop_reason}"
             )
+            lines.append(
+                "    (moved: what the round's GP, refitted with the last batch, did to the last "
+                "posterior, in std; error: the spread of the GP's errors at the batch's "
+                "posterior draws, in L)"
+            )
             for r in self.adaptive.rounds:
                 lines.append(
                     f"    round {r.round:<3} runs {r.n_runs:<5} +{r.n_batch:<4} mean moved "
-                    f"{r.mean_shift:<8.3g} std changed {r.std_change:<8.3g} RMSE at new draws "
-                    f"{r.validation_rmse:.3g}"
+                    f"{r.mean_shift:<8.3g} quantiles {r.quantile_shift:<8.3g} std changed "
+                    f"{r.std_change:<8.3g} error at new draws {r.validation_centred:.3g}"
+                )
+            change, rounds = self.adaptive.final_change, self.adaptive.rounds
+            if change is not None and rounds:
+                lines.append(
+                    f"    the design's last GP, on {rounds[-1].n_runs + rounds[-1].n_batch} "
+                    f"runs: mean moved {change.mean_shift:.3g}, quantiles "
+                    f"{change.quantile_shift:.3g}, std changed {change.std_change:.3g}, "
+                    f"log Z {change.evidence_change:.3g}"
                 )
         return "\n".join(lines)
 
