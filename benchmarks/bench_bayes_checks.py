@@ -258,6 +258,12 @@ def main(argv: list[str] | None = None) -> int:
     labels = [c.label for c in CONFIGS]
     ap.add_argument("--only", choices=labels, nargs="+", help="these configurations")
     ap.add_argument("--seeds", type=int, default=3, help="gp_smc seeds 0 .. n-1 per config")
+    ap.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="start the seeds here (first-seed .. first-seed + seeds - 1): more seeds later",
+    )
     ap.add_argument("--quick", action="store_true", help="small sizes: a smoke run")
     args = ap.parse_args(argv)
     chosen = args.only or (QUICK_CONFIGS if args.quick else labels)
@@ -269,7 +275,8 @@ def main(argv: list[str] | None = None) -> int:
     outcomes: list[Outcome] = []
     for config in CONFIGS:
         if config.label in chosen:
-            outcomes += run_config(config, list(range(args.seeds)), args.quick)
+            seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+            outcomes += run_config(config, seeds, args.quick)
     print(f"\nall runs ({time.perf_counter() - t0:.0f} s):")
     print(confusion(outcomes))
     for label in chosen:
