@@ -35,20 +35,21 @@ reference is quadrature on a grid (a bimodal posterior's mode weights exactly), 
 
 The exit status is 0 whatever the rates.
 
-Measured on 2026-11-29 at f52487b (idle 2 cores, gp_smc seeds 0-2, 17 configurations, 51
-runs; 25 min, the exact references included), issue 42's family and rule:
+Measured on 2026-11-29 at f52487b (idle 2 cores; gp_smc seeds 0-2, then 3-4 with
+``--first-seed 3 --seeds 2``: 17 configurations x 5 seeds = 85 runs; 25 + 19 min, the exact
+references included), issue 42's family and rule:
 
-* at issue 42's budgets (11 configurations: sharp, broad, banana, bimodal; 2-D, 2 + 1-D,
-  6 + 1-D; ray and cpp): 33 right posteriors of 33 (max 0.09 std off, std factors <= 1.10),
-  all 33 ``completed``, with 32-61 runs in 2-D, 44-120 in 2 + 1-D, 221-452 in 6 + 1-D; the
-  broad 6 + 1-D case (``7d_cpp_broad``) 229-264 runs, 32-35 s excluding them;
-* starved (fixed Sobol designs of 30 and 150 runs): 7 wrong posteriors (0.4-3.4 std off,
-  std factors 1.6-10), all 7 ``unreliable`` (check errors 4.6-1190 in L); 2 right by luck
-  (0.19, 0.22 std off), ``unreliable`` (errors 5.8 and 10.2 in L: nothing vouches for them);
-* stopped by a short budget (adaptive, 120 and 150 runs): 6 right, 2 of them ``completed``
-  (7d_cpp_short, errors 0.31 and 0.37 in L at the check), 4 ``unreliable`` (errors 0.71-1.78);
-* silently wrong (wrong and ``completed``): 0 of 51. Right posteriors that say
-  ``completed``: 33 of 33 at the budgets, 38 of 44 over all configurations.
+* at issue 42's budgets (12 configurations: sharp, broad, banana, bimodal; 2-D, 2 + 1-D,
+  6 + 1-D; ray and cpp): 60 right posteriors of 60 (max 0.11 std off, std factors <= 1.10),
+  all 60 ``completed``, with 32-43 runs in 2-D, 44-120 in 2 + 1-D, 155-452 in 6 + 1-D; the
+  broad 6 + 1-D case (``7d_cpp_broad``) 155-324 runs, 18-36 s excluding them;
+* starved (fixed Sobol designs of 30 and 150 runs): 11 wrong posteriors (0.4-3.4 std off,
+  std factors 1.6-10), all 11 ``unreliable`` (check errors 4.6-1190 in L); 4 right by luck
+  (0.13-0.22 std off), ``unreliable`` (errors 2.9-10.2 in L: nothing vouches for them);
+* stopped by a short budget (adaptive, 120 and 150 runs): 10 right, 4 of them ``completed``
+  (check errors 0.31-0.47 in L), 6 ``unreliable`` (errors 0.71-1.78);
+* silently wrong (wrong and ``completed``): 0 of 85. Right posteriors that say
+  ``completed``: 60 of 60 at the budgets, 64 of 74 over all configurations.
 
 Before issue 42's changes (the same family, partly, at e121958 and before): the broad
 6 + 1-D case used all 1000 runs without its design converging (two SMC runs' Monte Carlo
