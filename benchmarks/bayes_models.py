@@ -82,18 +82,57 @@ TRUTH_SHAPE = {"banana": {"a": 0.3, "b": 0.2}, "bimodal": {"a": 0.6, "b": 0.3}}
 CASE_NAMES = ("2d", "2d_inflow", "7d", "banana", "banana_inflow", "bimodal", "bimodal_inflow")
 
 
-class LayeredMoundForwardModel(fbia.Configurable):
-    """A layered mound whose deformed interface is a closed-form graph (module docstring)."""
+class GraphMound(fbia.Configurable):
+    """What the closed-form mounds share: the grid of x, the undeformed graph f0 and the
+    inputs, pairs of material inputs (``material_names``) then ``inflow_rate``."""
 
     dim = 2
 
     class Options(fbia.PluginOptions):
-        subdomains: Literal[1, 3] = Field(3, description="layers: 1 (E, nu) or 3 (E1 .. nu3)")
         n_points: int = Field(41, ge=5, description="vertices of the interface polyline [-]")
         inflow_rate: float = Field(100.0, description="q when not given [mm^2/s]")
         height: float = Field(0.5, gt=0, description="crest height h [mm]")
         width: float = Field(0.8, gt=0, description="footprint width w [mm]")
         centre: float = Field(1.0, description="footprint centre x0 [mm]")
+
+    options: Options
+    material_names: list[str]
+
+    def __init__(self, options: fbia.PluginOptions | None = None, /, **kwargs: Any) -> None:
+        super().__init__(options, **kwargs)
+        o = self.options
+        self.x = np.linspace(o.centre - o.width / 2, o.centre + o.width / 2, o.n_points)
+
+    def parameter_names(self) -> Sequence[str]:
+        """The material inputs, then ``inflow_rate`` [mm^2/s]."""
+        return [*self.material_names, "inflow_rate"]
+
+    def reference_height(self, x: FloatArray) -> FloatArray:
+        o = self.options
+        s = np.clip((x - o.centre) / (o.width / 2), -1.0, 1.0)
+        return np.asarray(o.height * np.cos(0.5 * math.pi * s))
+
+    def heights(self, first: FloatArray, second: FloatArray, q: FloatArray) -> FloatArray:
+        """Deformed heights y(x_j), shape (N, n_points), from :meth:`split`'s arrays."""
+        raise NotImplementedError
+
+    def split(self, values: Mapping[str, float] | FloatArray, names: Sequence[str] | None = None):
+        """(first, second of each material pair, q) arrays from one input dict, or from rows
+        of ``values`` named ``names``."""
+        if isinstance(values, Mapping):
+            row = np.array([[float(values[n]) for n in self.parameter_names()]])
+        else:
+            assert names is not None
+            cols = [list(names).index(n) for n in self.parameter_names()]
+            row = np.asarray(values, dtype=float)[:, cols]
+        return row[:, 0:-1:2], row[:, 1:-1:2], row[:, -1]
+
+
+class LayeredMoundForwardModel(GraphMound):
+    """A layered mound whose deformed interface is a closed-form graph (module docstring)."""
+
+    class Options(GraphMound.Options):
+        subdomains: Literal[1, 3] = Field(3, description="layers: 1 (E, nu) or 3 (E1 .. nu3)")
         channel_height: float = Field(1.0, gt=0, description="channel height H [mm]")
         viscosity: float = Field(1e-3, gt=0, description="fluid viscosity [Pa s]")
 
@@ -102,28 +141,20 @@ class LayeredMoundForwardModel(fbia.Configurable):
     def __init__(self, options: fbia.PluginOptions | None = None, /, **kwargs: Any) -> None:
         super().__init__(options, **kwargs)
         o = self.options
-        self.x = np.linspace(o.centre - o.width / 2, o.centre + o.width / 2, o.n_points)
         self.f0 = self.reference_height(self.x)
         bounds = np.array(LAYERS[o.subdomains]) * o.height
         self._lo, self._hi = bounds[:, 0], bounds[:, 1]
         self._len_f0 = self.layer_lengths(self.f0)  # (K, n_points)
 
     # -- inputs -------------------------------------------------------------------------------
-    @property
+    @property  # type: ignore[override]
     def material_names(self) -> list[str]:
+        """``E, nu`` or ``E1, nu1, E2, nu2, E3, nu3`` [Pa, -]."""
         if self.options.subdomains == 1:
             return ["E", "nu"]
         return [f"{n}{k}" for k in range(1, 4) for n in ("E", "nu")]
 
-    def parameter_names(self) -> Sequence[str]:
-        """``E, nu`` or ``E1, nu1, E2, nu2, E3, nu3`` [Pa, -], and ``inflow_rate`` [mm^2/s]."""
-        return [*self.material_names, "inflow_rate"]
-
     # -- the closed form ----------------------------------------------------------------------
-    def reference_height(self, x: FloatArray) -> FloatArray:
-        o = self.options
-        s = np.clip((x - o.centre) / (o.width / 2), -1.0, 1.0)
-        return np.asarray(o.height * np.cos(0.5 * math.pi * s))
 
     def layer_lengths(self, y: FloatArray) -> FloatArray:
         """len_k(y): thickness of layer k below height y, shape (K, *y.shape)."""
@@ -143,16 +174,6 @@ class LayeredMoundForwardModel(fbia.Configurable):
         Y = self.reference_height(self.x[None, :] - shift)
         settle = np.einsum("nk,knj->nj", compression, self.layer_lengths(Y))
         return np.asarray(Y - settle)
-
-    def split(self, values: Mapping[str, float] | FloatArray, names: Sequence[str] | None = None):
-        """(E, nu, q) arrays from one input dict, or from rows of ``values`` named ``names``."""
-        if isinstance(values, Mapping):
-            row = np.array([[float(values[n]) for n in self.parameter_names()]])
-        else:
-            assert names is not None
-            cols = [list(names).index(n) for n in self.parameter_names()]
-            row = np.asarray(values, dtype=float)[:, cols]
-        return row[:, 0:-1:2], row[:, 1:-1:2], row[:, -1]
 
     # -- fbia.ForwardModel ----------------------------------------------------------------
     def solve(
@@ -179,7 +200,7 @@ class LayeredMoundForwardModel(fbia.Configurable):
         return fbia.Solution.from_pairs(pairs)
 
 
-class ShapeMapModel(fbia.Configurable):
+class ShapeMapModel(GraphMound):
     """A mound whose lean and settlement follow two shape inputs ``a``, ``b`` through a map
     that bends or splits the posterior (issue 42's family: banana-shaped and bimodal cases with
     exact posteriors).  With s = q / 100 (the inflow ``inflow_rate`` scales both responses):
@@ -193,35 +214,14 @@ class ShapeMapModel(fbia.Configurable):
     sharply, so the posterior lies along the parabola b = c - a^2; in the bimodal case only
     a^2 is seen, so +a and -a fit equally well (two modes of equal mass)."""
 
-    dim = 2
-
-    class Options(fbia.PluginOptions):
+    class Options(GraphMound.Options):
         shape: Literal["banana", "bimodal"] = Field("banana", description="the map [-]")
-        n_points: int = Field(41, ge=5, description="vertices of the interface polyline [-]")
-        inflow_rate: float = Field(100.0, description="q when not given [mm^2/s]")
-        height: float = Field(0.5, gt=0, description="crest height h [mm]")
-        width: float = Field(0.8, gt=0, description="footprint width w [mm]")
-        centre: float = Field(1.0, description="footprint centre x0 [mm]")
 
     options: Options
     #: lean per unit a (banana) and per unit a^2 (bimodal) at q = 100 [mm]; settlement per
     #: unit b [-]
     LEAN, LEAN_2, SETTLE = 0.005, 0.02, 0.05
     material_names = ["a", "b"]
-
-    def __init__(self, options: fbia.PluginOptions | None = None, /, **kwargs: Any) -> None:
-        super().__init__(options, **kwargs)
-        o = self.options
-        self.x = np.linspace(o.centre - o.width / 2, o.centre + o.width / 2, o.n_points)
-
-    def parameter_names(self) -> Sequence[str]:
-        """``a``, ``b`` [-] and ``inflow_rate`` [mm^2/s]."""
-        return ["a", "b", "inflow_rate"]
-
-    def reference_height(self, x: FloatArray) -> FloatArray:
-        o = self.options
-        s = np.clip((x - o.centre) / (o.width / 2), -1.0, 1.0)
-        return np.asarray(o.height * np.cos(0.5 * math.pi * s))
 
     def heights(self, a: FloatArray, b: FloatArray, q: FloatArray) -> FloatArray:
         """Deformed heights y(x_j), shape (N, n_points), for a, b of shape (N, 1) and q (N,)."""
@@ -234,16 +234,6 @@ class ShapeMapModel(fbia.Configurable):
         f0 = self.reference_height(self.x)[None, :]
         Y = self.reference_height(self.x[None, :] - lean * f0 / self.options.height)
         return np.asarray(Y * (1.0 - settle))
-
-    def split(self, values: Mapping[str, float] | FloatArray, names: Sequence[str] | None = None):
-        """(a, b, q) arrays from one input dict, or from rows of ``values`` named ``names``."""
-        if isinstance(values, Mapping):
-            row = np.array([[float(values[n]) for n in self.parameter_names()]])
-        else:
-            assert names is not None
-            cols = [list(names).index(n) for n in self.parameter_names()]
-            row = np.asarray(values, dtype=float)[:, cols]
-        return row[:, 0:1], row[:, 1:2], row[:, 2]
 
     def solve(
         self,
@@ -268,7 +258,7 @@ class Case:
 
     name: str
     problem: fbia.InverseProblem
-    model: LayeredMoundForwardModel | ShapeMapModel
+    model: GraphMound
     rays: NDArray[np.intp]  # grid indices of the measurement points
     y_obs: FloatArray  # observed heights there
     truth: dict[str, float]
@@ -398,7 +388,7 @@ def build_case(
         raise ValueError(f"unknown measure {measure!r}; valid: ray, cpp")
     layered = name == "7d"
     shape = name.removesuffix("_inflow")
-    model: LayeredMoundForwardModel | ShapeMapModel
+    model: GraphMound
     parameters = []
     if shape in ("banana", "bimodal"):
         model = ShapeMapModel(shape=shape, n_points=n_points)

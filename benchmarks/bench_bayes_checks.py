@@ -51,10 +51,11 @@ references included), issue 42's family and rule:
 * silently wrong (wrong and ``completed``): 0 of 85. Right posteriors that say
   ``completed``: 60 of 60 at the budgets, 64 of 74 over all configurations.
 
-Before issue 42's changes (the same family, partly, at e121958 and before): the broad
-6 + 1-D case used all 1000 runs without its design converging (two SMC runs' Monte Carlo
-noise exceeded 0.1 std every round), 609 s excluding runs, 2.85 GB, and with its sample
-paths computed by the delta method a right posterior said ``unreliable`` (x8.9 widening).
+Before issue 42's changes (232d7bb, the broad case alone, the machine shared): the broad
+6 + 1-D case used all 1000 runs without its design converging (its rule compared two SMC
+runs, Monte Carlo noise included; inferred, not logged), 609 s excluding runs, 2.85 GB.
+With the new stopping rule but sample paths still by the delta method (during issue 42) its
+right posterior said ``unreliable`` (x8.9 widening).
 
 Measured on 2026-11-28 (idle 2 cores, gp_smc seeds 0-2, 10 configurations, 30 runs; 18 min),
 with the repair of failed checks (gp_smc ``check_repairs = 2``):

@@ -79,9 +79,19 @@ def repairable(
     surrogate's error or its uncertainty, not failed runs, made it fail; an adaptive design;
     the runs fit into ``n_train``; fewer than ``limit`` repairs ``done``."""
     passed = check.reliable and check.cause == "check"
-    if passed or check.n == 0 or check.fails_often or design is None or not adaptive:
+    if passed or check.n == 0 or check.fails_often:
         return False
-    return done < limit and int(design.train_mask.sum()) + len(check.x) <= n_train
+    return room_for_repair(design, adaptive, n_train, len(check.x), done, limit)
+
+
+def room_for_repair(
+    design: DesignRuns | None, adaptive: bool, n_train: int, n_runs: int, done: int, limit: int
+) -> bool:
+    """Whether a repair of ``n_runs`` runs may be made: an adaptive design, the runs fit into
+    ``n_train``, fewer than ``limit`` repairs ``done`` (before any of them is run)."""
+    if design is None or not adaptive:
+        return False
+    return done < limit and int(design.train_mask.sum()) + n_runs <= n_train
 
 
 def with_check_runs(design: DesignRuns, check: PosteriorCheck, status: Sequence[str]) -> DesignRuns:

@@ -84,7 +84,7 @@ from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link
 from ..surrogates.uncertainty import SurrogateUncertainty, marginalise_surrogate_uncertainty
 from .adaptive import floored, soft_floor
 from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, WIDE_TEMPERATURE, adaptive_design
-from .check import posterior_check, repair_note, repairable, with_check_runs
+from .check import posterior_check, repair_note, repairable, room_for_repair, with_check_runs
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
 from .result import (
@@ -209,7 +209,10 @@ class GpSmcIterator(IteratorBase):
             repair = check
             if check.reliable and uncertain:
                 expected, uncertainty = self._uncertainty(run, post, gp)
-                if uncertainty.moves_posterior and opts.uncertainty_check:
+                room = room_for_repair(
+                    design, adaptive is not None, budget, opts.n_check, len(failed), limit
+                )
+                if uncertainty.moves_posterior and opts.uncertainty_check and room:
                     # the GP's sample paths put posterior mass where no run has been: runs at
                     # draws of that averaged posterior say whether it is there
                     repair = yield from posterior_check(run, expected, gp, opts.n_check, rng)
@@ -377,7 +380,7 @@ class GpSmcIterator(IteratorBase):
         # a warm start (a round of the adaptive design) takes one restart for the GP of L and
         # none for the residual emulator's components (up to 20 GPs, each warm from its own)
         restarts = opts.gp_restarts if start is None else min(1, opts.gp_restarts)
-        warm_components = 0 if start is not None else restarts
+        warm = start if start and "components" in start else None  # a residual emulator's
         rng = np.random.default_rng(opts.seed if opts.gp_seed is None else opts.gp_seed)
         link = None
         if opts.surrogate != "log_likelihood":
@@ -392,17 +395,11 @@ class GpSmcIterator(IteratorBase):
                 link,
                 ard=opts.ard,
                 optimizer=opts.gp_optimizer,
-                restarts=warm_components,
+                restarts=0 if warm else opts.gp_restarts,
                 subset=opts.gp_subset,
                 polish_iters=opts.gp_polish_iters,
-            ).fit(
-                x,
-                residuals,
-                rng=rng,
-                start=start if start and "components" in start else None,
-                axes=axes,
-                optimise=optimise or not (start and "components" in start),
-            )
+            ).fit(x, residuals, rng=rng, start=warm, axes=axes, optimise=optimise or not warm)
+        gp_start = None if warm else start  # a residual emulator's hyperparameters fit no GP of L
         return GpSurrogate(
             ard=opts.ard,
             optimizer=opts.gp_optimizer,
@@ -412,14 +409,7 @@ class GpSmcIterator(IteratorBase):
             subset=opts.gp_subset,
             polish_iters=opts.gp_polish_iters,
             trend=opts.gp_trend,
-        ).fit(
-            x,
-            y,
-            rng=rng,
-            start=None if start and "components" in start else start,
-            axes=axes,
-            optimise=optimise or not (start and "components" not in start),
-        )
+        ).fit(x, y, rng=rng, start=gp_start, axes=axes, optimise=optimise or not gp_start)
 
     def _refit(
         self, run: SmcRun, design: DesignRuns, gp: Surrogate, post: SmcResult, floor: float

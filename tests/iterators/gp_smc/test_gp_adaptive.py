@@ -244,3 +244,32 @@ def test_a_failed_check_is_repaired_with_its_runs_within_the_budget(exact_2d, mo
     # the last check's draws are fresh: none of them is a training run
     last = repaired.check.x
     assert not any(np.any(np.all(repaired.design.points == row, axis=1)) for row in last)
+
+
+def test_sample_paths_that_move_the_posterior_are_repaired_with_runs(exact_2d, monkeypatch):
+    """issue 42: when the GP's sample paths move the posterior (forced here, the rounds left
+    alone), runs at draws of the averaged posterior join the design, at most check_repairs
+    times, and the status stays unreliable while they still move it; with no room for a
+    repair (check_repairs = 0) no such runs are made at all."""
+    import fbia.iterators.gp_smc.adaptive_loop as loop_module
+    import fbia.iterators.gp_smc.result as result_module
+    from fbia.iterators.surrogates.uncertainty import SurrogateUncertainty
+
+    problem, _, _ = exact_2d
+    opts = {"n_train": 200, "n_particles": 400, "n_rejuvenation": 3, "zeta": 0.9}
+    opts["round_particles"] = 400
+    plain = fbia.iterator("gp_smc", **opts).run(problem)
+    assert plain.status == "completed" and not plain.uncertainty.moves_posterior
+    with monkeypatch.context() as patch:
+        patch.setattr(loop_module, "_gp_unsure", lambda *args: False)  # the rounds as before
+        patch.setattr(SurrogateUncertainty, "moves_posterior", property(lambda self: True))
+        patch.setattr(result_module, "RELIABLE_RMSE", 1e9)  # every check passes: only paths
+        none = fbia.iterator("gp_smc", check_repairs=0, **opts).run(problem)
+        repaired = fbia.iterator("gp_smc", **opts).run(problem)
+    assert none.status == "unreliable" and none.failed_checks == []
+    assert none.nfev == plain.nfev - 8 * len(plain.failed_checks)  # no runs at its draws
+    assert repaired.status == "unreliable" and len(repaired.failed_checks) == 2
+    assert "2 repair(s)" in repaired.message
+    # each repair: 8 runs at draws of the averaged posterior + a fresh check of 8
+    assert repaired.nfev == none.nfev + 2 * 16
+    assert int(repaired.design.train_mask.sum()) == int(none.design.train_mask.sum()) + 16
