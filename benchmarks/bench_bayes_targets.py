@@ -436,6 +436,13 @@ def main(argv: list[str] | None = None) -> int:
         default=1200.0,
         help="seconds allowed to the SMC stage of the 6 + 1-D paper run before the fallbacks",
     )
+    ap.add_argument(
+        "--adaptive-tol",
+        type=float,
+        default=None,
+        help="the pipeline's adaptive_tol (default: gp_smc's); a tiny value (1e-9) runs the "
+        "design to its whole budget, which measures fbia's own time per 1000 design runs",
+    )
     args = ap.parse_args(argv)
     cases = CASES if args.case == "all" else (args.case,)
     print(
@@ -463,6 +470,8 @@ def main(argv: list[str] | None = None) -> int:
         print_reference(case, ref, settings)
 
         options = {**PIPELINE[name], "seed": args.seed}
+        if args.adaptive_tol is not None:
+            options["adaptive_tol"] = args.adaptive_tol
         if args.quick:
             options.update(QUICK_PIPELINE, n_train=QUICK_TRAIN[name])
         opts, notes = resolve(options)

@@ -38,8 +38,9 @@ with warnings.catch_warnings():
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def _product_k(a: Any, bt: Any, variance: float) -> Any:  # pragma: no cover - compiled
-    """k(a_i, b_k) for scaled inputs a (n, d) and b^T (d, m): the row loop runs in parallel."""
+def product_kernel(a: Any, bt: Any, variance: float) -> Any:  # pragma: no cover - compiled
+    """k(a_i, b_k) for inputs scaled by sqrt(3) / l, a (n, d) and b^T (d, m), C-contiguous:
+    the row loop runs in parallel (also the cross-covariances of :mod:`.gp`)."""
     n, d = a.shape
     m = bt.shape[1]
     out = np.empty((n, m))
@@ -122,7 +123,7 @@ class Matern32Product(Kern):
             and (c[2] is None if x2 is None else c[2] is not None and _same(c[2], x2))
         ):
             return c[3]
-        k = _product_k(*self._scaled(x, x2), float(self.variance[0]))
+        k = product_kernel(*self._scaled(x, x2), float(self.variance[0]))
         self._cache = (key, x.copy(), None if x2 is None else x2.copy(), k)
         return k
 

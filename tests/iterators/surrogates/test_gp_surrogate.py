@@ -269,3 +269,48 @@ def test_warm_start_carries_length_scales_to_turned_axes():
     assert "rotation" in hp_t
     _, back = plain._carried(hp_t)
     np.testing.assert_allclose(back, np.abs(turned.rotation) @ hp_t["lengthscales"], rtol=1e-9)
+
+
+@pytest.mark.parametrize("ard", [False, True], ids=["single", "ard"])
+def test_conditioning_without_gpy_equals_gpys_exact_inference(ard):
+    """A fit that keeps its hyperparameters (an adaptive round between re-optimisations)
+    conditions in numpy (Cholesky, alpha): its mean, variance, evidence and leave-one-out
+    predictions are GPy's for the same hyperparameters, up to round-off (with GPy's jitter of
+    1e-8 on the diagonal; without it they differed by 1e-5 of the span)."""
+    x = qmc.Sobol(2, scramble=True, seed=7).random(64)
+    y = _log_lik(x)
+    full = GpSurrogate(ard=ard, restarts=0).fit(x, y, rng=0)
+    kept = GpSurrogate(ard=ard).fit(x, y, start=full.hyperparameters(), optimise=False)
+    assert kept.info["optimizer"] == "none (hyperparameters kept)"
+    x_test = np.random.default_rng(2).uniform(-0.2, 1.2, (200, 2))
+    m_full, v_full = full.predict(x_test)
+    m_kept, v_kept = kept.predict(x_test)
+    span = y.max() - y.min()
+    np.testing.assert_allclose(m_kept, m_full, rtol=0, atol=1e-7 * span)
+    np.testing.assert_allclose(v_kept, v_full, rtol=1e-5, atol=1e-9 * span**2)
+    np.testing.assert_allclose(kept.loo_predictions(), full.loo_predictions(), atol=1e-6 * span)
+    assert kept.info["neg_log_evidence"] == pytest.approx(full.info["neg_log_evidence"], rel=1e-6)
+
+
+def test_a_warm_start_on_many_runs_searches_on_a_subset_and_conditions_on_all():
+    """Warm-started on more than WARM_SUBSET runs, the hyperparameters are searched on a
+    random subset of WARM_SUBSET of them and the GP is conditioned on every run: it
+    interpolates all of them and predicts as well as one optimised on all."""
+    from fbia.iterators.surrogates.gp import WARM_SUBSET
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 1.0, (WARM_SUBSET + 200, 2))
+    y = _log_lik(x)
+    first = GpSurrogate(ard=True).fit(x[:60], y[:60], rng=0)
+    warm = GpSurrogate(ard=True, restarts=0).fit(x, y, rng=0, start=first.hyperparameters())
+    assert warm.info["optimizer"] == f"lbfgsb on a subset of {WARM_SUBSET}"
+    assert warm.info["subset_search"]["n_train"] == WARM_SUBSET
+    span = y.max() - y.min()
+    np.testing.assert_allclose(warm.predict_mean(x), y, atol=1e-3 * span)  # every run
+    on_all = GpSurrogate(ard=True, restarts=0, subset=10_000).fit(
+        x, y, rng=0, start=first.hyperparameters(), optimise=True
+    )
+    x_test = qmc.Sobol(2, scramble=True, seed=4).random(256)
+    err_warm = warm.test_error(x_test, _log_lik(x_test))["test_relative_l2"]
+    err_all = on_all.test_error(x_test, _log_lik(x_test))["test_relative_l2"]
+    assert err_warm < 1.5 * err_all + 1e-4
