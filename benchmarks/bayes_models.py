@@ -79,6 +79,11 @@ TRUE_INFLOW = 100.0  # mm^2/s
 TRUTH_SHAPE = {"banana": {"a": 0.3, "b": 0.2}, "bimodal": {"a": 0.6, "b": 0.3}}
 #: every case build_case knows: the layered mound in 2-D, 2 + 1-D, 6 + 1-D, and the shape maps
 #: with the inflow known (2-D) or uncertain (2 + 1-D)
+#: the RKHS measure's kernel width [mm] (Paper B: ~10 % of the largest displacement; the
+#: mounds move by up to ~0.1 mm) and its residual, D itself (as examples/paper_b/measures)
+RKHS_SIGMA_W = 0.01
+#: relative step of the central differences that give the closed forms' tangents
+TANGENT_STEP = 1e-5
 CASE_NAMES = ("2d", "2d_inflow", "7d", "banana", "banana_inflow", "bimodal", "bimodal_inflow")
 
 
@@ -115,6 +120,32 @@ class GraphMound(fbia.Configurable):
     def heights(self, first: FloatArray, second: FloatArray, q: FloatArray) -> FloatArray:
         """Deformed heights y(x_j), shape (N, n_points), from :meth:`split`'s arrays."""
         raise NotImplementedError
+
+    def tangent_inputs(self) -> list[str]:
+        """Every input has a tangent (the closed form differentiated by central differences,
+        accurate to ~1e-9 of a vertex: the model's own sensitivities, as ``ale_fsi`` gives)."""
+        return list(self.parameter_names())
+
+    def interface(self, values: Mapping[str, float], tangents: Sequence[str] = ()):
+        """The deformed polyline at the inputs ``values`` (all of them), with the tangents
+        d vertices / d input of ``tangents`` (``Interface.tangents``)."""
+        names = list(self.parameter_names())
+        base = np.array([float(values[n]) for n in names])
+        rows = [base]
+        steps = []
+        for n in tangents:
+            h = TANGENT_STEP * max(1.0, abs(base[names.index(n)]))
+            for sign in (1.0, -1.0):
+                row = base.copy()
+                row[names.index(n)] += sign * h
+                rows.append(row)
+            steps.append(h)
+        y = self.heights(*self.split(np.array(rows), names))
+        interface = fbia.Interface.polyline(np.c_[self.x, y[0]])
+        for k, (n, h) in enumerate(zip(tangents, steps, strict=True)):
+            dy = (y[1 + 2 * k] - y[2 + 2 * k]) / (2.0 * h)
+            interface.tangents[n] = np.c_[np.zeros_like(dy), dy]
+        return interface
 
     def split(self, values: Mapping[str, float] | FloatArray, names: Sequence[str] | None = None):
         """(first, second of each material pair, q) arrays from one input dict, or from rows
@@ -181,8 +212,10 @@ class LayeredMoundForwardModel(GraphMound):
         parameters: Mapping[str, float],
         coordinates: Sequence[Mapping[str, float]],
         workdir: Path,
+        tangents: Sequence[str] = (),
     ) -> fbia.Solution:
-        """One deformed interface per coordinate (a coordinate's inflow_rate overrides)."""
+        """One deformed interface per coordinate (a coordinate's inflow_rate overrides), with
+        the tangents of the inputs ``tangents``."""
         unknown = sorted(set(parameters) - set(self.parameter_names()))
         if unknown:
             raise fbia.ConfigError(f"unknown parameter(s) {unknown}", type(self).__name__)
@@ -195,8 +228,7 @@ class LayeredMoundForwardModel(GraphMound):
             E, nu, q = self.split(values)
             if not (np.all(E > 0) and np.all(nu > -1.0) and np.all(nu <= 0.5)):
                 raise fbia.ForwardModelError("E <= 0 or nu outside (-1, 0.5]")
-            y = self.heights(E, nu, q)[0]
-            pairs.append((coordinate, fbia.Interface.polyline(np.c_[self.x, y])))
+            pairs.append((coordinate, self.interface(values, tangents)))
         return fbia.Solution.from_pairs(pairs)
 
 
@@ -240,14 +272,14 @@ class ShapeMapModel(GraphMound):
         parameters: Mapping[str, float],
         coordinates: Sequence[Mapping[str, float]],
         workdir: Path,
+        tangents: Sequence[str] = (),
     ) -> fbia.Solution:
-        """One deformed interface per coordinate (a coordinate's inflow_rate overrides)."""
+        """One deformed interface per coordinate (a coordinate's inflow_rate overrides), with
+        the tangents of the inputs ``tangents``."""
         pairs = []
         for coordinate in coordinates:
             values = {"inflow_rate": self.options.inflow_rate, **parameters, **coordinate}
-            a, b, q = self.split(values)
-            y = self.heights(a, b, q)[0]
-            pairs.append((coordinate, fbia.Interface.polyline(np.c_[self.x, y])))
+            pairs.append((coordinate, self.interface(values, tangents)))
         return fbia.Solution.from_pairs(pairs)
 
 
@@ -294,12 +326,28 @@ class Case:
         for a in range(0, len(z), chunk):
             E, nu, q = self.model.split(full[a : a + chunk], self.model.parameter_names())
             y = self.model.heights(E, nu, q)
+            if self.measure == "rkhs":
+                out[a : a + chunk] = self._rkhs_log_likelihood(y, sigma)
+                continue
             if self.measure == "ray":
                 r = self.y_obs[None, :] - y[:, self.rays]
             else:
                 r = self.cpp_residuals(y)
             out[a : a + chunk] = const - np.sum(r**2, axis=1) / (2 * sigma**2)
         return out
+
+    def _rkhs_log_likelihood(self, y: FloatArray, sigma: float) -> FloatArray:
+        """Eq. 5 with the RKHS distance (eq. 11) of each simulated graph ``y`` (N, n_points) to
+        the observation, through the measure itself (one distance per row: no vectorised
+        form, so only grids of 2-D cases use it)."""
+        (obs,) = self.problem.observations
+        measure = self.problem.measure
+        n = measurement_count(self.problem) or 1
+        const = -0.5 * n * math.log(2 * math.pi * sigma**2)
+        d = np.array(
+            [measure.distance(fbia.Interface.polyline(np.c_[self.model.x, row]), obs) for row in y]
+        )
+        return np.asarray(const - d**2 / (2 * sigma**2))
 
     def cpp_residuals(self, y: FloatArray) -> FloatArray:
         """Eq. 7 for simulated graphs ``y`` (N, n_points) over the model's grid: each vertex's
@@ -381,11 +429,13 @@ def build_case(
     priors of Paper B (uniform E [100, 800] Pa in 2-D, [100, 1500] Pa per layer in 7-D;
     uniform nu [-0.8, 0.5]; the Beta inflow of Fig. 10).  ``measure="cpp"``: the cpp measure
     (eq. 7, one residual per simulated vertex) against the observed polyline instead of rays
-    (issue 30's 6 + 1-D case: cpp with sigma_N = 2 um)."""
+    (issue 30's 6 + 1-D case: cpp with sigma_N = 2 um); ``measure="rkhs"``: the RKHS distance
+    of surface currents (eq. 11, sigma_W = :data:`RKHS_SIGMA_W`) as the one residual, whose
+    likelihood has no vectorised form (grids of the 2-D cases only)."""
     if name not in CASE_NAMES:
         raise ValueError(f"unknown case {name!r}; valid: {', '.join(CASE_NAMES)}")
-    if measure not in ("ray", "cpp"):
-        raise ValueError(f"unknown measure {measure!r}; valid: ray, cpp")
+    if measure not in ("ray", "cpp", "rkhs"):
+        raise ValueError(f"unknown measure {measure!r}; valid: ray, cpp, rkhs")
     layered = name == "7d"
     shape = name.removesuffix("_inflow")
     model: GraphMound
@@ -426,7 +476,11 @@ def build_case(
         truth["inflow_rate"] = TRUE_INFLOW
     problem = fbia.InverseProblem(
         model=model,
-        measure=fbia.measure(measure),
+        measure=(
+            fbia.measure(measure)
+            if measure != "rkhs"
+            else fbia.measure("rkhs", sigma_w=RKHS_SIGMA_W, residuals="distance")
+        ),
         observations=[obs],
         parameters=parameters,
         noise_std=sigma_n,

@@ -60,7 +60,7 @@ class Evaluation:
     diagnostics: dict[str, Any] = field(default_factory=dict)
     solution: Solution | None = field(default=None, repr=False)
     #: dr/dx (n_r, n): columns in the order of :attr:`jacobian_names`, from the model's
-    #: tangents (``fbia.iterators.lm.tangents``); None when the run gave none
+    #: tangents (``fbia.iterators.tangents``); None when the run gave none
     jacobian: NDArray[np.float64] | None = field(default=None, repr=False)
     jacobian_names: tuple[str, ...] = ()
 
@@ -361,7 +361,7 @@ class InverseProblem:
         return ev
 
     def solve(self, full: dict[str, float], coords: Sequence[Coordinate], wd: Path) -> Solution:
-        """The forward run of :meth:`evaluate` (``fbia.iterators.lm.tangents`` adds tangents)."""
+        """The forward run of :meth:`evaluate` (``fbia.iterators.tangents`` adds tangents)."""
         return self.model.solve(full, coords, wd)
 
     def describe(self) -> dict[str, Any]:

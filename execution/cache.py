@@ -33,7 +33,7 @@ __all__ = ["AsksTangents", "Plan", "RunCache"]
 @runtime_checkable
 class AsksTangents(Protocol):
     """A problem whose records carry J from the model's tangents
-    (:class:`fbia.iterators.lm.tangents.TangentProblem`)."""
+    (:class:`fbia.iterators.tangents.TangentProblem`)."""
 
     tangent_names: tuple[str, ...]
 

@@ -72,7 +72,7 @@ from .lm.handoff import POSTERIOR_LABELS, posterior_starts
 from .lm.options import LMOptions
 from .lm.result import FitStatistics, LMResult, LMState, compare_starts
 from .lm.robust import RobustChain
-from .lm.tangents import TangentProblem, tangent_inputs
+from .tangents import TangentProblem, tangent_inputs
 
 FloatArray = NDArray[np.float64]
 

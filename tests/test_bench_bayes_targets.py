@@ -80,3 +80,24 @@ def test_checks_benchmark_smoke_run(capsys):
     right = checks.Outcome("c", 1, True, "completed", *[0.0] * 6, 1, 0.0)
     table = checks.confusion([outcome, right])
     assert "silently wrong (wrong and 'completed'): 1" in table
+
+
+@pytest.mark.parametrize("name", ["7d", "banana_inflow"])
+def test_mound_tangents_are_the_derivatives_of_the_residuals(name):
+    """The closed-form mounds' tangents (bench_bayes_gradients' sensitivities) through the
+    measure's Jacobian (TangentProblem, as LM uses them) equal a difference of the residuals
+    of two forward runs."""
+    from fbia.iterators.tangents import TangentProblem
+
+    case = bayes_models.build_case(name, measure="cpp", sigma_n=0.01)
+    names = [p.name for p in case.problem.parameters] + list(case.problem.uncertain_names)
+    tangents = TangentProblem.of(case.problem, names)
+    x = dict(case.truth)
+    ev = tangents.evaluate(x)
+    assert ev.jacobian_names == tuple(names)
+    for j, n in enumerate(names):
+        h = 1e-4 * max(1.0, abs(x[n]))
+        up = np.asarray(case.problem.evaluate({**x, n: x[n] + h}).residuals)
+        down = np.asarray(case.problem.evaluate({**x, n: x[n] - h}).residuals)
+        scale = np.abs(ev.jacobian[:, j]).max()
+        np.testing.assert_allclose(ev.jacobian[:, j], (up - down) / (2 * h), atol=1e-4 * scale)

@@ -80,8 +80,9 @@ from ..smc.table import table_note, table_points
 from ..surrogates.design import finite_bounds, sobol_design
 from ..surrogates.feasibility import feasibility_note, feasibility_summary, fit_feasibility
 from ..surrogates.gp import GpSurrogate
-from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link
+from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link, tangent_runs
 from ..surrogates.uncertainty import SurrogateUncertainty, marginalise_surrogate_uncertainty
+from ..tangents import TangentProblem
 from .adaptive import floored, soft_floor
 from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, WIDE_TEMPERATURE, adaptive_design
 from .check import posterior_check, repair_note, repairable, room_for_repair, with_check_runs
@@ -144,7 +145,10 @@ class GpSmcIterator(IteratorBase):
         self, problem: InverseProblem, evaluator: Evaluator
     ) -> Generator[GpSmcState, None, GpSmcResult]:
         opts = self.options
-        run = SmcRun(problem, evaluator, self._inputs(problem), time.perf_counter())
+        inputs = self._inputs(problem)
+        if opts.gradients == "tangents":
+            problem = self._with_tangents(problem, inputs)
+        run = SmcRun(problem, evaluator, inputs, time.perf_counter())
         self.surrogate_note = ""
         if opts.surrogate_uncertainty != "none" and (opts.mode != "surrogate" or run.noise):
             raise ConfigError(
@@ -313,6 +317,19 @@ class GpSmcIterator(IteratorBase):
         (:func:`~fbia.iterators.gp_smc.posterior.write_posterior_files`)."""
         return write_posterior_files(result, folder, self.options.seed)
 
+    def _with_tangents(self, problem: InverseProblem, inputs: list[Parameter]) -> InverseProblem:
+        """``problem`` whose runs also give J = dr/dz for every input (gradients =
+        "tangents": pseudo-runs of the residual emulator)."""
+        opts = self.options
+        if opts.mode != "surrogate" or opts.surrogate == "log_likelihood":
+            raise ConfigError(
+                "trains the residual emulator: needs mode = 'surrogate' and surrogate = "
+                "'residuals' or 'auto'",
+                "gradients",
+            )
+        names = [p.name for p in inputs]
+        return TangentProblem.of(problem, names, "gradients", "gradients = 'off'")
+
     def _inputs(self, problem: InverseProblem) -> list[Parameter]:
         """x then theta; each needs a prior, and x finite bounds for the box design."""
         inputs = [*problem.parameters, *problem.uncertain]
@@ -390,7 +407,11 @@ class GpSmcIterator(IteratorBase):
             if link is None and opts.surrogate == "residuals":
                 raise ConfigError(f"the residual emulator cannot give L: {why}", "surrogate")
             self.surrogate_note = "" if link else f"GP of L (residuals not usable: {why})"
+            if link is None and opts.gradients == "tangents":
+                self.surrogate_note += "; the runs' tangents unused (no residual emulator)"
         if link is not None:
+            if opts.gradients == "tangents":
+                x, residuals = tangent_runs(x, residuals, records)
             return ResidualSurrogate(
                 link,
                 ard=opts.ard,

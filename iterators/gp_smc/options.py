@@ -99,6 +99,14 @@ class GpSmcOptions(PluginOptions):
         description="SMC particles in the rounds of the adaptive design (the final SMC uses "
         "n_particles) [-]",
     )
+    gradients: Literal["off", "tangents"] = Field(
+        "off",
+        description="'tangents': every forward run also returns the Jacobian of the residuals "
+        "with respect to every input (x and theta) from the model's tangents (ale_fsi in "
+        "quasi-static mode), and the residual emulator trains on one pseudo-run per input "
+        "and run from it, r(z + h e_j) = r(z) + h J e_j (indirect gradient enhancement, "
+        "gp_residuals); needs the residual emulator [-]",
+    )
     seed: int = Field(0, description="seed of the Sobol scrambling and of SMC [-]")
     gp_seed: int | None = Field(
         None,

@@ -1,7 +1,7 @@
 """Measures differentiated along a vertex motion (issue 30 item 3): d residuals = dr/dv · dv.
 
 ``cpp`` gives it analytically (``residuals_jvp``); ``ray`` and ``rkhs`` through the framework's
-central difference of the measure alone (``fbia.iterators.lm.tangents``).  Checked against
+central difference of the measure alone (``fbia.iterators.tangents``).  Checked against
 central differences of the residuals with a step 10x larger (O(h^2) apart; a larger step
 crosses the kinks where cpp's closest point changes element), in 2-D and 3-D.
 """
@@ -11,7 +11,7 @@ import pytest
 from test_measures_common import bumpy_sphere, make, wavy_curve
 
 import fbia
-from fbia.iterators.lm.tangents import directional_difference
+from fbia.iterators.tangents import directional_difference
 
 
 def _pair(dim):

@@ -1,5 +1,8 @@
 """The Jacobian of the residuals from the forward model's tangents: J = dr/dv · dv/dx.
 
+Shared by the iterators that use a model's sensitivities: Levenberg–Marquardt (``jacobian =
+"tangent"``) and gp_smc (``gradients = "tangents"``: the residual emulator's pseudo-runs).
+
 A forward model that declares ``tangent_inputs()`` returns, when asked with
 ``solve(..., tangents=names)``, the derivative of every interface vertex with respect to each
 named input (:attr:`fbia.Interface.tangents`; ``ale_fsi``: one back-substitution per input
@@ -25,10 +28,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core.errors import ConfigError, MeasureError
-from ...core.interface import Interface
-from ...core.observation import Coordinate, Observation, Solution
-from ...core.problem import Evaluation, InverseProblem
+from ..core.errors import ConfigError, MeasureError
+from ..core.interface import Interface
+from ..core.observation import Coordinate, Observation, Solution
+from ..core.problem import Evaluation, InverseProblem
 
 __all__ = ["TangentProblem", "directional_difference", "residual_jacobian", "tangent_inputs"]
 
@@ -104,15 +107,21 @@ class TangentProblem(InverseProblem):
     tangent_names: tuple[str, ...] = ()
 
     @classmethod
-    def of(cls, problem: InverseProblem, names: Sequence[str]) -> TangentProblem:
-        """``problem`` with the tangents of ``names`` asked for; ConfigError if the model
-        does not give them."""
+    def of(
+        cls,
+        problem: InverseProblem,
+        names: Sequence[str],
+        where: str = "levenberg_marquardt: jacobian",
+        instead: str = "jacobian = 'forward' or 'central'",
+    ) -> TangentProblem:
+        """``problem`` with the tangents of ``names`` asked for; ConfigError (at ``where``,
+        suggesting ``instead``) if the model does not give them."""
         missing = [n for n in names if n not in tangent_inputs(problem.model)]
         if missing:
             raise ConfigError(
                 f"the forward model {type(problem.model).__name__} gives no tangents for "
-                f"{', '.join(missing)}; use jacobian = 'forward' or 'central'",
-                "levenberg_marquardt: jacobian",
+                f"{', '.join(missing)}; use {instead}",
+                where,
             )
         fields = {f.name: getattr(problem, f.name) for f in dataclasses.fields(InverseProblem)}
         return cls(**fields, tangent_names=tuple(names))

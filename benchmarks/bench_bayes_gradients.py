@@ -1,0 +1,138 @@
+"""Benchmark: do the model's sensitivities cut gp_smc's forward runs? (issue 42, item 4)
+
+A forward model with tangents (``ale_fsi``; here the closed-form mounds of ``bayes_models``,
+whose tangents are their closed forms differentiated) gives with every run the Jacobian
+J = dr/dz of the measure's residuals with respect to every input z (x and theta;
+:class:`fbia.iterators.tangents.TangentProblem`, as Levenberg-Marquardt uses it). gp_smc's
+``gradients = "tangents"`` gives them to the residual emulator as *indirect
+gradient-enhanced* training data (Chung & Alonso 2002: "indirect GEK";
+:func:`fbia.iterators.surrogates.residuals.tangent_runs`): every run at z_i with residuals
+r_i adds d pseudo-runs at z_i + h_j e_j with residuals r_i + h_j J_i e_j, h_j = 0.02 x the
+design's spread in input j, so that each component's GP sees the slope of its score in every
+direction at every run (d + 1 values per run instead of 1). The GP itself is unchanged; a
+GP with derivative observations (GPy's ``DiffKern``) would need the second derivatives of
+fbia's product kernel.
+
+For each case (``bench_bayes_targets``' rule, written down before the runs: every x mean
+within 0.3 exact std, every std within x1.5), gp_smc runs without and with the tangents at
+fixed budgets (the design run to its budget, ``adaptive_tol`` 1e-9, so that runs compare at
+equal counts; + the 8 check runs) and with its own stopping rule from Sobol starts of 10
+and 4 runs per input; the table prints runs, accuracy, status and fbia's own seconds side by
+side. fbia makes the tangents its default only if they cut the runs to a right posterior
+>= 2x at equal accuracy (issue 42).
+
+    .venv/bin/python benchmarks/bench_bayes_gradients.py                  # all cases
+    .venv/bin/python benchmarks/bench_bayes_gradients.py --case 7d --seeds 1
+
+The exit status is 0 whatever the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from bayes_models import Moments, build_case  # next to this file
+from bench_bayes_targets import (
+    GRID,
+    PIPELINE,
+    REFERENCE,
+    accuracy,
+    exact_reference,
+    resolve,
+)
+
+import fbia
+from fbia.iterators.gp_smc.iterator import GpSmcIterator
+from fbia.iterators.surrogates.residuals import TANGENT_STEP
+
+#: fixed budgets per case (design runs to their end, + the 8 check runs)
+BUDGETS = {"2d_inflow": (16, 24, 36, 52), "7d": (50, 70, 100, 160, 264)}
+#: the own stopping rule: Sobol start runs per input, without and with the tangents (gp_smc's
+#: default is 10 per input, Loeppky et al.; a run with tangents carries d + 1 values)
+START_PER_INPUT = (10, 4)
+CASES = {
+    "2d_inflow": {"sigma_n": 0.01, "measure": "cpp", "n_points": 41},
+    "7d": {"sigma_n": 0.02, "measure": "cpp", "n_points": 61},
+}
+
+
+def run_once(case: Any, options: Mapping[str, Any], gradients: bool) -> dict[str, Any]:
+    """One gp_smc run; its runs, moments, status and seconds excluding the forward runs."""
+    opts, _ = resolve({**options, "gradients": "tangents" if gradients else "off"})
+    it = GpSmcIterator(**opts)
+    evaluator = fbia.SerialEvaluator()
+    t0 = time.perf_counter()
+    try:
+        result = _drain(it, case.problem, evaluator)
+    finally:
+        seconds = time.perf_counter() - t0
+        nfev = len(evaluator.history)
+        forward = float(sum(ev.time for ev in evaluator.history))
+        evaluator.close()
+    post = result.posterior
+    moments = Moments(list(post.names), np.asarray(post.mean_all), np.sqrt(np.diag(post.cov_all)))
+    return {
+        "nfev": nfev,
+        "moments": moments,
+        "status": result.status,
+        "own": seconds - forward,
+    }
+
+
+def _drain(it: GpSmcIterator, problem: Any, evaluator: Any) -> Any:
+    gen = it.steps(problem, evaluator)
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--case", choices=[*CASES, "all"], default="all")
+    ap.add_argument("--seeds", type=int, default=2, help="gp_smc seeds per setting")
+    args = ap.parse_args(argv)
+    cases = list(CASES) if args.case == "all" else [args.case]
+    print(f"fbia {fbia.__version__}; pseudo-run step {TANGENT_STEP} x the design's spread")
+    rows = []
+    for name in cases:
+        case = build_case(name, **CASES[name])
+        n_x = len(case.problem.parameters)
+        ref = exact_reference(case, REFERENCE, GRID.get(name))
+        exact = ref.grid if ref.grid is not None else ref.moments
+        print(f"\n=== {name}: {CASES[name]}, exact reference {ref.seconds:.0f} s")
+        settings = [(b, {"adaptive_tol": 1e-9, "n_train": b - 8}) for b in BUDGETS[name]]
+        n_inputs = len(case.names)
+        for k in START_PER_INPUT:
+            settings.append((f"own {k}/in", {"n_initial": k * n_inputs}))
+        for label, extra in settings:
+            for seed in range(args.seeds):
+                for gradients in (False, True):
+                    options = {**PIPELINE[name], **extra, "seed": seed}
+                    out = run_once(case, options, gradients)
+                    ok, shift, ratio = accuracy(exact, out["moments"], n_x)
+                    worst = float(np.max(np.abs(np.log(ratio[:n_x]))))
+                    row = (
+                        f"{name:9s} {str(label):>8s} seed {seed} "
+                        f"{'tangents' if gradients else 'plain   '}: {out['nfev']:4d} runs, "
+                        f"max |dmean|/std {float(np.max(shift[:n_x])):.2f}, worst std factor "
+                        f"{math.exp(worst):.2f} -> {'right' if ok else 'WRONG'}, "
+                        f"{out['status']}, {out['own']:.0f} s own"
+                    )
+                    print("  " + row, flush=True)
+                    rows.append(row)
+    print()
+    for row in rows:
+        print("SUMMARY " + row)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
