@@ -35,6 +35,25 @@ reference is quadrature on a grid (a bimodal posterior's mode weights exactly), 
 
 The exit status is 0 whatever the rates.
 
+Measured on 2026-11-29 at b8decc2 (issue 42's cost cuts: warm hyperparameter searches on 300
+runs, conditioning without GPy, joint EIV covariances over 500 candidates; gp_smc seeds 0-2,
+17 configurations, 51 runs; 59 min with other benchmarks on the same 2 cores):
+
+* at issue 42's budgets (12 configurations): 36 right posteriors of 36 (max 0.09 std off,
+  std factors <= 1.10), all 36 ``completed``, with 32-43 runs in 2-D, 44-120 in 2 + 1-D,
+  264-378 in 6 + 1-D (the broad case 316-378);
+* starved: 7 wrong, all ``unreliable``; 2 right by luck, ``unreliable``;
+* stopped by a short budget (120 and 150 runs in 6 + 1-D): 6 right, all ``unreliable``
+  (check error spreads 0.87-2.0 in L: the design had not converged; at f52487b 4 of 10 such
+  runs said ``completed`` with spreads 0.31-0.47);
+* silently wrong: 0 of 51. Right posteriors that say ``completed``: 36 of 36 at the budgets,
+  36 of 44 over all configurations.
+
+The RKHS configurations (``2d_rkhs``, ``banana_rkhs``; sigma_W = 0.01 mm, D as the residual;
+quadrature references on 200 x 200 points through the measure itself) were added after that
+run: ``--only 2d_rkhs banana_rkhs --seeds 3``, 6 right posteriors of 6 (max 0.18 std off, std
+factors <= 1.32), all ``completed``, with 70-98 runs (<= 100).
+
 Measured on 2026-11-29 at f52487b (idle 2 cores; gp_smc seeds 0-2, then 3-4 with
 ``--first-seed 3 --seeds 2``: 17 configurations x 5 seeds = 85 runs; 25 + 19 min, the exact
 references included), issue 42's family and rule:

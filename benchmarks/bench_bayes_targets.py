@@ -58,6 +58,16 @@ in 7 rounds, 32.9 s wall (124 s of fbia's own time per 1000 runs, issue 42 asks 
 fixed costs of the final SMC and checks weigh on a design that stops at 264), 0.62 GB peak
 resident (``/usr/bin/time -v``). Before issue 42 (232d7bb, the machine shared): all 1000
 runs without converging, 609 s excluding runs, 2.85 GB.
+
+fbia's own time per 1000 design runs (issue 42: <= 60 s on 2 cores), the same broad case run
+to its whole budget: ``--case 7d --skip-paper --measure cpp --sigma-n 0.02 --n-points 61
+--adaptive-tol 1e-9`` (idle 2 cores): at 5c80edf 1000 runs, 151 s excluding them, 1.27 GB
+(GP fits 47 % of it, the EIV batches 25 %, the rounds' SMC 17 %); at b8decc2 (warm
+hyperparameter searches on 300 runs, conditioning without GPy, joint EIV covariances) 1000
+runs, 70 s excluding them, 0.87 GB, right (max 0.03 std off, std ratios 0.99-1.01),
+'completed': the rounds' SMC (22 s; 25 tempering steps x 5 moves of 2000 particles through
+20 component GPs per round) and the warm searches (~3 s per re-optimisation) are what is
+left; the target is not met by 10 s.
 """
 
 from __future__ import annotations
