@@ -40,10 +40,14 @@ inflated, the runs and accuracies are not), gp_smc seeds 0 and 1:
   runs, ``completed``): right and ``completed`` from 52 runs without tangents (seed 1 at 52:
   right, ``unreliable``), from 36 with (both seeds); right at all from 36 / > 36 without, 24
   / 36 with. Own stopping rule (10 per input, seed 0): 72 runs without, 52 with.
-* ``7d``: see the SUMMARY lines of a run (not finished in the session that measured the two
-  cases above; at 50 runs: 2.29 std off without tangents, 0.37 with; at 70 without: 0.77).
+* ``7d`` (closed form, cpp on 61 vertices, sigma_N 20 um; seed 0, not finished: stopped to
+  leave the cores to example 8): at 50 runs 2.29 std off without tangents, 0.37 with (both
+  wrong); at 70 without 0.77; an earlier run of the same pseudo-runs (a benchmark-side
+  subclass before the option existed): at 100 runs 0.47 std off without (wrong), 0.07 with
+  (right, ``completed``, 135 s own against 52 s), at 160 without 0.10 (right,
+  ``unreliable``): about 1.6x fewer runs.
 
-So the tangents cut the runs to a right posterior by about 1.3-1.5x in 2 + 1-D, and make
+So the tangents cut the runs to a right posterior by about 1.3-1.6x, and make
 the means more accurate at equal runs, at up to 2.8x fbia's own time (the emulator trains
 on d + 1 times the points); issue 42's rule for a default is >= 2x, so ``gradients`` stays
 ``"off"`` by default.
