@@ -308,14 +308,16 @@ def _greedy_eiv(
     """``n`` candidates chosen one by one, each maximising the expected reduction of the
     integrated variance of exp(f) p over the integration points, the GP conditioned on the
     ones chosen before (variances only: they do not depend on the runs' results)."""
-    # one joint prediction: each GP solves against the integration points and the candidates
-    # once (separate calls for the variances and the two covariance blocks solved 2x as many)
-    m = len(integ)
-    mean, cov = gp.predict_joint(np.vstack([integ, cand]))
-    mu, s2 = mean[:m], np.diag(cov)[:m]
+    mu, s2 = gp.predict(integ)
     # integration points are draws from exp(mu) p: weight p^2 e^(2 mu + s2) / (e^mu p)
     log_w = mu + s2 + log_prior(integ)
     log_w -= log_w.max()
+    # both covariance blocks from one call (each GP solves against the integration points
+    # and the candidates once; two calls solved the candidates twice); first order in a
+    # residual emulator's scores, as the criterion's tau^2 is defined
+    m = len(integ)
+    both = np.vstack([integ, cand])
+    cov = gp.posterior_covariance(both, both)
     c_ic = np.array(cov[:m, m:])  # (M, C)
     c_cc = np.array(cov[m:, m:])  # (C, C)
     nugget = gp.nugget
