@@ -49,6 +49,11 @@ runs, conditioning without GPy, joint EIV covariances over 500 candidates; gp_sm
 * silently wrong: 0 of 51. Right posteriors that say ``completed``: 36 of 36 at the budgets,
   36 of 44 over all configurations.
 
+That run had the candidates' variances of the EIV rule with the residual emulator's
+second-order term (reverted at f3f79ea, example 8 showed why); after the revert,
+``--only 2d_inflow_cpp banana_inflow_cpp 7d_cpp 7d_cpp_broad --seeds 1``: 4 of 4 right and
+``completed`` (77, 52, 264, 316 runs; max 0.05 std off).
+
 The RKHS configurations (``2d_rkhs``, ``banana_rkhs``; sigma_W = 0.01 mm, D as the residual;
 quadrature references on 200 x 200 points through the measure itself) were added after that
 run: ``--only 2d_rkhs banana_rkhs --seeds 3``, 6 right posteriors of 6 (max 0.18 std off, std

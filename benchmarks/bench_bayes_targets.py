@@ -62,12 +62,14 @@ runs without converging, 609 s excluding runs, 2.85 GB.
 fbia's own time per 1000 design runs (issue 42: <= 60 s on 2 cores), the same broad case run
 to its whole budget: ``--case 7d --skip-paper --measure cpp --sigma-n 0.02 --n-points 61
 --adaptive-tol 1e-9`` (idle 2 cores): at 5c80edf 1000 runs, 151 s excluding them, 1.27 GB
-(GP fits 47 % of it, the EIV batches 25 %, the rounds' SMC 17 %); at b8decc2 (warm
-hyperparameter searches on 300 runs, conditioning without GPy, joint EIV covariances) 1000
-runs, 70 s excluding them, 0.87 GB, right (max 0.03 std off, std ratios 0.99-1.01),
-'completed': the rounds' SMC (22 s; 25 tempering steps x 5 moves of 2000 particles through
-20 component GPs per round) and the warm searches (~3 s per re-optimisation) are what is
-left; the target is not met by 10 s.
+(GP fits 47 % of it, the EIV batches 25 %, the rounds' SMC 17 %); at f3f79ea (warm
+hyperparameter searches on 300 runs, conditioning without GPy, the EIV covariances from one
+call) 1000 runs, 68 s excluding them, 0.85 GB, right (max 0.04 std off, std ratios
+0.97-1.00), 'completed': the rounds' SMC (~22 s; 25 tempering steps x 5 moves of 2000
+particles through 20 component GPs per round) and the warm searches (~3 s per
+re-optimisation) are what is left; the target is missed by 8 s. The same case with its own
+stopping rule at f3f79ea: right (max 0.05 std off), 'completed', 316 runs, converged in 8
+rounds, 28 s excluding runs, 87 s wall with the exact reference, 0.65 GB.
 """
 
 from __future__ import annotations
