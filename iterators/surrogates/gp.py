@@ -324,8 +324,11 @@ class GpSurrogate(ExtrapolationGuard):
             self.info["subset_search"] = pre.describe()
         if kept is not None:
             obj = self._condition(*kept)
-            how = "none (hyperparameters kept)" if not optimise else f"{self.optimizer} on a "
-            how += "" if not optimise else f"subset of {WARM_SUBSET}"
+            how = (
+                f"{self.optimizer} on a subset of {WARM_SUBSET}"
+                if optimise
+                else "none (hyperparameters kept)"
+            )
             return self._trained(t0, obj, how, [])
         model = self._gpy_model(xs, ys)
         self.model = model
@@ -409,8 +412,8 @@ class GpSurrogate(ExtrapolationGuard):
         """Condition on the training data with these hyperparameters (units of the scaled
         data): the Cholesky factor of K + sigma_n^2 I (+ :data:`GPY_JITTER`, GPy's jittered
         Cholesky: as its exact inference) and alpha, without a GPy model (a GPy model computes
-        the inverse and the evidence's gradients too: 10x the time at 1000 points); returns
-        the negative log evidence."""
+        the inverse and the evidence's gradients too: 0.12 s against 0.02 s for 1000 points
+        in 7-D); returns the negative log evidence."""
         from GPy.util.linalg import jitchol
         from scipy.linalg import cho_solve
 
