@@ -308,22 +308,25 @@ def _greedy_eiv(
     """``n`` candidates chosen one by one, each maximising the expected reduction of the
     integrated variance of exp(f) p over the integration points, the GP conditioned on the
     ones chosen before (variances only: they do not depend on the runs' results)."""
-    mu, s2 = gp.predict(integ)
+    m, n_cand = len(integ), len(cand)
+    # one covariance for both sets (each GP solves against the runs once), of which only the
+    # blocks the criterion uses are formed: integration points x candidates, the candidates'
+    # variances, and the rows of the candidates picked (first order in a residual emulator's
+    # scores, as the criterion's tau^2 is defined)
+    cov = gp.covariance_on(np.vstack([integ, cand]))
+    at_integ, at_cand = np.arange(m), np.arange(m, m + n_cand)
+    mu = gp.predict_mean(integ)
+    s2 = cov.predictive_variance(at_integ)  # the variance of gp.predict
     # integration points are draws from exp(mu) p: weight p^2 e^(2 mu + s2) / (e^mu p)
     log_w = mu + s2 + log_prior(integ)
     log_w -= log_w.max()
-    # both covariance blocks from one call (each GP solves against the integration points
-    # and the candidates once; two calls solved the candidates twice); first order in a
-    # residual emulator's scores, as the criterion's tau^2 is defined
-    m = len(integ)
-    both = np.vstack([integ, cand])
-    cov = gp.posterior_covariance(both, both)
-    c_ic = np.array(cov[:m, m:])  # (M, C)
-    c_cc = np.array(cov[m:, m:])  # (C, C)
+    c_ic = cov.block(at_integ, at_cand)  # (M, C)
+    var_c = cov.variance(at_cand)  # the diagonal of the candidates' block
     nugget = gp.nugget
     picked: list[int] = []
-    for _ in range(min(n, len(cand))):
-        s2_c = np.maximum(np.diag(c_cc), 0.0)
+    rows: list[tuple[FloatArray, float]] = []  # the conditioned rows of the picks so far
+    for _ in range(min(n, n_cand)):
+        s2_c = np.maximum(var_c, 0.0)
         tau2 = c_ic**2 / (s2_c + nugget)[None, :]
         # log sum_m w_m (e^tau2 - 1), stable for tau2 from 0 to hundreds
         log_gain = np.log(np.expm1(np.minimum(tau2, 700.0)) + 1e-300) + log_w[:, None]
@@ -332,9 +335,13 @@ def _greedy_eiv(
         score[picked] = -np.inf
         best = int(np.argmax(score))
         picked.append(best)
-        # condition on a run at cand[best]: c(a, b) -= c(a, x*) c(x*, b) / (s2(x*) + nugget)
-        row = c_cc[best].copy()
+        # condition on a run at cand[best]: c(a, b) -= c(a, x*) c(x*, b) / (s2(x*) + nugget),
+        # the row c(x*, .) of the candidates' block conditioned on the picks before
+        row = cov.block(at_cand[best : best + 1], at_cand)[0]
+        for earlier, denom_earlier in rows:
+            row -= earlier[best] * earlier / denom_earlier
         denom = s2_c[best] + nugget
         c_ic -= np.outer(c_ic[:, best], row) / denom
-        c_cc -= np.outer(row, row) / denom
+        var_c -= row**2 / denom
+        rows.append((row, denom))
     return np.asarray(cand[picked])

@@ -47,6 +47,7 @@ import math
 import time
 import warnings
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -164,6 +165,37 @@ def gaussian_paths(
         return mean[:, None] + chol @ z, jitter
     vals, vecs = np.linalg.eigh(cov)
     return mean[:, None] + (vecs * np.sqrt(np.maximum(vals, 0.0))) @ z, math.nan
+
+
+@dataclass(frozen=True)
+class GpCovariance:
+    """The posterior covariance of a GP among a fixed set of points (eq. 28b), in units of
+    L^2, by blocks: c(a, b) = k(a, b) - v_a^T v_b with v = L^-1 k(X, .) solved once for all
+    the points (:meth:`GpSurrogate.covariance_on`). An adaptive design's criterion needs a
+    few blocks of it, not all of it (:func:`~fbia.iterators.gp_smc.adaptive.select_batch`)."""
+
+    xs: NDArray[np.float64]  # the points, standardised
+    v: NDArray[np.float64]  # L^-1 k(X, xs), (n_runs, points)
+    lengthscale: NDArray[np.float64]
+    variance_k: float  # the kernel's variance (standardised units)
+    product: bool
+    scale: float
+
+    def block(self, rows: ArrayLike, cols: ArrayLike) -> NDArray[np.float64]:
+        """c between the points ``rows`` and ``cols`` (index arrays), (len(rows), len(cols))."""
+        i, j = np.asarray(rows), np.asarray(cols)
+        k = matern32_cross(self.xs[i], self.xs[j], self.lengthscale, self.variance_k, self.product)
+        return np.asarray((k - self.v[:, i].T @ self.v[:, j]) * self.scale**2)
+
+    def variance(self, rows: ArrayLike) -> NDArray[np.float64]:
+        """The diagonal of :meth:`block` at ``rows`` (the variance of :meth:`GpSurrogate.predict`,
+        not clipped at 0)."""
+        i = np.asarray(rows)
+        return np.asarray((self.variance_k - np.sum(self.v[:, i] ** 2, axis=0)) * self.scale**2)
+
+    def predictive_variance(self, rows: ArrayLike) -> NDArray[np.float64]:
+        """The variance of :meth:`GpSurrogate.predict` at ``rows`` (clipped at 0)."""
+        return np.maximum(self.variance(rows), 0.0)
 
 
 class GpSurrogate(ExtrapolationGuard):
@@ -617,6 +649,20 @@ class GpSurrogate(ExtrapolationGuard):
             )
         )
         return np.asarray((kab - v_a.T @ v_b) * self.scale**2)
+
+    def covariance_on(self, x: ArrayLike) -> GpCovariance:
+        """The posterior covariance among the rows of ``x``, its blocks computed on demand
+        (:class:`GpCovariance`): the triangular solve against the runs done once for all of
+        them, the prior kernel only for the blocks asked for."""
+        from scipy.linalg import solve_triangular
+
+        if self._chol is None:
+            raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
+        xs = self.standardise(np.atleast_2d(x))
+        v = solve_triangular(
+            self._chol, matern32_cross(self._xs, xs, self._ell, self._var, self.ard), lower=True
+        )
+        return GpCovariance(xs, v, self._ell, self._var, self.ard, self.scale)
 
     def predict_joint(self, x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Posterior mean (M,) and full covariance (M, M) of the latent L at the rows of ``x``

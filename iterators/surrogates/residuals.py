@@ -38,7 +38,7 @@ from ...core.errors import ConfigError
 from ...core.likelihood import MIN_SQUARED_DISTANCE
 from ...core.problem import Evaluation
 from .feasibility import Feasibility
-from .gp import GpSurrogate, gaussian_paths
+from .gp import GpCovariance, GpSurrogate, gaussian_paths
 from .guard import ExtrapolationGuard, GuardCounts
 from .mean import fused_means
 
@@ -170,6 +170,39 @@ def residual_link(
     best = float(np.min(np.sum(r[ok] ** 2, axis=1)))
     scale = math.sqrt(max(best / max(n, 1), MIN_SQUARED_DISTANCE))
     return ResidualLink(scale, None, n), r, ""
+
+
+@dataclass(frozen=True)
+class ResidualCovariance:
+    """The covariance of L among a fixed set of points under a residual emulator, by blocks:
+    sum_j (dL/dt_j)(a) c_j(a, b) (dL/dt_j)(b), the components' covariances c_j first order in
+    the scores (:meth:`ResidualSurrogate.posterior_covariance`), each component solved once
+    (:meth:`ResidualSurrogate.covariance_on`)."""
+
+    grad: FloatArray  # dL/dt_j at the points, (points, components)
+    components: tuple[GpCovariance, ...]
+
+    def block(self, rows: ArrayLike, cols: ArrayLike) -> FloatArray:
+        """The covariance between the points ``rows`` and ``cols`` (index arrays)."""
+        i, j = np.asarray(rows), np.asarray(cols)
+        out = np.zeros((len(i), len(j)))
+        for c, comp in enumerate(self.components):
+            out += self.grad[i, c, None] * comp.block(i, j) * self.grad[None, j, c]
+        return out
+
+    def variance(self, rows: ArrayLike) -> FloatArray:
+        """The diagonal of :meth:`block` at ``rows`` (first order)."""
+        i = np.asarray(rows)
+        var = np.column_stack([comp.variance(i) for comp in self.components])
+        return np.asarray(np.sum(self.grad[i] ** 2 * var, axis=1))
+
+    def predictive_variance(self, rows: ArrayLike) -> FloatArray:
+        """The variance of :meth:`ResidualSurrogate.predict` at ``rows``: the first-order
+        term and the second-order sum_j s_j^4 / 2 (the components' variances clipped at 0
+        as there)."""
+        i = np.asarray(rows)
+        var = np.column_stack([np.maximum(comp.variance(i), 0.0) for comp in self.components])
+        return np.asarray(np.sum(self.grad[i] ** 2 * var + 0.5 * var**2, axis=1))
 
 
 class ResidualSurrogate(ExtrapolationGuard):
@@ -402,6 +435,13 @@ class ResidualSurrogate(ExtrapolationGuard):
         for j, gp in enumerate(self.components):
             out += ga[:, j, None] * gp.posterior_covariance(a, b) * gb[None, :, j]
         return out
+
+    def covariance_on(self, x: ArrayLike) -> ResidualCovariance:
+        """The covariance of L among the rows of ``x`` by blocks, first order in the scores
+        (:class:`ResidualCovariance`): each component's solve done once for all the points."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        _, grad = self._gradients(x)
+        return ResidualCovariance(grad, tuple(gp.covariance_on(x) for gp in self.components))
 
     def predict_joint(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Mean (M,) and covariance (M, M) of L at the rows of ``x``; the diagonal carries

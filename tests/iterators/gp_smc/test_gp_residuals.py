@@ -88,6 +88,25 @@ def test_variance_vanishes_at_runs_and_covariance_is_consistent(fitted):
     assert off[0, 1] == pytest.approx(cov[0, 1]) and off[0, 1] == pytest.approx(off[1, 0])
 
 
+def test_covariance_blocks_equal_the_full_covariance(fitted):
+    """covariance_on (one solve per component for all the points, blocks on demand) gives
+    posterior_covariance's blocks, its first-order diagonal, and predict's variance, for the
+    residual emulator and for the GP of L."""
+    x, s = fitted
+    pts = np.random.default_rng(3).uniform(0.0, 0.8, (9, 2))
+    rows, cols = np.array([0, 4, 8]), np.arange(2, 7)
+    for surrogate in (s, GpSurrogate(ard=True).fit(x, s.y_train, rng=0)):
+        cov = surrogate.covariance_on(pts)
+        full = surrogate.posterior_covariance(pts, pts)
+        span = np.abs(full).max()
+        np.testing.assert_allclose(cov.block(rows, cols), full[np.ix_(rows, cols)], atol=1e-9 * span)
+        np.testing.assert_allclose(cov.variance(cols), np.diag(full)[cols], atol=1e-9 * span)
+        _, var = surrogate.predict(pts)
+        np.testing.assert_allclose(cov.predictive_variance(np.arange(9)), var, rtol=1e-7, atol=1e-9 * span)
+    # the residual emulator's predictive variance carries the second-order term
+    assert np.all(s.covariance_on(pts).predictive_variance(np.arange(9)) > np.diag(s.posterior_covariance(pts, pts)) - 1e-12)
+
+
 @pytest.mark.parametrize("ard", [True, False])
 def test_components_predicted_in_one_call_equal_one_by_one(ard, monkeypatch):
     """The batched compiled loop over the principal components (issue 30) gives each
