@@ -58,6 +58,7 @@ FloatArray = NDArray[np.float64]
 #: the rounds' SMC: a coarse tempering (its posterior only steers the design)
 ROUND_ZETA = 0.9
 ROUND_REJUVENATION = 5
+ROUND_REJUVENATE = "after_resampling"
 #: the rounds' check of the GP's sample paths: paths and distinct particles (the final check
 #: takes 200 and 2000; the joint paths cost ~ points^3 per residual component)
 ROUND_PATHS = 100
@@ -247,6 +248,7 @@ def _gp_unsure(
             "n_particles": opts.round_particles,
             "zeta": ROUND_ZETA,
             "n_rejuvenation": ROUND_REJUVENATION,
+            "rejuvenate": ROUND_REJUVENATE,
         },
     )
     return uncertainty.moves_posterior

@@ -84,7 +84,13 @@ from ..surrogates.residuals import ResidualSurrogate, Surrogate, residual_link, 
 from ..surrogates.uncertainty import SurrogateUncertainty, marginalise_surrogate_uncertainty
 from ..tangents import TangentProblem
 from .adaptive import floored, soft_floor
-from .adaptive_loop import ROUND_REJUVENATION, ROUND_ZETA, WIDE_TEMPERATURE, adaptive_design
+from .adaptive_loop import (
+    ROUND_REJUVENATE,
+    ROUND_REJUVENATION,
+    ROUND_ZETA,
+    WIDE_TEMPERATURE,
+    adaptive_design,
+)
 from .check import posterior_check, repair_note, repairable, room_for_repair, with_check_runs
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
@@ -463,6 +469,7 @@ class GpSmcIterator(IteratorBase):
             n_particles=n_particles,
             zeta=ROUND_ZETA,
             n_rejuvenation=ROUND_REJUVENATION,
+            rejuvenate=ROUND_REJUVENATE,
             ess_min=opts.ess_min,
             rng=np.random.default_rng([opts.seed, 4]),
             max_steps=opts.max_smc_steps,

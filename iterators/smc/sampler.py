@@ -420,8 +420,13 @@ class SequentialMonteCarlo:
             seg_log_z += log_z_inc
             gamma = new_gamma
             resampled = current_ess < self.ess_min * n
+            # the particles move in every step, or only when resampled, at gamma = 1 and at
+            # keep_gamma (kept as a draw of the tempered density: moved, not only reweighted)
             move = self.n_rejuvenation > 0 and (
-                self.rejuvenate == "every_step" or resampled or gamma >= 1.0
+                self.rejuvenate == "every_step"
+                or resampled
+                or gamma >= 1.0
+                or gamma == self.keep_gamma
             )
             if move or resampled or gamma >= 1.0:
                 # Variance of the evidence factor of the steps since the particles last moved
