@@ -34,6 +34,15 @@ weaknesses: it can stall on a bound and gives no result when a forward run fails
 
 Status tags of the result (``success`` is True for the first three):
 
+``unreliable``          converged, but a parameter is at a bound or the residuals are
+                        inconsistent with the stated noise (chi-square test,
+                        :mod:`fbia.iterators.lm.fit_quality`): ``success`` False, as for a
+                        ``gp_smc`` result so flagged; the message names the cause,
+                        ``info["convergence"]`` keeps the tag below, ``fbia run`` exits 3.
+                        Calibrations only: on a plain residual function an active bound is
+                        a constrained optimum (``result.quality.at_bound``, as scipy's
+                        ``active_mask``)
+
 ``converged_gradient``  err_grad < eps_grad (eq. 29a), or r ⟂ J within gtol (robust)
 ``converged_residual``  err_res < eps_res (eq. 29b), or ‖r‖² stopped decreasing (ftol, robust)
 ``converged_step``      no step larger than xtol reduces err_res (robust)
@@ -68,6 +77,7 @@ from ..core.iteration import Evaluator, IteratorBase
 from ..core.options import settings_from
 from ..core.problem import Evaluation, InverseProblem, ProblemLike
 from .lm.chains import LMChain, LMSettings, Outcome, PaperChain, err_res_of
+from .lm.fit_quality import fit_quality
 from .lm.handoff import POSTERIOR_LABELS, posterior_starts
 from .lm.options import LMOptions
 from .lm.result import FitStatistics, LMResult, LMState, compare_starts
@@ -114,6 +124,7 @@ class LevenbergMarquardtIterator(IteratorBase):
         extra = self._uncertain_inputs(problem)
         starts = self._starts(problem, names, lower, upper)
         jacobian = self._jacobian_kind(problem, names)
+        stated = problem  # its noise levels judge the fit (lm.fit_quality)
         if jacobian == "tangent":
             problem = TangentProblem.of(problem, names)  # type: ignore[arg-type]
         settings = self._settings(names, jacobian)
@@ -177,7 +188,7 @@ class LevenbergMarquardtIterator(IteratorBase):
         finally:
             for g in gens.values():
                 g.close()
-        self.result = self._result(chains, evaluations, settings)
+        self.result = self._result(chains, evaluations, settings, stated)
         return self.result
 
     def stop(self, gen: Generator[LMState, None, LMResult]) -> LMResult:
@@ -332,7 +343,11 @@ class LevenbergMarquardtIterator(IteratorBase):
         )
 
     def _result(
-        self, chains: list[LMChain], evaluations: list[Evaluation], settings: LMSettings
+        self,
+        chains: list[LMChain],
+        evaluations: list[Evaluation],
+        settings: LMSettings,
+        problem: ProblemLike | None = None,
     ) -> LMResult:
         names = list(chains[0].names)
         rows: list[dict[str, Any]] = []
@@ -437,9 +452,38 @@ class LevenbergMarquardtIterator(IteratorBase):
         if warnings:
             message += " - WARNING: " + "; ".join(warnings)
         stats = FitStatistics.of(c.J, c.r)
+        # the verdict on the optimum: a parameter at a bound, residuals against the stated
+        # noise (chi-square); either makes the status "unreliable" (lm/fit_quality.py)
+        record = next(
+            (
+                e
+                for e in reversed(evaluations)
+                if e.ok and e.residuals is not None and np.array_equal(e.residuals, c.r)
+            ),
+            None,
+        )
+        quality = fit_quality(names, c.x, c.lower, c.upper, problem, record)
+        status, success = c.status, c.success
+        # on a calibration (an InverseProblem) the bounds are the range the parameters may
+        # take; on a plain residual function (fbia.least_squares) they are constraints of the
+        # problem, an active one a constrained optimum as in scipy (quality records it)
+        if quality.causes and isinstance(problem, InverseProblem):
+            message = "; ".join(quality.causes) + " - " + message
+            status = "unreliable" if c.success else c.status
+            success = False
+        common["info"]["convergence"] = c.status
+        # standard errors: none for a parameter at a bound (the Gauss-Newton covariance
+        # assumes an interior optimum) or from a start that never moved (no optimum)
+        stderr = None
+        if stats.stderr is not None and c.iterations > 0:
+            stderr = {
+                n: float(se)
+                for n, se in zip(names, stats.stderr, strict=True)
+                if n not in quality.at_bound
+            }
         return LMResult(
-            status=c.status,
-            success=c.success,
+            status=status,
+            success=success,
             message=message,
             x=rows[best]["x"],
             err_res=c.err_res,
@@ -452,12 +496,11 @@ class LevenbergMarquardtIterator(IteratorBase):
             sigma2=stats.sigma2,
             cov=stats.cov,
             corr=stats.corr,
-            stderr=None
-            if stats.stderr is None
-            else dict(zip(names, map(float, stats.stderr), strict=True)),
+            stderr=stderr,
             cov_rank=stats.cov_rank,
             aic=stats.aic,
             bic=stats.bic,
+            quality=quality,
             **common,
         )
 

@@ -259,9 +259,13 @@ class LMChain:
         assert self.r is not None and self.J is not None
         grad = float(np.linalg.norm(g[free])) if s.mode != "paper" else self.err_grad
         if grad < s.eps_grad:
+            # at a bound the gradient is judged on the parameters off it (the result's
+            # err_grad is eq. 24 over all of them): say which one the message gives
+            whole = s.mode == "paper" or bool(np.all(free))
+            which = "err_grad" if whole else "err_grad of the parameters off a bound"
             return (
                 "converged_gradient",
-                f"converged on the gradient: err_grad = {grad:.3e} < eps_grad = {s.eps_grad:g} "
+                f"converged on the gradient: {which} = {grad:.3e} < eps_grad = {s.eps_grad:g} "
                 "(eq. 29a)",
                 True,
             )

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ...core.problem import Result
+from .fit_quality import FitQuality
 
 FloatArray = NDArray[np.float64]
 
@@ -124,6 +125,11 @@ class LMResult(Result):
     warnings
         Human-readable warnings: starts that fit equally well but found different optima, or
         fewer residuals than parameters (the optimum is then not determined).
+    quality
+        The verdict on the optimum (:class:`~fbia.iterators.lm.fit_quality.FitQuality`):
+        parameters at a bound, the chi-square test against the stated noise; its causes make
+        the status ``unreliable``. ``stderr`` leaves out the parameters at a bound, and is
+        None when the best start never moved.
     """
 
     names: list[str] = field(default_factory=list)
@@ -143,6 +149,7 @@ class LMResult(Result):
     bic: float | None = None
     starts: list[dict[str, Any]] = field(default_factory=list, repr=False)
     warnings: list[str] = field(default_factory=list)
+    quality: FitQuality | None = None
 
     @property
     def x_array(self) -> FloatArray | None:
@@ -176,6 +183,7 @@ class LMResult(Result):
                 "bic": self.bic,
                 "starts": [_plain(s) for s in self.starts],
                 "warnings": list(self.warnings),
+                "quality": None if self.quality is None else _plain(asdict(self.quality)),
             }
         )
         return out
@@ -195,6 +203,13 @@ class LMResult(Result):
             value = getattr(self, key)
             out[key] = nan if value is None else float(value)
         out["iterations"] = float(self.iterations)
+        fit = self.quality
+        if fit is not None:
+            out["n_at_bound"] = float(len(fit.at_bound))
+            if fit.chi2 is not None and fit.dof:
+                out["chi2"] = fit.chi2
+                out["reduced_chi2"] = fit.chi2 / fit.dof
+                out["p_chi2"] = nan if fit.p_value is None else fit.p_value
         for name, se in (self.stderr or {}).items():
             out[f"stderr.{name}"] = float(se)
         with_x = [s for s in self.starts if s["x"] is not None]
@@ -271,6 +286,13 @@ class LMResult(Result):
             lines.append(
                 "  std. errors: " + ", ".join(f"{k} ± {v:.3g}" for k, v in self.stderr.items())
             )
+        at_bound = () if self.quality is None else self.quality.at_bound
+        if at_bound:
+            lines.append(f"  no std. error at a bound: {', '.join(at_bound)}")
+        elif self.stderr is None and self.err_res is not None and self.iterations == 0:
+            lines.append("  no std. errors: the best start never moved from its initial guess")
+        if self.quality is not None and self.quality.chi2 is not None:
+            lines.append(f"  fit against the stated noise: {self.quality.describe()}")
         if self.corr is not None and len(self.names) > 1:
             pairs = [
                 f"{self.names[i]}-{self.names[j]} {self.corr[i, j]:+.3f}"

@@ -443,7 +443,8 @@ def test_a_run_that_names_an_unknown_quantity_fails_with_the_list(tmp_path, monk
     line = one_error_line(capsys)
     assert line.startswith(
         "study.toml: [[paper.values]] #4 quantity: the result has no quantity 'pm.E'; "
-        "available: converged, err_grad, err_res, iterations, mean.E, mean.err_res, mean.nu, "
+        "available: chi2, converged, err_grad, err_res, iterations, mean.E, mean.err_res, "
+        "mean.nu, "
     ), line
 
 

@@ -225,6 +225,9 @@ def test_bounds_are_respected_and_an_active_bound_is_found():
     b0 = np.dot(np.exp(-0.5 * T), Y) / np.dot(np.exp(-T), np.ones_like(T))  # optimal b0 | b1
     assert result.x_array[0] == pytest.approx(b0, rel=1e-7)
     assert result.starts[0]["at_bound"] == ["x1"]
+    # a plain residual function's bounds are constraints: the active one is recorded (as
+    # scipy's active_mask), not a verdict (a calibration's is: test_lm_fit_quality.py)
+    assert result.status.startswith("converged") and result.quality.at_bound == ("x1",)
 
 
 def test_robust_mode_needs_no_new_jacobian_after_a_declined_step():
