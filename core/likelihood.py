@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -120,3 +121,57 @@ def log_likelihood_from_profile(
     with np.errstate(over="ignore"):
         s = n / (2 * math.pi) * np.exp(-2.0 * profile / n - 1.0)
     return np.asarray(-0.5 * n * np.log(2 * math.pi * sigma**2) - s / (2 * sigma**2))
+
+
+#: chi2's upper tail below which residuals contradict the stated noise (1 right fit in 1000)
+P_MISFIT = 1e-3
+
+
+@dataclass(frozen=True)
+class ChiSquare:
+    """The goodness of fit of one run against the stated noise of eq. 5: a right model and
+    noise level give chi2 = sum_k D_k^2 / sigma_k^2 ~ chi-square with nu = n - (fitted inputs)
+    degrees of freedom; p its upper tail (only: residuals below the noise do not make a fit
+    wrong). Used by Levenberg-Marquardt's verdict and gp_smc's model check."""
+
+    chi2: float
+    dof: int
+    p_value: float
+
+    @property
+    def noise_ratio(self) -> float:
+        """sqrt(chi2 / nu): the residuals in units of the stated noise (1 for a right fit)."""
+        return math.sqrt(self.chi2 / self.dof)
+
+    @property
+    def misfit(self) -> bool:
+        return self.p_value < P_MISFIT
+
+    def cause(self) -> str:
+        p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
+        return (
+            f"residuals {self.noise_ratio:.3g}x the stated noise (chi2 = {self.chi2:.4g} on "
+            f"{self.dof} degrees of freedom, {p} < {P_MISFIT:g}): the noise level or the "
+            "model is wrong"
+        )
+
+
+def chi_square(problem: object, record: Evaluation | None, n_fitted: int) -> ChiSquare | None:
+    """The :class:`ChiSquare` of the run ``record``; None without a stated noise (sigma_N
+    inferred or not given), for a failed run, or with nu < 1."""
+    if not isinstance(problem, InverseProblem) or problem.noise_prior is not None:
+        return None
+    if record is None or not record.ok or record.distances is None or record.residuals is None:
+        return None
+    sigmas = [o.noise_std or problem.noise_std for o in problem.observations]
+    if None in sigmas or len(sigmas) != len(record.distances):
+        return None
+    count = measurement_count(problem)
+    dof = (len(record.residuals) if count is None else count) - n_fitted
+    if dof < 1:
+        return None
+    d2 = np.asarray(record.distances, dtype=float) ** 2
+    chi2 = float(np.sum(d2 / np.asarray(sigmas, dtype=float) ** 2))
+    from scipy.stats import chi2 as chi2_distribution
+
+    return ChiSquare(chi2, dof, float(chi2_distribution.sf(chi2, dof)))

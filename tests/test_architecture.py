@@ -159,7 +159,9 @@ def test_plugins_do_not_import_each_other_except_the_shared_fem():
 def test_the_kernel_is_thin_and_light():
     modules = sorted((ROOT / "core").glob("*.py"))
     lines = sum(len(p.read_text(encoding="utf-8").splitlines()) for p in modules)
-    assert len(modules) <= 16 and lines <= 3000, (len(modules), lines)
+    # 3000 lines until the likelihood's chi-square test of a fit joined eq. 5 (issue 43: one
+    # test for Levenberg-Marquardt's verdict and gp_smc's model check)
+    assert len(modules) <= 16 and lines <= 3050, (len(modules), lines)
     code = (
         "import sys, fbia.core\n"
         "heavy = ('sqlite3', 'dask', 'distributed', 'GPy', 'ngsolve', 'netgen', 'matplotlib')\n"

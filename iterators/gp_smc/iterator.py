@@ -92,6 +92,7 @@ from .adaptive_loop import (
     adaptive_design,
 )
 from .check import posterior_check, repair_note, repairable, room_for_repair, with_check_runs
+from .model_check import model_check
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
 from .result import (
@@ -255,11 +256,22 @@ class GpSmcIterator(IteratorBase):
         status = run_status(opts.mode, check, uncertainty)
         tabled, coarse = table_note(post.table, opts.smc_table_tol)
         status = "unreliable" if coarse else status
+        # can the model and the prior explain the data at all (gp_smc/model_check.py)
+        n_in = len(run.inputs)
+        model = model_check(
+            run.problem,
+            run.inputs,
+            posterior_particles.particles[:, :n_in],
+            posterior_particles.weights,
+            run.evaluations,
+        )
+        status = "unreliable" if model.causes and status == "completed" else status
         return GpSmcResult(
             status=status,
             success=status == "completed",
             message=(
-                f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
+                "".join(f"{cause} - " for cause in model.causes)
+                + f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
                 f"steps ({opts.mode}; {run.nfev} forward runs, {run.n_failed} failed)"
                 + (f"; {self.surrogate_note}" if self.surrogate_note else "")
                 + ("" if adaptive is None else adaptive.note())
@@ -291,6 +303,7 @@ class GpSmcIterator(IteratorBase):
             failed_checks=failed,
             uncertainty=uncertainty,
             posterior=posterior,
+            model_check=model,
             smc=SmcSummary(
                 n_steps=post.n_steps,
                 gammas=list(post.gammas),

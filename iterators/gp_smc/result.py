@@ -23,6 +23,7 @@ from ...core.problem import Result, jsonable
 from ..surrogates.residuals import KeepsSurrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
 from .adaptive import PosteriorChange
+from .model_check import ModelCheck
 
 FloatArray = NDArray[np.float64]
 
@@ -322,6 +323,10 @@ class GpSmcResult(Result):
         ``check`` (gp_smc's ``check_repairs``; empty when the first check decided).
     seconds
         Wall time of the analysis.
+    model_check
+        Whether the model and the prior can explain the data (:mod:`.model_check`: posterior
+        mass piled against a prior bound, the best forward run against the stated noise);
+        its causes make a ``completed`` result ``unreliable``.
     """
 
     names: list[str] = field(default_factory=list)
@@ -337,6 +342,7 @@ class GpSmcResult(Result):
     smc: SmcSummary | None = field(default=None, repr=False)
     failed_checks: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    model_check: ModelCheck | None = None
 
     def summary(self) -> str:
         """The status line, the MAP, then per input (x, theta, sigma_N when inferred) the
@@ -436,7 +442,17 @@ class GpSmcResult(Result):
             "failed_checks": self.failed_checks,
             "seconds": self.seconds,
         }
-        for name in ("design", "adaptive", "surrogate", "check", "uncertainty", "posterior", "smc"):
+        parts_named = (
+            "design",
+            "adaptive",
+            "surrogate",
+            "check",
+            "uncertainty",
+            "posterior",
+            "smc",
+            "model_check",
+        )
+        for name in parts_named:
             value = getattr(self, name)
             parts[name] = None if value is None else asdict(value)
         out["info"] = {**out["info"], **jsonable(parts)}

@@ -9,20 +9,13 @@ of the optimum x* say whether the numbers mean what a user reads into them (issu
   interior optimum) means nothing.
 * **Residuals inconsistent with the stated noise.** With the likelihood's noise level sigma_k
   of each observation k (Paper B eq. 5; the problem's ``noise_std``) and its discrepancy D_k
-  at x*, a model that is right and a noise level that is right give
-
-      chi2 = sum_k D_k^2 / sigma_k^2  ~  chi-square with nu = n - n_x degrees of freedom,
-
-  n the number of single measurements (:func:`fbia.core.likelihood.measurement_count`, else
-  the residual count) and n_x the fitted parameters (linearised around x*, as the standard
-  errors are). The fit is inconsistent with the noise when the upper tail probability
-  p = P(chi2_nu >= chi2) is below :data:`P_MISFIT` = 1e-3: the residuals are
-  sqrt(chi2 / nu) times the stated noise (:attr:`FitQuality.noise_ratio`), so either the
-  noise level or the model is wrong, and the standard errors (scaled by the residuals) do not
-  describe the stated noise either. Only the upper tail is tested: residuals smaller than the
-  noise (noise-free synthetic data, a stated noise level that is an upper bound) do not make
-  the optimum wrong. Without a stated noise (no ``noise_std``, sigma_N inferred, or a plain
-  residual function) or with nu < 1 there is no test.
+  at x*, a right model and a right noise level give chi2 = sum_k D_k^2 / sigma_k^2 ~
+  chi-square with nu = n - n_x degrees of freedom; an upper-tail probability below
+  :data:`~fbia.core.likelihood.P_MISFIT` = 1e-3 says the residuals are sqrt(chi2 / nu) times
+  the stated noise, so either the noise level or the model is wrong
+  (:class:`~fbia.core.likelihood.ChiSquare`, shared with ``gp_smc``'s model check). Without a
+  stated noise (no ``noise_std``, sigma_N inferred, a plain residual function) or with
+  nu < 1 there is no test.
 
 Either fact makes the result's status ``unreliable`` (:class:`FitQuality.causes` names it in
 one line each), and ``fbia run`` then exits 3. lmfit reports the reduced chi-square and drops
@@ -39,15 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core.likelihood import measurement_count
-from ...core.problem import Evaluation, InverseProblem
+from ...core.likelihood import ChiSquare, chi_square
+from ...core.problem import Evaluation
 
 FloatArray = NDArray[np.float64]
 
-#: the upper-tail probability of the chi-square statistic below which the residuals are
-#: inconsistent with the stated noise (one fit in a thousand with a right model and noise
-#: level is flagged)
-P_MISFIT = 1e-3
 #: a parameter within this fraction of its range of a bound is at the bound
 BOUND_RTOL = 1e-9
 
@@ -64,16 +53,23 @@ class FitQuality:
     p_value: float | None = None  # P(chi2_nu >= chi2)
 
     @property
+    def test(self) -> ChiSquare | None:
+        """The chi-square test of the fit, if there is one."""
+        if self.chi2 is None or not self.dof or self.p_value is None:
+            return None
+        return ChiSquare(self.chi2, self.dof, self.p_value)
+
+    @property
     def noise_ratio(self) -> float | None:
         """sqrt(chi2 / nu): the residuals in units of the stated noise (1 for a right fit)."""
-        if self.chi2 is None or not self.dof:
-            return None
-        return math.sqrt(self.chi2 / self.dof)
+        test = self.test
+        return None if test is None else test.noise_ratio
 
     @property
     def misfit(self) -> bool:
-        """Whether the residuals are inconsistent with the stated noise (p < P_MISFIT)."""
-        return self.p_value is not None and self.p_value < P_MISFIT
+        """Whether the residuals are inconsistent with the stated noise."""
+        test = self.test
+        return test is not None and test.misfit
 
     @property
     def causes(self) -> list[str]:
@@ -84,14 +80,9 @@ class FitQuality:
                 self.at_bound, self.bound_values, self.bound_sides, strict=True
             )
         ]
-        if self.misfit:
-            assert self.chi2 is not None and self.noise_ratio is not None
-            p = f"p = {self.p_value:.2g}" if self.p_value else "p < 1e-300"
-            out.append(
-                f"residuals {self.noise_ratio:.3g}x the stated noise (chi2 = {self.chi2:.4g} "
-                f"on {self.dof} degrees of freedom, {p} < {P_MISFIT:g}): "
-                "the noise level or the model is wrong"
-            )
+        test = self.test
+        if test is not None and test.misfit:
+            out.append(test.cause())
         return out
 
     @property
@@ -100,11 +91,12 @@ class FitQuality:
 
     def describe(self) -> str:
         """One line for a summary: the chi-square test's figures, or why there is none."""
-        if self.chi2 is None or not self.dof:
+        test = self.test
+        if test is None:
             return "no chi-square test (no stated noise, or no more measurements than parameters)"
         return (
-            f"chi2 / nu = {self.chi2 / self.dof:.3g} (nu = {self.dof}), residuals "
-            f"{self.noise_ratio:.3g}x the stated noise, p = {self.p_value:.3g}"
+            f"chi2 / nu = {test.chi2 / test.dof:.3g} (nu = {test.dof}), residuals "
+            f"{test.noise_ratio:.3g}x the stated noise, p = {test.p_value:.3g}"
         )
 
 
@@ -126,33 +118,6 @@ def bound_hits(
     return tuple(hits), tuple(values), tuple(sides)
 
 
-def chi_square(
-    problem: object, record: Evaluation | None, n_x: int
-) -> tuple[float, int, float] | None:
-    """(chi2, nu, p) of the run ``record`` at the optimum against the noise levels the
-    problem states (module docstring); None without stated noise or with nu < 1."""
-    if not isinstance(problem, InverseProblem) or record is None or problem.noise_prior is not None:
-        return None
-    if not record.ok or record.distances is None or record.residuals is None:
-        return None
-    sigmas = [
-        obs.noise_std if obs.noise_std is not None else problem.noise_std
-        for obs in problem.observations
-    ]
-    if any(s is None for s in sigmas) or len(sigmas) != len(record.distances):
-        return None
-    count = measurement_count(problem)
-    n = len(record.residuals) if count is None else count
-    dof = n - n_x
-    if dof < 1:
-        return None
-    d = np.asarray(record.distances, dtype=float)
-    chi2 = float(np.sum(d**2 / np.asarray(sigmas, dtype=float) ** 2))
-    from scipy.stats import chi2 as chi2_distribution
-
-    return chi2, dof, float(chi2_distribution.sf(chi2, dof))
-
-
 def fit_quality(
     names: Sequence[str],
     x: FloatArray,
@@ -166,5 +131,4 @@ def fit_quality(
     test = chi_square(problem, record, len(names))
     if test is None:
         return FitQuality(hits, values, sides)
-    chi2, dof, p = test
-    return FitQuality(hits, values, sides, chi2, dof, p)
+    return FitQuality(hits, values, sides, test.chi2, test.dof, test.p_value)

@@ -18,7 +18,8 @@ from _paths import ROOT
 from scipy.stats import chi2
 
 import fbia
-from fbia.iterators.lm.fit_quality import P_MISFIT, FitQuality, bound_hits
+from fbia.core.likelihood import P_MISFIT
+from fbia.iterators.lm.fit_quality import FitQuality, bound_hits
 from fbia.studies.cli import main
 
 DEMO = (ROOT / "examples" / "flow_cell" / "study.toml").read_text()
@@ -88,7 +89,7 @@ def test_a_right_fit_says_success_over_noise_draws(tmp_path, capsys, seed):
 
 
 def test_chi_square_figures_and_bounds():
-    q = FitQuality(chi2=120.0, dof=79)
+    q = FitQuality(chi2=120.0, dof=79, p_value=0.5)
     assert q.noise_ratio == pytest.approx(math.sqrt(120.0 / 79))
     # 79 degrees of freedom: chi2 = 120 lies just inside the 1e-3 tail's limit, 130 beyond it
     limit = chi2.isf(P_MISFIT, 79)
