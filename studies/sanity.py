@@ -17,7 +17,11 @@ The checks, each with the factor that triggers it:
   (``E`` in kPa where the model takes Pa; a description may give alternatives, ``[s/g or
   mm^2 s/g]``, when another option decides);
 * a Young's modulus (a parameter ``E`` or ``E_<k>`` in Pa) whose bounds lie entirely below
-  1 Pa or above 1e7 Pa (biofilm moduli are reported between about 1 Pa and 1 MPa).
+  1 Pa or above 1e7 Pa (biofilm moduli are reported between about 1 Pa and 1 MPa);
+* a model option in Pa (a modulus) outside 1-1e7 Pa (``E = 4e8`` by a unit slip; lengths in
+  mm the models check against their channel themselves);
+* a synthetic truth outside its parameter's bounds (or its prior's support): the fit can only
+  end at the bound, and a Levenberg-Marquardt result there is ``unreliable``.
 """
 
 from __future__ import annotations
@@ -78,6 +82,44 @@ def unit_warnings(study: Any) -> list[str]:
                     f"{MODULUS_RANGE[0]:g}-{MODULUS_RANGE[1]:g} Pa, where biofilm moduli are "
                     "reported: in kPa or MPa? fbia's unit is Pa"
                 )
+    out += _option_warnings(study.model, stated)
+    out += _truth_warnings(study)
+    return out
+
+
+def _option_warnings(model: Any, units: dict[str, str]) -> list[str]:
+    """Model options whose values are implausible in the unit their description states."""
+    out = []
+    for name, value in plugin_options(model).items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        unit = units.get(name)
+        if unit == "Pa" and value > 0 and not MODULUS_RANGE[0] <= value <= MODULUS_RANGE[1]:
+            out.append(
+                f"model option {name} = {value:g} Pa lies outside {MODULUS_RANGE[0]:g}-"
+                f"{MODULUS_RANGE[1]:g} Pa, where biofilm moduli are reported: in another unit? "
+                "fbia's unit is Pa"
+            )
+    return out
+
+
+def _truth_warnings(study: Any) -> list[str]:
+    """A synthetic truth outside its parameter's bounds or its prior's support."""
+    if study.synthetic is None:
+        return []
+    out = []
+    for p in [*study.parameters, *study.uncertain]:
+        value = study.synthetic.truth.get(p.name)
+        if value is None:
+            continue
+        lo, hi = p.bounds if p.bounds is not None else (-math.inf, math.inf)
+        if p.prior is not None:
+            lo, hi = max(lo, p.prior.support[0]), min(hi, p.prior.support[1])
+        if not lo <= value <= hi:
+            out.append(
+                f"[synthetic] truth {p.name} = {value:g} lies outside [{lo:g}, {hi:g}], the "
+                f"range {p.name} may take: the calibration can only end at the bound"
+            )
     return out
 
 

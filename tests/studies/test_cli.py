@@ -456,3 +456,30 @@ def test_the_json_schema_accepts_every_example_and_refuses_a_typo(capsys):
     assert any("executer" in e.message for e in validator.iter_errors(typo))
     wrong = tomllib.loads(STUDY.replace("seed = 3", 'seed = "three"'))
     assert list(validator.iter_errors(wrong))
+
+
+def test_validate_warns_of_a_truth_outside_the_bounds_and_of_model_options_in_another_unit(
+    tmp_path, monkeypatch, capsys
+):
+    """Issue 43 item 2: the flow-cell demo with its synthetic truth at E = 3000 Pa (bounds
+    [50, 1500]) and a model option E = 4e8 Pa (a unit slip): warnings from validate (the study
+    is still valid), none for the demo."""
+    monkeypatch.chdir(tmp_path)
+    demo = (ROOT / "examples" / "flow_cell" / "study.toml").read_text()
+    Path("demo.toml").write_text(demo)
+    assert main(["validate", "demo.toml"]) == 0
+    assert capsys.readouterr().err == ""
+    slipped = demo.replace("truth = { E = 400.0, nu = 0.3 }", "truth = { E = 3000.0, nu = 0.3 }")
+    slipped = slipped.replace("options = { n_points = 81 }", "options = { n_points = 81, E = 4e8 }")
+    Path("study.toml").write_text(slipped)
+    assert main(["validate", "study.toml"]) == 0
+    warnings = [
+        line.removeprefix("fbia: warning: study.toml: ")
+        for line in capsys.readouterr().err.splitlines()
+    ]
+    assert warnings == [
+        "model option E = 4e+08 Pa lies outside 1-1e+07 Pa, where biofilm moduli are reported: "
+        "in another unit? fbia's unit is Pa",
+        "[synthetic] truth E = 3000 lies outside [50, 1500], the range E may take: the "
+        "calibration can only end at the bound",
+    ], warnings
