@@ -42,7 +42,7 @@ typecheck: $(STAMP) package-tree
 # The guides of docs/ and the API reference from the docstrings (mkdocs.yml), into build/site;
 # a warning (a broken docstring, a reference that resolves to nothing) fails the build.
 docs: $(STAMP) package-tree
-	$(BIN)/mkdocs build --strict --quiet
+	$(BIN)/mkdocs build --strict
 
 # The suite in TEST_WORKERS processes (pytest-xdist): 2 for the 2-core machine of the goal
 # (measured at stop 38: 386 s against 575 s in one process, all 1354 tests passing).

@@ -38,6 +38,9 @@ _SURFACE_SUFFIXES = {".stl", ".ply", ".obj", ".vtk", ".vtu", ".off", ".msh", ".x
 class Interface:
     """A discretised interface: vertices and elements (segments in 2-D, triangles in 3-D).
 
+    A forward model asked for tangents (``solve(..., tangents=names)``) sets ``tangents``:
+    per input name, d vertices / d input (the shape of ``vertices``).
+
     Parameters
     ----------
     vertices
@@ -45,9 +48,6 @@ class Interface:
     cells
         Element connectivity, shape (m, 2) for segments or (m, 3) for triangles; the column
         count must equal the spatial dimension.
-
-    A forward model asked for tangents (``solve(..., tangents=names)``) sets
-    :attr:`tangents`: per input name, d vertices / d input (the shape of ``vertices``).
     """
 
     __slots__ = ("_vertices", "_cells", "_cache", "tangents")

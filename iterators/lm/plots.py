@@ -42,7 +42,7 @@ def plot_lm_result(result: LMResult, problem: Any, folder: str | Path) -> list[P
     ----------
     result
         The result of :class:`~fbia.iterators.levenberg_marquardt.LevenbergMarquardtIterator`
-        or :func:`~fbia.iterators.levenberg_marquardt.least_squares`.
+        or :func:`~fbia.iterators.least_squares.least_squares`.
     problem
         The inverse problem (for parameter units and bounds) or None.
     folder
