@@ -28,6 +28,7 @@ def now() -> str:
 def provenance(
     *,
     study_path: Path | None = None,
+    study_name: str | None = None,
     study_text: str | None = None,
     study_sha256: str | None = None,
     seed: int | None = None,
@@ -56,6 +57,7 @@ def provenance(
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "plugins": plugin_versions(*plugins),
+        "study_name": study_name,
         "study_file": None if study_path is None else str(study_path),
         "study_sha256": study_sha256,
         "study_text": study_text,

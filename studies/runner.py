@@ -528,6 +528,7 @@ def _finish(
     outputs = outputs or RunOutputs()
     made = make_provenance(
         study_path=study.path.resolve(),
+        study_name=study.name,
         study_text=study.text,
         study_sha256=study.sha256,
         seed=study.seed,

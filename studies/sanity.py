@@ -94,7 +94,8 @@ def _option_warnings(model: Any, units: dict[str, str]) -> list[str]:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             continue
         unit = units.get(name)
-        if unit == "Pa" and value > 0 and not MODULUS_RANGE[0] <= value <= MODULUS_RANGE[1]:
+        in_range = MODULUS_RANGE[0] <= value <= MODULUS_RANGE[1]
+        if unit == "Pa" and 0 < value < math.inf and not in_range:
             out.append(
                 f"model option {name} = {value:g} Pa lies outside {MODULUS_RANGE[0]:g}-"
                 f"{MODULUS_RANGE[1]:g} Pa, where biofilm moduli are reported: in another unit? "

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -24,7 +23,8 @@ import numpy as np
 from ...core.errors import ConfigError
 from ...core.parameters import Parameter, Prior
 from ...core.problem import jsonable
-from ..smc.sampler import SmcResult, systematic_resample
+from ..smc.sampler import SmcResult
+from .inference_data import inference_data
 from .result import FloatArray, GpSmcResult, LaplaceApproximation, ParticlePosterior
 
 __all__ = [
@@ -254,34 +254,18 @@ def load_posterior(folder: str | Path) -> dict[str, Any]:
 
 
 def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, seed: int = 0):
-    """An ``arviz.InferenceData`` of equally weighted draws (systematic resampling with the
-    generator of ``seed``) of a :func:`load_posterior` result: groups ``posterior`` (one
-    variable per input, x then theta), ``log_likelihood`` (``L``, the surrogate's or the
-    model's log-likelihood of eq. 5) and ``sample_stats`` (``lp``: log-posterior L + log p up
-    to a constant; ``log_prior``)."""
-    try:
-        with warnings.catch_warnings():  # arviz 0.2x announces its refactor on import
-            warnings.simplefilter("ignore", FutureWarning)
-            import arviz
-    except ImportError:
-        raise ConfigError(
-            "arviz is not installed (pip install arviz)", "to_inference_data"
-        ) from None
-    w = np.asarray(posterior["weights"])
-    rng = np.random.default_rng(seed)
-    idx = systematic_resample(w, rng)
-    if n_draws is not None:
-        idx = idx[rng.permutation(len(idx))[:n_draws]]
-    parts = np.asarray(posterior["particles"])[idx]
-    loglik = np.asarray(posterior["log_likelihood"])[idx][None]
-    log_prior = np.asarray(posterior["log_prior"])[idx][None]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", FutureWarning)
-        return arviz.from_dict(
-            posterior={n: parts[None, :, j] for j, n in enumerate(posterior["names"])},
-            log_likelihood={"L": loglik},
-            sample_stats={"lp": loglik + log_prior, "log_prior": log_prior},
-        )
+    """An ``arviz.InferenceData`` of a :func:`load_posterior` result
+    (:mod:`~fbia.iterators.gp_smc.inference_data`; without the prior, the units and the
+    study's attributes, which ``GpSmcResult.to_inference_data`` adds)."""
+    return inference_data(
+        list(posterior["names"]),
+        np.asarray(posterior["particles"]),
+        np.asarray(posterior["weights"]),
+        np.asarray(posterior["log_likelihood"]),
+        np.asarray(posterior["log_prior"]),
+        seed=seed,
+        n_draws=n_draws,
+    )
 
 
 def write_posterior_files(result: Any, folder: str | Path, seed: int = 0) -> list[Path]:
@@ -292,16 +276,8 @@ def write_posterior_files(result: Any, folder: str | Path, seed: int = 0) -> lis
         return []
     folder = Path(folder)
     paths = list(save_posterior(result, folder))
-    post = result.posterior
-    arrays = {  # what load_posterior would read back from the files just written
-        "names": post.names,
-        "particles": post.particles,
-        "weights": post.weights,
-        "log_likelihood": post.log_likelihood,
-        "log_prior": post.log_prior,
-    }
     try:
-        data = to_inference_data(arrays, seed=seed)
+        data = result.to_inference_data(seed=seed)
     except ConfigError:  # arviz is not installed
         return paths
     data.to_netcdf(str(folder / "posterior.nc"))

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core.errors import ConfigError
 from ...core.problem import Result, jsonable
 from ..surrogates.residuals import KeepsSurrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
@@ -431,6 +432,69 @@ class GpSmcResult(Result):
             width = np.ptp(self.design.points[:, :2], axis=0)
             out["laplace.angle"] = principal_angle(lap.cov, post.cov, width)
         return out
+
+    def to_inference_data(
+        self, problem: Any = None, n_draws: int | None = None, seed: int = 0
+    ) -> Any:
+        """The posterior as an ``arviz.InferenceData`` (:mod:`.inference_data`): posterior,
+        prior, log_likelihood, sample_stats (with the particles' weights and the SMC's
+        diagnostics) and, given the ``problem``, observed_data; units per variable, fbia and
+        plugin versions, study and seed as attributes (from ``provenance`` once ``fbia run``
+        has written the result)."""
+        from ...core.parameters import Prior
+        from .inference_data import inference_data
+
+        post = self.posterior
+        if post is None:
+            raise ConfigError("this result has no posterior", "to_inference_data")
+        priors, units = {}, {}
+        for spec in self.priors:
+            name = str(spec.get("name"))
+            units[name] = str(spec.get("unit") or "-")
+            if spec.get("prior"):
+                bounds = spec.get("bounds")
+                priors[name] = Prior.from_spec(
+                    spec["prior"], None if bounds is None else tuple(bounds)
+                )
+        made = self.provenance or {}
+        from ...core.version import __version__
+
+        attrs = {
+            "fbia_version": made.get("fbia", __version__),
+            "plugins": made.get("plugins", []),
+            "study": made.get("study_name") or made.get("study_file") or "",
+            "seed": made.get("seed") if made.get("seed") is not None else -1,
+            "inference_library": "fbia gp_smc (GP surrogate + SMC, Paper B)",
+        }
+        smc = {}
+        if self.smc is not None:
+            smc = {
+                "smc_final_ess": self.smc.final_ess,
+                "smc_tempering_steps": self.smc.n_steps,
+                "smc_steps_with_moves": self.smc.steps_with_moves,
+            }
+        smc["log_evidence"] = float(post.log_evidence)
+        observed = None
+        if problem is not None:
+            observed = {
+                f"interface_{k}": np.asarray(o.interface.vertices)
+                for k, o in enumerate(problem.observations, start=1)
+                if o.interface is not None
+            }
+        return inference_data(
+            post.names,
+            post.particles,
+            post.weights,
+            post.log_likelihood,
+            post.log_prior,
+            seed=seed,
+            n_draws=n_draws,
+            priors=priors,
+            units=units,
+            attrs=attrs,
+            smc=smc,
+            observed=observed,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()

@@ -190,7 +190,12 @@ class SmcResult:
 
     @property
     def final_ess(self) -> float:
-        return ess(np.log(np.maximum(self.weights, 1e-300)))
+        """The ESS of the weights: of the last reweighting's, before the resampling at
+        gamma = 1 made them equal (then ``ess[-1]``), or of the weights as they are."""
+        w = self.weights
+        if self.ess and len(w) and float(np.ptp(w)) <= 1e-12 * float(np.max(w)):
+            return float(self.ess[-1])
+        return ess(np.log(np.maximum(w, 1e-300)))
 
     def resample(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """``n`` equally weighted draws from the particle approximation (systematic)."""
@@ -419,7 +424,12 @@ class SequentialMonteCarlo:
             log_evidence += log_z_inc
             seg_log_z += log_z_inc
             gamma = new_gamma
-            resampled = current_ess < self.ess_min * n
+            # resample when the ESS fell below ess_min, and always at gamma = 1 (then moved):
+            # the result's particles are equally weighted, so any tool's plain mean over them
+            # (ArviZ's) is the weighted one, as with pymc's SMC
+            resampled = current_ess < self.ess_min * n or (
+                gamma >= 1.0 and float(np.ptp(log_w)) > 1e-12
+            )
             # the particles move in every step, or only when resampled, at gamma = 1 and at
             # keep_gamma (kept as a draw of the tempered density: moved, not only reweighted)
             move = self.n_rejuvenation > 0 and (

@@ -297,17 +297,20 @@ def test_gradients_need_a_model_with_tangents_and_the_residual_emulator():
         ).run(problem)
 
 
-def test_tangents_give_a_right_2d_inflow_posterior_from_24_runs():
+def test_tangents_give_a_right_2d_inflow_posterior_from_32_runs():
     """With the model's tangents (the benchmark mound's closed-form derivatives; ale_fsi's
-    in a real study) 16 Sobol runs + 8 check runs give the 2-D + inflow posterior to 0.3
-    exact std (bench_bayes_gradients: 0.10 std; without tangents 0.50 std off, wrong)."""
+    in a real study) 24 Sobol runs + 8 check runs give the 2-D + inflow posterior to 0.3
+    exact std, and the check says so. (16 + 8 runs put the means within 0.25 std as well, but
+    the surrogate is 1.1-2.6 in L off at the check draws over seeds 0-2 since the SMC resamples
+    at gamma = 1: ``unreliable``, rightly unsure; bench_bayes_gradients: without tangents 0.50
+    std off at 16 runs.)"""
     sys.path.insert(0, str(BENCH))
     import bayes_models
 
     case = bayes_models.build_case("2d_inflow", measure="cpp")
     exact = bayes_models.grid_posterior(case, 90, 60)
-    result = fbia.iterator("gp_smc", n_train=16, gradients="tangents", seed=0).run(case.problem)
-    assert result.nfev == 24 and result.status == "completed"
+    result = fbia.iterator("gp_smc", n_train=24, gradients="tangents", seed=0).run(case.problem)
+    assert result.nfev == 32 and result.status == "completed"
     post = result.posterior
     std = np.sqrt(np.diag(post.cov_all))
     assert np.all(np.abs(post.mean_all - exact.mean)[:2] < 0.3 * exact.std[:2])

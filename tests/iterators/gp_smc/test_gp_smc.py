@@ -258,10 +258,48 @@ def test_arviz_reads_the_posterior(runs, tmp_path):
     idata = to_inference_data(load_posterior(tmp_path))
     assert isinstance(idata, arviz.InferenceData)
     assert set(idata.posterior.data_vars) == {"E", "nu", "inflow_rate"}
-    assert set(idata.sample_stats.data_vars) == {"lp", "log_prior"}
+    assert set(idata.sample_stats.data_vars) == {"lp", "log_prior", "weight"}
     assert set(idata.log_likelihood.data_vars) == {"L"}
-    # Equally weighted draws from the particles keep the weighted mean.
-    assert float(idata.posterior["E"].mean()) == pytest.approx(result.posterior.mean[0], rel=0.02)
+    # SMC ends with a resampling at gamma = 1: the particles are the draws, ArviZ's mean is
+    # the summary's weighted mean
+    assert float(idata.posterior["E"].mean()) == pytest.approx(result.posterior.mean[0], rel=1e-12)
+
+
+def test_to_inference_data_is_a_first_class_hand_off(runs, tmp_path):
+    """Issue 43 item 4: az.summary gives the summary's weighted means; the groups, units,
+    versions, study and seed are there, the SMC's diagnostics in sample_stats' attributes;
+    the netCDF file reads back the same."""
+    arviz = pytest.importorskip("arviz")
+    problem, result, _ = runs[True]
+    result.provenance = {"fbia": fbia.__version__, "plugins": [{"name": "gp_smc"}],
+                         "study_name": "tiny", "seed": 7}  # fmt: skip
+    idata = result.to_inference_data(problem)
+    groups = set(idata.groups())
+    assert {"posterior", "prior", "log_likelihood", "sample_stats", "observed_data"} <= groups
+    table = arviz.summary(idata, kind="stats", round_to="none")
+    post = result.posterior
+    for j, name in enumerate(post.names):
+        assert table.loc[name, "mean"] == pytest.approx(post.mean_all[j], rel=1e-12)
+    assert idata.posterior.attrs["resampled"] == 0
+    assert np.allclose(idata.sample_stats["weight"], 1.0)
+    assert idata.posterior["E"].attrs["units"] == "Pa"
+    assert idata.posterior["inflow_rate"].attrs["units"] == "mm^2/s"
+    assert idata.posterior.attrs["fbia_version"] == fbia.__version__
+    assert idata.posterior.attrs["study"] == "tiny" and idata.posterior.attrs["seed"] == 7
+    assert "gp_smc" in idata.posterior.attrs["plugins"]
+    stats = idata.sample_stats.attrs
+    assert stats["smc_tempering_steps"] == result.smc.n_steps
+    assert 0 < stats["smc_final_ess"] <= len(post.weights)
+    assert stats["log_evidence"] == pytest.approx(post.log_evidence)
+    # the prior group holds draws of the priors: the inflow's Beta(2.6, 1.4) on [0, 110]
+    assert float(idata.prior["inflow_rate"].mean()) == pytest.approx(110 * 2.6 / 4.0, rel=0.05)
+    observed = idata.observed_data["interface_1"]
+    assert observed.shape[-1] == 2 and observed.attrs["units"] == "mm"
+    path = tmp_path / "posterior.nc"
+    idata.to_netcdf(str(path))
+    back = arviz.from_netcdf(str(path))
+    assert float(back.posterior["E"].mean()) == pytest.approx(post.mean_all[0], rel=1e-12)
+    assert back.posterior.attrs["study"] == "tiny"
 
 
 def test_hpd_mass_of_map_truth_and_a_far_point(runs):
