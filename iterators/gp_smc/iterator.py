@@ -487,6 +487,7 @@ class GpSmcIterator(IteratorBase):
             rng=np.random.default_rng([opts.seed, 4]),
             max_steps=opts.max_smc_steps,
             keep_gamma=WIDE_TEMPERATURE,
+            final_resample=False,  # its weighted particles steer the design, no file
         ).run()
 
     def _surrogate_stage(

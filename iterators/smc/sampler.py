@@ -250,6 +250,13 @@ class SequentialMonteCarlo:
         A gamma in (0, 1) where the tempering stops on its way (a step ends exactly there)
         and whose weighted particles the result keeps as ``tempered``: a draw from exp(gamma
         L) p for free, instead of a second run (the adaptive design's wide draws).
+    final_resample
+        Resample at gamma = 1 before the last moves (default), so that the particles are
+        equally weighted (ArviZ's plain mean over them is the weighted one). The adaptive
+        design's rounds leave it off: the particles the moves leave in place (about 0.7^5 of
+        them) would be duplicates there, and batches drawn from them repeat points (measured
+        on the broad 6 + 1-D case at 1000 runs: E2's posterior std 1.34x the exact one with
+        it in the rounds, 1.02x without).
     """
 
     def __init__(
@@ -268,6 +275,7 @@ class SequentialMonteCarlo:
         training_range: tuple[float, float] | None = None,
         table_points: int | None = None,
         keep_gamma: float | None = None,
+        final_resample: bool = True,
     ) -> None:
         if not callable(log_likelihood):
             raise ConfigError("log_likelihood must be callable: (N, d) array -> (N,) array", "smc")
@@ -309,6 +317,7 @@ class SequentialMonteCarlo:
         if keep_gamma is not None and not 0.0 < keep_gamma < 1.0:
             raise ConfigError(f"keep_gamma must lie in (0, 1), got {keep_gamma}", "smc")
         self.keep_gamma = keep_gamma
+        self.final_resample = bool(final_resample)
         self.tables: LogTables | None = None
         self.nfev = 0
         self.n_nonfinite = 0
@@ -428,7 +437,7 @@ class SequentialMonteCarlo:
             # the result's particles are equally weighted, so any tool's plain mean over them
             # (ArviZ's) is the weighted one, as with pymc's SMC
             resampled = current_ess < self.ess_min * n or (
-                gamma >= 1.0 and float(np.ptp(log_w)) > 1e-12
+                self.final_resample and gamma >= 1.0 and float(np.ptp(log_w)) > 1e-12
             )
             # the particles move in every step, or only when resampled, at gamma = 1 and at
             # keep_gamma (kept as a draw of the tempered density: moved, not only reweighted)
