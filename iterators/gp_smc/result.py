@@ -20,10 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
+from ...core.parameters import Prior
 from ...core.problem import Result, jsonable
+from ...core.version import __version__
 from ..surrogates.residuals import KeepsSurrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
 from .adaptive import PosteriorChange
+from .inference_data import inference_data
 from .model_check import ModelCheck
 
 FloatArray = NDArray[np.float64]
@@ -441,9 +444,6 @@ class GpSmcResult(Result):
         diagnostics) and, given the ``problem``, observed_data; units per variable, fbia and
         plugin versions, study and seed as attributes (from ``provenance`` once ``fbia run``
         has written the result)."""
-        from ...core.parameters import Prior
-        from .inference_data import inference_data
-
         post = self.posterior
         if post is None:
             raise ConfigError("this result has no posterior", "to_inference_data")
@@ -457,8 +457,6 @@ class GpSmcResult(Result):
                     spec["prior"], None if bounds is None else tuple(bounds)
                 )
         made = self.provenance or {}
-        from ...core.version import __version__
-
         attrs = {
             "fbia_version": made.get("fbia", __version__),
             "plugins": made.get("plugins", []),

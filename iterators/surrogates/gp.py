@@ -198,6 +198,19 @@ class GpCovariance:
         return np.maximum(self.variance(rows), 0.0)
 
 
+def covariance_between(surrogate: Any, a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    """The block between the rows of ``a`` and ``b`` of ``surrogate.covariance_on`` over
+    both (one solve for both; one set when ``b is a``): ``posterior_covariance`` of the GP
+    and of the residual emulator."""
+    xa = np.atleast_2d(np.asarray(a, dtype=float))
+    if b is a:
+        rows = np.arange(len(xa))
+        return np.asarray(surrogate.covariance_on(xa).block(rows, rows))
+    xb = np.atleast_2d(np.asarray(b, dtype=float))
+    cov = surrogate.covariance_on(np.vstack([xa, xb]))
+    return np.asarray(cov.block(np.arange(len(xa)), np.arange(len(xa), len(xa) + len(xb))))
+
+
 class GpSurrogate(ExtrapolationGuard):
     """GP regression model of the log-likelihood L(x) (Paper B, eq. 26-29).
 
@@ -628,27 +641,7 @@ class GpSurrogate(ExtrapolationGuard):
         """Posterior covariance of L between the rows of ``a`` (M, d) and ``b`` (P, d)
         (eq. 28b off the diagonal), in units of L^2: what conditioning on a new run at a
         point of ``b`` removes from the variance at ``a`` (an adaptive design's criterion)."""
-        from scipy.linalg import solve_triangular
-
-        xa = self.standardise(np.atleast_2d(a))
-        xb = self.standardise(np.atleast_2d(b))
-        # k(a, b) - v_a^T v_b with v = L^-1 k(X, .), L the Cholesky factor of K + sigma_n^2 I:
-        # the triangular solves keep the small variances near the data accurate, where the
-        # explicit inverse loses them to cancellation
-        chol = self._chol
-        assert chol is not None
-        kab = matern32_cross(xa, xb, self._ell, self._var, self.ard)
-        v_a = solve_triangular(
-            chol, matern32_cross(self._xs, xa, self._ell, self._var, self.ard), lower=True
-        )
-        v_b = (
-            v_a
-            if b is a
-            else solve_triangular(
-                chol, matern32_cross(self._xs, xb, self._ell, self._var, self.ard), lower=True
-            )
-        )
-        return np.asarray((kab - v_a.T @ v_b) * self.scale**2)
+        return covariance_between(self, a, b)
 
     def covariance_on(self, x: ArrayLike) -> GpCovariance:
         """The posterior covariance among the rows of ``x``, its blocks computed on demand
@@ -659,6 +652,9 @@ class GpSurrogate(ExtrapolationGuard):
         if self._chol is None:
             raise ConfigError("the GP surrogate is not trained yet (call fit)", "gp")
         xs = self.standardise(np.atleast_2d(x))
+        # v = L^-1 k(X, .), L the Cholesky factor of K + sigma_n^2 I: the triangular solve
+        # keeps the small variances near the data accurate, where the explicit inverse loses
+        # them to cancellation
         v = solve_triangular(
             self._chol, matern32_cross(self._xs, xs, self._ell, self._var, self.ard), lower=True
         )

@@ -38,7 +38,7 @@ from ...core.errors import ConfigError
 from ...core.likelihood import MIN_SQUARED_DISTANCE
 from ...core.problem import Evaluation
 from .feasibility import Feasibility
-from .gp import GpCovariance, GpSurrogate, gaussian_paths
+from .gp import GpCovariance, GpSurrogate, covariance_between, gaussian_paths
 from .guard import ExtrapolationGuard, GuardCounts
 from .mean import fused_means
 
@@ -429,12 +429,7 @@ class ResidualSurrogate(ExtrapolationGuard):
 
     def posterior_covariance(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
         """Covariance of L between the rows of ``a`` and ``b`` (first order in the scores)."""
-        _, ga = self._gradients(a)
-        gb = ga if b is a else self._gradients(b)[1]
-        out = np.zeros((len(ga), len(gb)))
-        for j, gp in enumerate(self.components):
-            out += ga[:, j, None] * gp.posterior_covariance(a, b) * gb[None, :, j]
-        return out
+        return covariance_between(self, a, b)
 
     def covariance_on(self, x: ArrayLike) -> ResidualCovariance:
         """The covariance of L among the rows of ``x`` by blocks, first order in the scores

@@ -104,3 +104,40 @@ def test_no_test_without_a_stated_noise_and_the_check_on_a_whole_posterior():
     at_200[:, 0] = np.minimum(at_200[:, 0], 200.0)  # a prior E in [100, 200] Pa, data at 400
     narrow = model_check(problem, _inputs((100.0, 200.0)), at_200, np.ones(500), [record])
     assert narrow.piled == ("E",) and "piles against its upper bound" in narrow.causes[0]
+
+
+FAST = {"n_particles": 1000, "n_rejuvenation": 5, "zeta": 0.9, "seed": 0, "design": "sobol"}
+
+
+#: SMC on the forward model itself (milliseconds here): the posterior is the model's, so it
+#: piles against the bound when the data want E = 400 Pa and the prior stops at 200 Pa (a
+#: surrogate of 24 runs does not know where that posterior ends)
+DIRECT = {"mode": "direct", "n_particles": 300, "n_rejuvenation": 3, "zeta": 0.8, "seed": 0}
+
+
+@pytest.mark.parametrize(
+    "sigma_n, e_bounds, options, cause",
+    [
+        (0.001, (100.0, 800.0), {"n_train": 24, **FAST}, None),
+        (0.0001, (100.0, 800.0), {"n_train": 24, **FAST}, "at the best forward run, residuals"),
+        (0.001, (100.0, 200.0), DIRECT, "the posterior of E piles against its upper bound"),
+    ],
+)
+def test_gp_smc_puts_the_model_check_into_its_status(sigma_n, e_bounds, options, cause):
+    """The check through gp_smc itself: its causes lead the message and make the status
+    unreliable; with the data's own noise and the truth inside the prior, it says nothing."""
+    problem = _problem(sigma_n)
+    problem = fbia.InverseProblem(
+        model=problem.model,
+        measure=problem.measure,
+        observations=problem.observations,
+        noise_std=sigma_n,
+        parameters=_inputs(e_bounds),
+        fixed={"inflow_rate": 100.0},
+    )
+    result = fbia.iterator("gp_smc", **options).run(problem)
+    if cause is None:
+        assert result.model_check.causes == [] and "the stated noise" not in result.message
+    else:
+        assert result.message.startswith(cause) and result.status == "unreliable"
+        assert not result.success and result.model_check.causes
