@@ -21,9 +21,11 @@ the same keys as the live problem it was made from (the store's migration relies
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import importlib.metadata
 import json
+import os
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -41,6 +43,7 @@ from ..core.problem import InverseProblem, jsonable
 __all__ = [
     "canonical",
     "code_digest",
+    "code_digest_as_stored",
     "default_options",
     "without_defaults",
     "comparison_key",
@@ -206,17 +209,160 @@ def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -
     return out
 
 
-def code_digest(obj: Any) -> dict[str, str]:
-    """The source of plugin ``obj``'s code: the class, the files it comes from and their
-    SHA-256.  The files are every ``.py`` file of the package the class's module belongs to
-    (``fbia.plugins.ale_fsi`` -> ``ale_fsi/``, a third party's ``fbia_mysolver`` -> its
-    folder), or the module alone when it is a top-level module or one of ``fbia.plugins``'
-    single-file plugins; fbia's own models add ``plugins/fem/``, the finite-element numerics
-    and flow-cell geometry they share.  Code the plugin imports from elsewhere (fbia.core,
-    numpy, NGSolve) is not included: their versions are in the run's provenance.  A plugin that
-    declares a ``numerics_version`` also gets its package's version and that declaration: a new
-    release of the package that declares the same numerics keeps the stores (an edit without a new
+# -- the model plugin's source -------------------------------------------------------------------
+def code_digest(obj: Any) -> dict[str, Any]:
+    """The source of plugin ``obj``'s code: the class, the SHA-256 of each file of it (by its
+    path relative to the plugin's folder: ``model.py``, ``../fem/newton.py``) and one SHA-256
+    over them.  The files are the class's module and the modules of the plugin's own code it
+    imports, transitively (:func:`_own_files`): editing a module of the plugin's package that
+    the model does not import (an iterator, the registration in its ``__init__.py``) keeps
+    the digest.  Code the plugin imports from elsewhere (fbia.core, numpy, NGSolve) is not
+    included: their versions are in the run's provenance.  A plugin that declares a
+    ``numerics_version`` also gets its package's version and that declaration: a new release
+    of the package that declares the same numerics keeps the stores (an edit without a new
     version does not)."""
+    cls = type(obj)
+    name = f"{cls.__module__}.{cls.__qualname__}"
+    source = getattr(sys.modules.get(cls.__module__), "__file__", None)
+    if source is None:
+        return {"class": name, "files": {}, "sha256": ""}
+    root, paths = _own_files(cls.__module__, Path(source).resolve())
+    files = {Path(os.path.relpath(p, root)).as_posix(): _file_sha(p) for p in paths}
+    files = dict(sorted(files.items()))
+    return {"class": name, "files": files, "sha256": _sha(canonical(files)), **_numerics(obj)}
+
+
+def code_digest_as_stored(
+    stored: Mapping[str, Any], obj: Any, code: dict[str, Any]
+) -> dict[str, Any]:
+    """``code`` (``obj``'s :func:`code_digest`), or when ``stored`` is a digest of fbia before
+    per-file digests (its ``files`` a folder name), ``obj``'s digest of that kind: so a
+    store of a plugin whose folder is unchanged keeps its runs after the upgrade."""
+    return _folder_digest(obj) if isinstance(stored.get("files"), str) else code
+
+
+def _numerics(obj: Any) -> dict[str, str]:
+    declared = getattr(type(obj), "numerics_version", None)
+    if declared is None:
+        return {}
+    # a release may change the code but declare the same numerics
+    return {"version": _package_version(obj), "numerics": str(declared)}
+
+
+def _file_sha(path: Path) -> str:
+    return _bytes_digest(path) or "(unreadable)"
+
+
+def _own_files(module: str, path: Path) -> tuple[Path, list[Path]]:
+    """The folder of the plugin whose class lives in ``module`` (file ``path``), and the files
+    of its own code that module runs: itself and what it imports from the plugin's packages
+    (:func:`_plugin_scope`), transitively.  Imports are read from the files with ``ast``,
+    not from ``sys.modules``; a package counts its ``__init__.py`` only when it is imported
+    itself (``import pkg``, ``from pkg import name`` of a name it defines), not for one of
+    its submodules.  Imports inside functions count: a lazy import is code the model runs."""
+    scope = _plugin_scope(module)
+    folders = _package_folders(module, path)
+    found = {module: path}
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        for alternatives in _imports(found[name], name):
+            target = _first_module(alternatives, scope, folders)
+            if target is not None and target[0] not in found:
+                found[target[0]] = target[1]
+                todo.append(target[0])
+    return folders.get(scope[0], path.parent), list(found.values())
+
+
+def _plugin_scope(module: str) -> tuple[str, ...]:
+    """The packages whose modules are a plugin's own code: a third party's top-level package
+    (``fbia_mysolver``), or its module alone when it is a top-level module; for fbia's own
+    models the plugin's package (``fbia.plugins.ale_fsi``) and ``fbia.plugins.fem``, the
+    finite-element numerics and flow-cell geometry they share."""
+    parts = module.split(".")
+    if parts[0] != "fbia":
+        return (parts[0],)
+    if len(parts) > 2 and parts[1] == "plugins":
+        return (".".join(parts[:3]), "fbia.plugins.fem")
+    return (".".join(parts[:2]),)
+
+
+def _package_folders(module: str, path: Path) -> dict[str, Path]:
+    """The folder of each package ``module`` (file ``path``) is in, itself if a package,
+    deepest first (the top-level folder need not be named like its package)."""
+    parts = module.split(".")
+    if path.name != "__init__.py":
+        parts.pop()
+    folders, folder = {}, path.parent
+    while parts:
+        folders[".".join(parts)] = folder
+        parts.pop()
+        folder = folder.parent
+    return folders
+
+
+def _imports(path: Path, module: str) -> list[tuple[str, ...]]:
+    """What the file ``path`` of ``module`` imports, anywhere in it: per import the modules
+    it may name, the submodule first (``from .a import b``: the submodule ``a.b``, else ``a``)."""
+    try:
+        tree = ast.parse(path.read_bytes())
+    except (OSError, SyntaxError, ValueError):
+        return []
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out: list[tuple[str, ...]] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(alias.name,) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = _absolute(node, package)
+            if base:
+                out += [(f"{base}.{alias.name}", base) for alias in node.names]
+    return out
+
+
+def _absolute(node: ast.ImportFrom, package: str) -> str:
+    """The absolute name of the module ``node`` imports from, inside ``package`` ('' when a
+    relative import leaves the top-level package)."""
+    if node.level == 0:
+        return node.module or ""
+    parts = package.split(".") if package else []
+    if node.level > len(parts):
+        return ""
+    head = parts[: len(parts) - node.level + 1]
+    return ".".join(head + ([node.module] if node.module else []))
+
+
+def _first_module(
+    names: tuple[str, ...], scope: tuple[str, ...], folders: Mapping[str, Path]
+) -> tuple[str, Path] | None:
+    """The first of ``names`` that is a module of the plugin's own code, with its file."""
+    for name in names:
+        if not any(name == s or name.startswith(f"{s}.") for s in scope):
+            continue
+        path = _module_file(name, folders)
+        if path is not None:
+            return name, path
+    return None
+
+
+def _module_file(name: str, folders: Mapping[str, Path]) -> Path | None:
+    """The file of module ``name`` (a package's ``__init__.py``) under the deepest of the
+    package ``folders`` it is in; None when there is none (a name, not a module)."""
+    for package, folder in folders.items():
+        if name != package and not name.startswith(f"{package}."):
+            continue
+        rest = name[len(package) + 1 :].split(".") if name != package else []
+        base = folder.joinpath(*rest)
+        candidates = [base / "__init__.py"] + ([base.with_suffix(".py")] if rest else [])
+        return next((f for f in candidates if f.is_file()), None)
+    return None
+
+
+def _folder_digest(obj: Any) -> dict[str, Any]:
+    """The code digest of fbia before per-file digests, kept to check the stores it wrote:
+    the SHA-256 of every ``.py`` file of the folder of the class's module (the module alone
+    when it is a top-level module or a module of ``fbia`` or ``fbia.plugins``), and of
+    ``plugins/fem/`` for fbia's own models; ``files`` names the folder."""
     cls = type(obj)
     module = sys.modules.get(cls.__module__)
     source = getattr(module, "__file__", None)
@@ -232,7 +378,7 @@ def code_digest(obj: Any) -> dict[str, str]:
         root, files = path.parent, [path]
     labels = [f.relative_to(root).as_posix() for f in files]
     if cls.__module__.startswith("fbia.plugins.") and root.name != "fem":
-        shared = root.parent / "fem"  # the finite-element numerics fbia's models share
+        shared = root.parent / "fem"
         fem = sorted(shared.rglob("*.py")) if shared.is_dir() else []
         files += fem
         labels += [f"../fem/{f.relative_to(shared).as_posix()}" for f in fem]
@@ -245,11 +391,7 @@ def code_digest(obj: Any) -> dict[str, str]:
             h.update(b"(unreadable)")
         h.update(b"\0")
     shown = str(root) if len(files) > 1 else str(path)
-    out = {"class": name, "files": shown, "sha256": h.hexdigest()}
-    declared = getattr(cls, "numerics_version", None)
-    if declared is not None:  # a release may change the code but declare the same numerics
-        out.update(version=_package_version(obj), numerics=str(declared))
-    return out
+    return {"class": name, "files": shown, "sha256": h.hexdigest(), **_numerics(obj)}
 
 
 # -- fingerprints --------------------------------------------------------------------------------

@@ -143,9 +143,11 @@ def comparison_rekey(
     return comparison_key(stored), target
 
 
-def code_change(old: dict[str, Any], code: dict[str, str], n: int) -> str | None:
+def code_change(old: dict[str, Any], code: dict[str, Any], n: int) -> str | None:
     """Why a store's ``n`` runs, made by the model code ``old`` (a :func:`code_digest`), are
-    not reused by the code ``code`` (None: they are)."""
+    not reused by the code ``code`` (None: they are), naming the files that changed.  A
+    digest of fbia before per-file digests names a folder, and is compared with ``code`` of
+    the same kind (:func:`code_digest_as_stored`)."""
     if n == 0 or old.get("class") != code["class"] or old.get("sha256") == code["sha256"]:
         return None
     released = old.get("version") is not None and old.get("version") != code.get("version")
@@ -153,10 +155,26 @@ def code_change(old: dict[str, Any], code: dict[str, str], n: int) -> str | None
         return None  # another release of the package, same declared numerics: its author's word
     return (
         f"the store holds {n} run{'s' if n != 1 else ''} made by other code of the model "
-        f"plugin {code['class']} (its source changed since: {code['files']}); they are not "
+        f"plugin {code['class']} (its source changed since: "
+        f"{_changed_files(old.get('files'), code['files'])}); they are not "
         "reused silently: run with --fresh to start over, or with --reuse-changed-code if "
         "the change leaves the results as they were"
     )
+
+
+def _changed_files(old: Any, new: dict[str, str] | str, most: int = 6) -> str:
+    """The files whose SHA-256 differ between two code digests' ``files``, added and removed
+    ones marked (the folder, for a digest of fbia before per-file digests)."""
+    if isinstance(new, str):
+        return new
+    was: dict[str, str] = old if isinstance(old, dict) else {}
+
+    def marked(f: str) -> str:
+        return f if f in was and f in new else f"{f} (added)" if f in new else f"{f} (removed)"
+
+    names = [f for f in sorted({*was, *new}) if was.get(f) != new.get(f)]
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(marked(f) for f in names[:most]) + more if names else "its files"
 
 
 def model_change(old: dict[str, Any], new: dict[str, Any], n: int) -> str:

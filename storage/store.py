@@ -63,6 +63,7 @@ from .db import connect
 from .fingerprints import (
     canonical,
     code_digest,
+    code_digest_as_stored,
     comparison_key,
     comparison_part,
     coordinates_of,
@@ -276,7 +277,7 @@ class StudyStore:
             self.hash = key
         elif key != self.hash:
             self._rekey_or_refuse(fingerprint, model, problem)
-        self._check_code(code, reuse_changed_code)
+        self._check_code(problem.model, code, reuse_changed_code)
         with self._transaction() as db:
             db.execute(
                 "INSERT OR REPLACE INTO meta VALUES ('problem', ?)", (canonical(fingerprint),)
@@ -303,9 +304,12 @@ class StudyStore:
             rekey(db, stored, coordinates_of(old), model, pair)
         self.hash = model_key(model)
 
-    def _check_code(self, code: dict[str, str], reuse: bool) -> None:
+    def _check_code(self, model: Any, code: dict[str, Any], reuse: bool) -> None:
         text = self._meta("code")
-        message = None if text is None or reuse else code_change(json.loads(text), code, len(self))
+        if text is None or reuse:
+            return
+        old = json.loads(text)
+        message = code_change(old, code_digest_as_stored(old, model, code), len(self))
         if message is not None:
             raise StoreMismatchError(message, str(self.path))
 

@@ -137,15 +137,24 @@ def test_a_store_keyed_with_every_option_is_rekeyed_and_reused(tmp_path):
     assert model == canonical(new)
 
 
-def test_the_code_digest_covers_a_plugin_package_and_only_it():
+def test_the_code_digest_covers_what_the_model_imports_and_only_it(plugin):
     from fbia.plugins.ale_fsi.model import AleFsiForwardModel
 
     digest = code_digest(AleFsiForwardModel())
     assert digest["class"] == "fbia.plugins.ale_fsi.model.AleFsiForwardModel"
-    assert digest["files"].endswith("ale_fsi") and len(digest["sha256"]) == 64
-    assert code_digest(fbia.forward_model("analytic_mound_2d"))["files"].endswith("analytic")
-    single = code_digest(toy_problem().model)  # a top-level module: that file alone
-    assert single["files"].endswith("_models.py")
+    files = set(digest["files"])
+    # model.py imports ..fem.flow_cell and, inside a method, .solver, which imports
+    # ..fem.newton and .forms
+    assert {"model.py", "solver.py", "forms.py", "../fem/flow_cell.py", "../fem/newton.py"} <= files
+    # not the registration nor the benchmark geometries, which the model does not import
+    assert not files & {"__init__.py", "turek_hron.py", "schaefer_turek_3d.py"}
+    assert all(len(sha) == 64 for sha in digest["files"].values())
+    assert len(digest["sha256"]) == 64
+    analytic = code_digest(fbia.forward_model("analytic_mound_2d"))["files"]
+    assert set(analytic) == {"mound_2d.py", "_mechanics.py"}  # not mound_3d.py
+    # a top-level module: that file alone, not the top-level module _models it imports
+    assert list(code_digest(plugin()())["files"]) == ["edited_plugin.py"]
+    assert list(code_digest(toy_problem().model)["files"]) == ["_models.py"]
 
 
 def test_a_package_upgrade_keeps_the_runs_of_a_plugin_with_a_numerics_version(
@@ -284,3 +293,117 @@ def test_a_new_release_with_the_same_numerics_keeps_the_runs_an_edit_does_not(
     monkeypatch.setattr(fingerprints, "_package_version", lambda obj: "1.1.0")
     with pytest.raises(fbia.ConfigError, match="different model"):
         _evaluate(path, _problem(bumped))
+
+
+# -- a plugin package: the model's modules, not the rest of the package (issue 43 item 6) -------
+MODEL = """\
+from _models import ToyMoundForwardModel
+
+from .helper import SCALE
+{imports}
+
+class Scaled(ToyMoundForwardModel):
+    def solve(self, parameters, coordinates, workdir):
+        from . import lazy  # a lazy import: code the model runs too
+
+        parameters = lazy.shift({{k: SCALE * v for k, v in parameters.items()}})
+        return super().solve(parameters, coordinates, workdir)
+"""
+
+PACKAGE = {
+    "__init__.py": "from .iterator import Stepper\nfrom .model import Scaled\n",
+    "iterator.py": "class Stepper:\n    pass\n",
+    "helper.py": "SCALE = 1.0\n",
+    "lazy.py": "def shift(parameters):\n    return dict(parameters)\n",
+    "model.py": MODEL.format(imports=""),
+}
+
+
+@pytest.fixture
+def package(tmp_path, monkeypatch):
+    """``package(edits)``: write the package ``third_party_fsi`` (the files of ``PACKAGE``,
+    and of ``edits`` instead) and import its model afresh, as an author would edit theirs."""
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
+    folder = tmp_path / "third_party_fsi"
+    folder.mkdir()
+
+    def forget():
+        for name in [m for m in sys.modules if m.split(".")[0] == "third_party_fsi"]:
+            del sys.modules[name]
+
+    def write(edits: dict[str, str] | None = None):
+        for name, text in {**PACKAGE, **(edits or {})}.items():
+            (folder / name).write_text(text)
+        forget()
+        importlib.invalidate_caches()
+        return importlib.import_module("third_party_fsi.model").Scaled
+
+    yield write
+    forget()
+
+
+def _stored_code(path):
+    with sqlite3.connect(path) as db:
+        (text,) = db.execute("SELECT value FROM meta WHERE key = 'code'").fetchone()
+    return json.loads(text)
+
+
+def _store_code(path, code):
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE meta SET value = ? WHERE key = 'code'", (canonical(code),))
+
+
+def test_editing_a_module_the_model_does_not_import_keeps_its_runs(tmp_path, package):
+    path = tmp_path / "s.sqlite"
+    assert set(code_digest(package()())["files"]) == {"model.py", "helper.py", "lazy.py"}
+    assert _evaluate(path, _problem(package())) == (set(), 3)
+    # the plugin's iterator and its registration change: not the model's code
+    unrelated = {
+        "iterator.py": "class Stepper:\n    steps = 2  # more steps\n",
+        "__init__.py": PACKAGE["__init__.py"] + "# registered above\n",
+    }
+    assert _evaluate(path, _problem(package(unrelated))) == ({0, 1, 2}, 3)
+    # a module the model imports changes: refused, naming that file
+    helper = {"helper.py": "SCALE = 1.0  # the same value\n"}
+    with pytest.raises(fbia.ConfigError, match=r"its source changed since: helper\.py\)"):
+        _evaluate(path, _problem(package(helper)))
+    lazy = {"lazy.py": PACKAGE["lazy.py"] + "# edited\n"}
+    with pytest.raises(fbia.ConfigError, match=r"its source changed since: lazy\.py\)"):
+        _evaluate(path, _problem(package(lazy)))
+    # the model imports one more module, then no longer: added and removed files named
+    grown = {
+        "model.py": MODEL.format(imports="from .extra import OFFSET"),
+        "extra.py": "OFFSET = 0\n",
+    }
+    with pytest.raises(fbia.ConfigError, match=r"since: extra\.py \(added\), model\.py\)"):
+        _evaluate(path, _problem(package(grown)))
+    assert _evaluate(path, _problem(package(grown)), reuse_changed_code=True) == ({0, 1, 2}, 3)
+    with pytest.raises(fbia.ConfigError, match=r"since: extra\.py \(removed\), model\.py\)"):
+        _evaluate(path, _problem(package({"extra.py": "OFFSET = 0\n"})))
+
+
+def test_a_store_with_a_folder_digest_keeps_its_runs_while_the_folder_is_unchanged(
+    tmp_path, package
+):
+    """A store written before per-file digests recorded one SHA-256 of the plugin's folder:
+    compared with that folder's digest now, it keeps its runs when the folder is unchanged
+    (and gets the new digest), and is refused naming the folder when not (it cannot say
+    which file changed), as before."""
+    from fbia.storage import fingerprints
+
+    path = tmp_path / "s.sqlite"
+    assert _evaluate(path, _problem(package())) == (set(), 3)
+    folder_digest = fingerprints._folder_digest(package()())
+    assert folder_digest["files"] == str((tmp_path / "third_party_fsi").resolve())
+    _store_code(path, folder_digest)  # as fbia before per-file digests wrote it
+    assert _evaluate(path, _problem(package())) == ({0, 1, 2}, 3)
+    assert _stored_code(path) == code_digest(package()())  # rewritten in the new format
+    _store_code(path, folder_digest)
+    edited = package({"iterator.py": "class Stepper:\n    steps = 2\n"})
+    with pytest.raises(fbia.ConfigError) as info:
+        _evaluate(path, _problem(edited))
+    assert f"(its source changed since: {folder_digest['files']})" in str(info.value)
+    assert _evaluate(path, _problem(edited), reuse_changed_code=True) == ({0, 1, 2}, 3)
+    assert _stored_code(path) == code_digest(edited())
+    assert _evaluate(path, _problem(edited)) == ({0, 1, 2}, 3)
