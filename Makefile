@@ -51,7 +51,14 @@ pytest: $(STAMP)
 	$(BIN)/pytest -n $(TEST_WORKERS)
 
 # Long verification runs (finer meshes, full studies): not part of `make test`.
+# The slow tests, and report.html in a real browser: Debian's chromium (installed here when
+# missing; needs root or sudo) driven by Playwright's driver (the `browser` extra).
+CHROMIUM ?= /usr/bin/chromium
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 test-slow: $(STAMP)
+	@test -x $(CHROMIUM) || $(SUDO) apt-get install -y -q chromium || \
+	  (echo "test-slow: $(CHROMIUM) missing and could not be installed (Debian: apt-get install chromium)" >&2; exit 2)
+	$(BIN)/python -m pip install --quiet -e '.[browser]'
 	$(BIN)/pytest -m slow
 
 # The papers' examples (examples/paper_*/<example>/study*.toml and Paper A's growth example

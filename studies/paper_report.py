@@ -1,13 +1,12 @@
-"""``report.md`` and ``paper.json`` of a study with a ``[paper]`` table, and the summary page.
+"""``paper.json`` and the paper's section of ``report.md`` for a study with a ``[paper]`` table,
+and the summary page.
 
 :func:`write_paper_report` is called by :func:`fbia.studies.runner.run_study` when the study has
-a ``[paper]`` table (:mod:`fbia.studies.paper`): it writes into the output folder
-
-* ``report.md``: the table **quantity | paper | fbia | difference | rel. | agrees? | why**,
-  the measured times (this session's wall time and the summed wall time of the forward runs,
-  which stays meaningful when a session reused stored runs), the settings (model, measure,
-  iterator options, synthetic data, executor), links to the figures and the result's summary;
-* ``paper.json``: the same rows and times, typed (:class:`PaperRecord`), for the summary.
+a ``[paper]`` table (:mod:`fbia.studies.paper`): it compares the result with the paper and
+writes ``paper.json`` (the rows and times, typed: :class:`PaperRecord`) into the output folder;
+:func:`paper_section` gives the section **Paper and fbia** of the study's ``report.md``
+(:mod:`fbia.studies.study_report`): the verdict, the table **quantity | paper | fbia |
+difference | rel. | agrees? | why** and the rules.
 
 Each row is judged by the rule of its kind (:data:`fbia.studies.paper.KINDS`); both pages state
 the rules once, generated from that table (:func:`rules_table`), so text and code cannot
@@ -37,15 +36,21 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import ConfigError
-from ..core.options import plugin_options
 from ..core.problem import Result
 from .paper import DRAWS_RULE, KINDS, Comparison, compare, verdict
 from .study import Study
+from .study_report import MARKDOWN_NAME, SessionTimes
 
-__all__ = ["PaperRecord", "rules_table", "write_paper_report", "write_summary"]
+__all__ = [
+    "PaperRecord",
+    "paper_section",
+    "paper_title",
+    "rules_table",
+    "write_paper_report",
+    "write_summary",
+]
 
 RECORD_NAME = "paper.json"
-REPORT_NAME = "report.md"
 #: the section of an example's README that the summary page copies (fresh-run wall times)
 TIMES_HEADING = "Measured times"
 
@@ -130,15 +135,15 @@ def write_paper_report(
     result: Result,
     out: Path,
     wall_time: float,
-    files: Sequence[str] = (),
     reused: int = 0,
     rows: Sequence[Comparison] | None = None,
     forward_time: float | None = None,
-) -> Path:
-    """Compare ``result`` with ``study.paper``; write ``report.md`` and ``paper.json``
+) -> PaperRecord:
+    """Compare ``result`` with ``study.paper``; write ``paper.json`` and return its record
     (``reused``: how many runs the session took from the store; ``rows``: the comparison
     when made otherwise, e.g. over noise draws; ``forward_time``: the summed time of the
-    forward runs when ``result`` does not hold them)."""
+    forward runs when ``result`` does not hold them).  :func:`paper_section` gives the
+    record's section of ``report.md``."""
     spec = study.paper
     assert spec is not None
     if rows is None:
@@ -162,53 +167,38 @@ def write_paper_report(
     )
     out.mkdir(parents=True, exist_ok=True)
     (out / RECORD_NAME).write_text(json.dumps(record.to_dict(), indent=1), encoding="utf-8")
-    figures = sorted({Path(f) for f in files if str(f).endswith(".png")})
-    text = _report(study, result, record, out, figures)
-    path = out / REPORT_NAME
-    path.write_text(text, encoding="utf-8")
-    return path
+    return record
 
 
-def _report(
-    study: Study, result: Result, record: PaperRecord, out: Path, figures: Sequence[Path]
-) -> str:
+def paper_title(study: Study, record: PaperRecord) -> str:
+    """The heading of the report of a study with a ``[paper]`` table."""
+    return f"{study.name}: fbia beside {record.source}"
+
+
+def paper_section(record: PaperRecord) -> list[str]:
+    """The comparison with the paper as markdown lines of ``report.md``: the verdict, the
+    note, the table and the rules."""
     good, judged = verdict(record.rows)
     flagged = next((r.reason for r in record.rows if r.reason), "")
-    lines = [
-        f"# {study.name}: fbia beside {record.source}",
-        "",
-        f"Study file `{study.path.name}`; result: **{result.status}** ({result.message}).",
-        f"{good} of {judged} published numbers agree by the rule of their kind"
-        + (
-            f" over {record.rows[0].n_draws} noise draws"
-            if record.rows and record.rows[0].n_draws
-            else ""
-        )
-        + (f" ({flagged}: every judged row counts as no)." if flagged else "."),
-        "",
-        _times(record),
-        "",
-    ]
+    draws = (
+        f" over {record.rows[0].n_draws} noise draws"
+        if record.rows and record.rows[0].n_draws
+        else ""
+    )
+    tail = f" ({flagged}: every judged row counts as no)." if flagged else "."
+    lines = ["## Paper and fbia", ""]
+    lines += [f"{good} of {judged} published numbers agree by the rule of their kind{draws}{tail}"]
+    lines += [""]
     if record.note:
         lines += [record.note, ""]
-    lines += ["## Paper and fbia", "", *comparison_table(record.rows), ""]
+    lines += [*comparison_table(record.rows), ""]
     lines += ["## Rules", "", *rules_table(), ""]
-    lines += ["## Settings", "", *_settings(study), ""]
-    if figures:
-        lines += ["## Figures", ""]
-        lines += [f"- [{_rel(f, out)}]({_rel(f, out)})" for f in figures]
-        lines.append("")
-    lines += ["## Result", "", "```", result.summary(), "```", ""]
-    return "\n".join(lines)
+    return lines
 
 
 def _times(record: PaperRecord) -> str:
-    reused = f" ({record.reused} runs taken from the store, not run again)" if record.reused else ""
-    return (
-        f"Measured: {record.wall_time:.1f} s wall time of this session{reused}; the "
-        f"{record.nfev} forward runs of the result took {record.forward_time:.1f} s together "
-        "(runs taken from the store count with the time they took when they ran)."
-    )
+    times = SessionTimes(record.wall_time, record.forward_time, record.nfev, record.reused)
+    return times.sentence()
 
 
 def rules_table() -> list[str]:
@@ -271,41 +261,6 @@ def _num(x: float | None) -> str:
     if x is None or not math.isfinite(x):
         return "no result" if x is not None else "-"
     return f"{x:.4g}"
-
-
-def _settings(study: Study) -> list[str]:
-    def opts(obj: Any, section: str) -> str:
-        """The options the study file sets (also where they equal the default), then those
-        that differ from the default for another reason (e.g. a seed from the study)."""
-        raw = study.raw.get(section, {})
-        written = dict(raw.get("options", {})) if isinstance(raw, dict) else {}
-        given = {**written, **plugin_options(obj, exclude_defaults=True)}
-        text = ", ".join(f"{k} = {v!r}" for k, v in given.items())
-        return f"{text}; the other options at their defaults" if text else "defaults"
-
-    lines = [
-        f"- model `{study.model_name}`: {opts(study.model, 'model')}",
-        f"- measure `{study.measure_name}`: {opts(study.measure, 'measure')}",
-    ]
-    if study.iterator is not None:
-        lines.append(f"- iterator `{study.iterator_name}`: {opts(study.iterator, 'iterator')}")
-    params = "; ".join(
-        f"{p.name} in [{p.bounds[0]:g}, {p.bounds[1]:g}]" if p.bounds else p.name
-        for p in study.parameters
-    )
-    lines.append(f"- parameters: {params}")
-    if study.synthetic is not None:
-        s = study.synthetic
-        truth = ", ".join(f"{k} = {v:g}" for k, v in s.truth.items())
-        pts = f", {s.points} measurement points" if s.points else ""
-        lines.append(
-            f"- synthetic data: truth {truth}; noise {s.noise_std:g} mm ({s.noise}, seed "
-            f"{s.seed}){pts}; states {s.coordinates}"
-        )
-    if study.fixed:
-        lines.append(f"- fixed: {study.fixed}")
-    lines.append(f"- executor: {study.executor.label()}; seed {study.seed}")
-    return lines
 
 
 def _rel(path: Path, start: Path) -> str:
@@ -396,7 +351,7 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     lines += _measured_times([path for path, _ in records], [Path(f) for f in folders], root)
     for path, rec in records:
         study_file = _rel_or_abs(Path(rec.study_file), root)
-        report = _rel_or_abs(path.parent / REPORT_NAME, root)
+        report = _rel_or_abs(path.parent / MARKDOWN_NAME, root)
         lines += [
             "",
             f"## {rec.study}",

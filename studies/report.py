@@ -15,6 +15,9 @@
                             (fbia.studies.provenance), evaluations)
       report.txt            the summary and the discrepancy table printed at the end (here,
                             with fbia.studies.tables)
+      report.md             status, times, that text, settings, figures, files, and the
+      report.html           comparison with a [paper] table; the HTML self-contained
+                            (fbia.studies.study_report, fbia.studies.paper_report)
       interfaces/           observed and simulated interfaces: CSV (2-D) and VTU (2-D, 3-D)
       plots/                interfaces.png, evaluations.png (fbia.studies.plots), and the
                             iterator's own plots

@@ -7,6 +7,7 @@ when it has none) and writes the output folder, resuming from its store;
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,11 +22,13 @@ from ..storage.output_folder import OutputLock, clear_runs
 from ..storage.store import StudyStore
 from . import report
 from .evaluation_log import EvaluationLog
+from .paper import Comparison
 from .plots import plot_evaluations, plot_interfaces
 from .progress import RunProgress, log_to_file
 from .provenance import RunOutputs, RunRecord, now
 from .provenance import provenance as make_provenance
 from .study import Study
+from .study_report import SessionTimes, write_report
 from .tables import discrepancy_rows
 
 __all__ = ["STORE_NAME", "forward_study", "run_study", "study_seeds"]
@@ -72,6 +75,7 @@ def _forward(
 def _forward_locked(
     study: Study, x: dict[str, float], out: Path, echo: Echo, started: str
 ) -> Result:
+    t0 = time.perf_counter()
     problem = study.problem
     with EvaluationLog(out / "evaluations.jsonl") as log:
         ev = problem.evaluate(x, workdir=out / "run", index=0, keep_solution=True)
@@ -99,7 +103,9 @@ def _forward_locked(
         echo(f"interfaces: {len(files['interfaces'])} files in {out / 'interfaces'}")
         for name, path in files.get("fields", {}).items():
             echo(f"field {name}: {path}")
-    _finish(study, result, out, started, echo, outputs=outputs)
+    text = _finish(study, result, out, started, echo, outputs=outputs)
+    times = SessionTimes(time.perf_counter() - t0, _forward_time(result), 1)
+    _reports(study, result, out, text, times, echo, figures=_pngs(outputs.files))
     return result
 
 
@@ -191,21 +197,20 @@ def _run_draws(
 ) -> Result:
     """A study over noise draws (:mod:`fbia.studies.draws`): every draw, then the result over
     them and its comparison with the paper, judged over the draws."""
-    from .draws import judge_draws, run_draws
+    from .draws import run_draws
 
     t0 = time.perf_counter()
     with OutputLock(out, "fbia run"):
         result = run_draws(study, out, store, run_one, echo)
-        _finish(study, result, out, started, echo)
+        text = _finish(study, result, out, started, echo)
+        wall = time.perf_counter() - t0
+        times = SessionTimes(wall, result.forward_time, result.nfev)
+        rows = None
         if study.paper is not None:
-            from .paper_report import write_paper_report
+            from .draws import judge_draws
 
-            wall = time.perf_counter() - t0
             rows = judge_draws(study.paper, result)
-            report_md = write_paper_report(
-                study, result, out, wall, rows=rows, forward_time=result.forward_time
-            )
-            echo(f"comparison with {study.paper.source}: {report_md}")
+        _reports(study, result, out, text, times, echo, rows=rows)
     return result
 
 
@@ -222,10 +227,8 @@ class _Session:
     executor_info: dict[str, Any] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
 
-    def finish(
-        self, result: Result, outputs: RunOutputs | None = None, quiet: bool = False
-    ) -> None:
-        _finish(
+    def finish(self, result: Result, outputs: RunOutputs | None = None, quiet: bool = False) -> str:
+        return _finish(
             self.study,
             result,
             self.out,
@@ -282,18 +285,62 @@ def _run_stored(
     except BaseException:
         session.finish(result, outputs, quiet=True)
         raise
-    session.finish(result, outputs)
-    files = outputs.files
-    if study.paper is not None:  # published numbers beside the result: report.md
-        from .paper_report import write_paper_report
-
-        pngs = [f for v in files.values() for f in (v if isinstance(v, list) else [v])]
-        wall = time.perf_counter() - session.t0
-        report_md = write_paper_report(
-            study, result, out, wall, [str(f) for f in pngs], reused=totals["reused"]
-        )
-        echo(f"comparison with {study.paper.source}: {report_md}")
+    text = session.finish(result, outputs)
+    wall = time.perf_counter() - session.t0
+    times = SessionTimes(wall, _forward_time(result), result.nfev, totals["reused"])
+    _reports(study, result, out, text, times, echo, figures=_pngs(outputs.files))
     return result
+
+
+def _pngs(files: Mapping[str, Any]) -> list[str]:
+    """The files of a session's outputs (:class:`RunOutputs`), flat (the report keeps the
+    images among them)."""
+    flat: list[str] = []
+    for v in files.values():
+        items = v.values() if isinstance(v, dict) else v if isinstance(v, list) else [v]
+        flat += [str(f) for f in items]
+    return flat
+
+
+def _forward_time(result: Result) -> float:
+    """The summed wall time of the result's forward runs (stored ones with their own)."""
+    return sum(e.time for e in result.evaluations if math.isfinite(e.time))
+
+
+def _reports(
+    study: Study,
+    result: Result,
+    out: Path,
+    text: str,
+    times: SessionTimes,
+    echo: Echo,
+    figures: Sequence[str] = (),
+    rows: Sequence[Comparison] | None = None,
+) -> None:
+    """``paper.json`` (a study with a ``[paper]`` table: :mod:`fbia.studies.paper_report`,
+    ``rows`` when judged otherwise, e.g. over noise draws), ``report.md`` and ``report.html``
+    (:mod:`fbia.studies.study_report`)."""
+    paper: list[str] = []
+    title = ""
+    if study.paper is not None:  # published numbers beside the result
+        from .paper_report import paper_section, paper_title, write_paper_report
+
+        record = write_paper_report(
+            study,
+            result,
+            out,
+            times.wall_time,
+            reused=times.reused,
+            rows=rows,
+            forward_time=times.forward_time,
+        )
+        paper, title = paper_section(record), paper_title(study, record)
+    md, page = write_report(
+        study, result, out, times, text=text, figures=figures, paper=paper, title=title
+    )
+    if study.paper is not None:
+        echo(f"comparison with {study.paper.source}: {md}")
+    echo(f"report: {md} and {page.name}")
 
 
 def _save_partial(session: _Session, log: EvaluationLog, exc: BaseException) -> None:
@@ -308,7 +355,7 @@ def _save_partial(session: _Session, log: EvaluationLog, exc: BaseException) -> 
         message = "stopped by the user (Ctrl-C)"
     else:
         message = f"the iterator stopped with {type(exc).__name__}: {exc}"
-    steps: list[tuple[str, Callable[[], None]]] = [
+    steps: list[tuple[str, Callable[[], object]]] = [
         ("closing the session in the store", lambda: session.store.end_session(status)),
         ("closing the evaluation log", log.close),
         (
@@ -520,10 +567,10 @@ def _finish(
     quiet: bool = False,
     store: StudyStore | None = None,
     outputs: RunOutputs | None = None,
-) -> None:
+) -> str:
     """The run record (:class:`RunRecord`: provenance, problem, ``outputs``), written once with
     the result as ``result.json``; the iterator's files; ``report.txt``, echoed unless
-    ``quiet``."""
+    ``quiet``.  Returns the text of ``report.txt``."""
     problem = study.problem
     outputs = outputs or RunOutputs()
     made = make_provenance(
@@ -553,6 +600,7 @@ def _finish(
     (out / "report.txt").write_text(text + "\n", encoding="utf-8")
     if not quiet:
         echo(text)
+    return text
 
 
 def study_seeds(study: Study) -> dict[str, int | None]:

@@ -401,7 +401,7 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     assert "| x.nu | 0.35 | 0.3 | -0.05 | -14.3 % | **no** (within 0.02) |" in report
     assert "| E above nu | > x.nu (0.3) | 400 |  |  | yes (> x.nu) |" in report
     assert "## Rules\n\n" + "\n".join(rules_table()) in report
-    assert "- [plots/interfaces.png](plots/interfaces.png)" in report
+    assert "![plots/interfaces.png](plots/interfaces.png)" in report
     assert (
         "- model `analytic_mound_2d`: n_points = 41; the other options at their defaults" in report
     )

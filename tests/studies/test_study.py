@@ -183,7 +183,11 @@ def test_study_run_through_the_api_writes_the_output_folder(registry, tmp_path):
     assert saved["x"] == result.x and saved["provenance"]["seed"] == 5
     assert "grid: grid_done" in (out / "report.txt").read_text()
     assert (out / "interfaces" / "simulated_inflow_rate_100.csv").is_file()
-    assert lines[-1].endswith(f"\noutput: {out}")
+    assert lines[-2].endswith(f"\noutput: {out}")
+    assert lines[-1] == f"report: {out / 'report.md'} and report.html"
+    page = (out / "report.md").read_text()
+    assert page.startswith("# ") and "result: **grid_done**" in page
+    assert "Not a result to use" not in page and "## Settings" in page
 
 
 def test_executor_spec_workers_override():
