@@ -4,17 +4,18 @@
 the analytic models, the store, the plots and the conformance kit (:mod:`fbia.testing`), so
 a plugin author needs none of the heavy stacks.  The rest comes with an extra:
 
-========  ===========================================  ==================================
-extra     what it gives                                modules
-========  ===========================================  ==================================
-``fem``   the finite-element models (``ale_fsi``,      ``ngsolve``, ``netgen``, ``xfem``
-          ``cutfem_fpi``, ``growth``)
-``bayes`` Paper B's GP + SMC (``gp_smc``), Sobol'      ``GPy``, ``numba``, ``SALib``
-          indices, the surrogate study
-``oct``   OCT scans as observations                    ``skimage``, ``tifffile``, ``nrrd``
-``dask``  the Dask executor                            ``distributed``
-``all``   all of them (``make demo`` and ``make test`` install it)
-========  ===========================================  ==================================
+==========  ===========================================  ==================================
+extra       what it gives                                modules
+==========  ===========================================  ==================================
+``fem``     the finite-element models (``ale_fsi``,      ``ngsolve``, ``netgen``, ``xfem``
+            ``cutfem_fpi``, ``growth``)
+``bayes``   Paper B's GP + SMC (``gp_smc``), Sobol'      ``GPy``, ``numba``, ``SALib``
+            indices, the surrogate study
+``oct``     OCT scans as observations                    ``skimage``, ``tifffile``, ``nrrd``
+``dask``    the Dask executor                            ``distributed``
+``tables``  results as ``pandas`` DataFrames             ``pandas``
+``all``     all of them (``make demo`` and ``make test`` install it)
+==========  ===========================================  ==================================
 
 A plugin class states what it needs as ``requires = ("ngsolve", ...)`` (module names); the
 registry checks them before it builds the plugin, and :func:`require` does the same for
@@ -46,6 +47,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "nrrd": "oct",
     "distributed": "dask",
     "dask": "dask",
+    "pandas": "tables",
 }
 
 

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import math
 import shutil
@@ -479,3 +480,65 @@ class Result:
             lines.append("  " + ", ".join(f"{k} = {v:.6g}" for k, v in self.x.items()))
         lines.append(f"  {self.nfev} forward evaluations, {self.n_failed} failed")
         return "\n".join(lines)
+
+    def units(self) -> dict[str, str]:
+        """The inputs' units where the result knows them (from the problem ``fbia run``
+        records in ``provenance``; ``gp_smc`` keeps its own)."""
+        problem = self.provenance.get("problem") or {}
+        specs = [*(problem.get("parameters") or []), *(problem.get("uncertain") or [])]
+        return {str(s["name"]): str(s["unit"]) for s in specs if s.get("unit")}
+
+    def to_records(self) -> list[dict[str, Any]]:
+        """The result's main table as plain rows (dicts with the same keys), which
+        :meth:`to_dataframe` wraps: here ``parameter`` and ``value`` of ``x``; iterators'
+        results give their own (one row per start, per input of a posterior, ...)."""
+        return [{"parameter": k, "value": float(v)} for k, v in (self.x or {}).items()]
+
+    def to_dataframe(self) -> Any:
+        """:meth:`to_records` as a ``pandas.DataFrame`` (pandas: the ``tables`` extra)."""
+        try:
+            import pandas
+        except ImportError:
+            raise ImportError(
+                "to_dataframe needs pandas, which is not installed: pip install 'fbia[tables]'"
+            ) from None
+        return pandas.DataFrame(self.to_records())
+
+    def _repr_html_(self) -> str:
+        """The result in a notebook: the status, marked when it is not a success, and the
+        message first, then the main quantities (:meth:`_html_body`) and the forward runs;
+        every text escaped, no external CSS or JavaScript."""
+        status = html.escape(f"{self.iterator or 'result'}: {self.status}")
+        message = html.escape(self.message)
+        first = (
+            f"<p><b>{status}</b> &mdash; {message}</p>"
+            if self.success
+            else f'<p style="color:#b00020"><b>&#9888; {status}</b> (not a success) &mdash; '
+            f"{message}</p>"
+        )
+        runs = f"<p>{self.nfev} forward runs, {self.n_failed} failed</p>"
+        return f'<div class="fbia-result">{first}{self._html_body()}{runs}</div>'
+
+    def _html_body(self) -> str:
+        """The main quantities as HTML, for :meth:`_repr_html_`: here ``x`` as a table."""
+        units, head = self.units(), ["parameter", "value", "unit"]
+        rows = [[k, v, units.get(k, "")] for k, v in (self.x or {}).items()]
+        if not units:  # a unit column only where the result knows units
+            head, rows = head[:-1], [row[:-1] for row in rows]
+        return html_table(head, rows) if rows else ""
+
+
+def html_table(head: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """``rows`` under ``head`` as a self-contained HTML table (for a result's notebook view):
+    every cell escaped, floats as ``%.6g``, None and NaN as a dash."""
+
+    def cell(tag: str, value: Any) -> str:
+        if value is None or (isinstance(value, float | np.floating) and math.isnan(value)):
+            text = "-"
+        else:
+            text = f"{value:.6g}" if isinstance(value, float | np.floating) else str(value)
+        return f'<{tag} style="text-align:left;padding:1px 8px">{html.escape(text)}</{tag}>'
+
+    lines = [[cell("th", h) for h in head], *([cell("td", v) for v in row] for row in rows)]
+    body = "".join(f"<tr>{''.join(line)}</tr>" for line in lines)
+    return f'<table style="border-collapse:collapse">{body}</table>'

@@ -30,6 +30,7 @@ indices, e.g. the Ishigami function, in tests/iterators/test_sobol_indices.py).
 
 from __future__ import annotations
 
+import html
 import math
 import time
 import warnings
@@ -48,7 +49,7 @@ from ..core.iteration import Evaluator, IteratorBase
 from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_levels
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter
-from ..core.problem import InverseProblem, Result, jsonable
+from ..core.problem import InverseProblem, Result, html_table, jsonable
 from ..imaging.figures import legend, pyplot
 from .surrogates.design import unit_to_inputs
 from .surrogates.gp import GpSurrogate
@@ -158,6 +159,37 @@ class SobolIndicesResult(Result):
     def summary(self) -> str:
         text = super().summary()
         return text if self.indices is None else f"{text}\n{self.indices.table()}"
+
+    def to_records(self) -> list[dict[str, Any]]:
+        """The indices as plain rows, one per input (:meth:`to_dataframe` wraps them):
+        ``input``, ``s1``, ``s1_conf``, ``st``, ``st_conf`` (the half-widths of the
+        confidence intervals at ``indices.confidence``); no rows without indices."""
+        ind = self.indices
+        if ind is None:
+            return []
+        columns = zip(ind.names, ind.s1, ind.s1_conf, ind.st, ind.st_conf, strict=True)
+        keys = ("input", "s1", "s1_conf", "st", "st_conf")
+        return [dict(zip(keys, row, strict=True)) for row in columns]
+
+    def _html_body(self) -> str:
+        """The indices table and what they were computed from."""
+        ind = self.indices
+        if ind is None:
+            return ""
+        head = ["input", "S1", "± conf", "ST", "± conf"]
+        keys = ("s1", "s1_conf", "st", "st_conf")
+        rows = [[r["input"], *(f"{r[k]:.3f}" for k in keys)] for r in self.to_records()]
+        rmse = self.test_relative_rmse
+        check = (
+            "no held-out runs"
+            if math.isnan(rmse)
+            else f"the surrogate's held-out RMSE is {rmse:.2g} of the quantity's spread"
+        )
+        about = (
+            f"Sobol' indices of {self.quantity} on the surrogate ({ind.n_evaluations} "
+            f"evaluations), {ind.confidence:.0%} confidence intervals; {check}"
+        )
+        return html_table(head, rows) + f"<p>{html.escape(about)}</p>"
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ read these attributes; ``to_dict()`` (``result.json``) writes them under ``"info
 
 from __future__ import annotations
 
+import html
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -21,7 +22,7 @@ from numpy.typing import NDArray
 
 from ...core.errors import ConfigError
 from ...core.parameters import Prior
-from ...core.problem import Result, jsonable
+from ...core.problem import Result, html_table, jsonable
 from ...core.version import __version__
 from ..surrogates.residuals import KeepsSurrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
@@ -435,6 +436,58 @@ class GpSmcResult(Result):
             width = np.ptp(self.design.points[:, :2], axis=0)
             out["laplace.angle"] = principal_angle(lap.cov, post.cov, width)
         return out
+
+    def units(self) -> dict[str, str]:
+        """The inputs' units (from ``priors``, the inputs' descriptions)."""
+        own = {str(p["name"]): str(p["unit"]) for p in self.priors if p.get("unit")}
+        return {**super().units(), **own}
+
+    def to_records(self) -> list[dict[str, Any]]:
+        """The posterior summary as plain rows, one per input of the posterior (x, theta, an
+        inferred sigma_N; :meth:`to_dataframe` wraps them): ``input``, ``unit``, ``map`` (x
+        only, NaN for the rest), ``pm`` (posterior mean), ``std``, ``q2.5``, ``q50``,
+        ``q97.5`` (the weighted particles' quantiles); as :meth:`summary` and
+        :meth:`quantities` give them. No rows without a posterior."""
+        post = self.posterior
+        if post is None:
+            return []
+        units = self.units()
+        std = np.sqrt(np.maximum(np.diag(post.cov_all), 0.0))
+        rows = []
+        for j, name in enumerate(post.names):
+            lo, mid, hi = post.credible_intervals[name]
+            rows.append(
+                {
+                    "input": name,
+                    "unit": units.get(name, ""),
+                    "map": float(post.map[j]) if j < len(post.map) else float("nan"),
+                    "pm": float(post.mean_all[j]),
+                    "std": float(std[j]),
+                    "q2.5": float(lo),
+                    "q50": float(mid),
+                    "q97.5": float(hi),
+                }
+            )
+        return rows
+
+    def _html_body(self) -> str:
+        """Per input the MAP, the posterior mean, std and 95 % interval with its unit, and how
+        the posterior was made; without a posterior, the base's (the MAP, if any)."""
+        records = self.to_records()
+        if not records:
+            return super()._html_body()
+        head = ["input", "MAP", "PM", "std", "2.5 %", "97.5 %", "unit"]
+        keys = ["input", "map", "pm", "std", "q2.5", "q97.5", "unit"]
+        parts = [html_table(head, [[r[k] for k in keys] for r in records])]
+        post = self.posterior
+        assert post is not None
+        how = (
+            f"{self.mode} mode, {len(post.weights)} particles, log evidence {post.log_evidence:.4g}"
+        )
+        if self.check is not None:
+            how += self.check.note()
+        parts.append(f"<p>{html.escape(how)}</p>")
+        return "".join(parts)
 
     def to_inference_data(
         self, problem: Any = None, n_draws: int | None = None, seed: int = 0

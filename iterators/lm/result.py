@@ -17,6 +17,7 @@ Statistics of the fit at the optimum x* (n_r residuals, n_x parameters, RSS = â€
 
 from __future__ import annotations
 
+import html
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core.problem import Result
+from ...core.problem import Result, html_table
 from .fit_quality import FitQuality
 
 FloatArray = NDArray[np.float64]
@@ -266,6 +267,84 @@ class LMResult(Result):
         lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]
         lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
         return "\n".join(line.rstrip() for line in lines)
+
+    def to_records(self) -> list[dict[str, Any]]:
+        """The multi-start table as plain rows, one per initial guess (:meth:`to_dataframe`
+        wraps them): ``start`` (1-based), ``label`` (from ``x0_labels``, else empty),
+        ``status`` (the start's own stop tag), ``converged``, ``best``, ``fits_as_well``,
+        ``x0.<name>`` where it started, ``x.<name>`` where it ended (NaN without result),
+        ``err_res`` and ``err_grad`` there (eq. 25, 24), ``iterations``, ``nfev``,
+        ``n_failed``, ``at_bound`` (the parameters on a bound, comma-separated) and
+        ``message``."""
+        nan = math.nan
+        rows = []
+        for s in self.starts:
+            x, x0 = s["x"] or {}, s.get("x0") or {}
+            row: dict[str, Any] = {
+                "start": int(s["start"]),
+                "label": str(s.get("label") or ""),
+                "status": str(s["status"]),
+                "converged": bool(s["success"]),
+                "best": bool(s.get("best")),
+                "fits_as_well": bool(s.get("equally_good")),
+            }
+            row.update({f"x0.{n}": float(x0.get(n, nan)) for n in self.names})
+            row.update({f"x.{n}": float(x.get(n, nan)) for n in self.names})
+            for key in ("err_res", "err_grad"):
+                row[key] = nan if s[key] is None else float(s[key])
+            for key in ("iterations", "nfev", "n_failed"):
+                row[key] = int(s.get(key) or 0)
+            row["at_bound"] = ", ".join(s["at_bound"])
+            row["message"] = str(s.get("message", ""))
+            rows.append(row)
+        return rows
+
+    def _html_body(self) -> str:
+        """Parameter, value, standard error (none at a bound, none from a start that never
+        moved: as :meth:`summary` says) and unit; the fit's figures; the starts (more than
+        one); the warnings."""
+        q = self.quality
+        sides = {} if q is None else dict(zip(q.at_bound, q.bound_sides, strict=False))
+        units, x = self.units(), self.x or {}
+        rows = []
+        for name in (n for n in self.names if n in x):
+            if name in sides:
+                se = f"none: at its {sides[name]} bound"
+            elif self.stderr and name in self.stderr:
+                se = f"Â± {self.stderr[name]:.3g}"
+            elif self.iterations == 0 and self.err_res is not None:
+                se = "none: the best start never moved"
+            else:
+                se = "-"
+            rows.append([name, x[name], se, units.get(name, "")])
+        head = ["parameter", "value", "std. error", "unit"]
+        if not units:  # a unit column only where the result knows units
+            head, rows = head[:-1], [row[:-1] for row in rows]
+        parts = [html_table(head, rows)] if rows else []
+        if self.err_res is not None:
+            fit = (
+                f"err_res = {self.err_res:.4e}, err_grad = {self.err_grad:.3e}, "
+                f"{self.iterations} iterations, J from {self._jacobian_sources()}"
+            )
+            if q is not None and q.chi2 is not None:
+                fit += f"; fit against the stated noise: {q.describe()}"
+            parts.append(f"<p>{html.escape(fit)}</p>")
+        if len(self.starts) > 1:
+            head = ["start", "status", *[f"{n}*" for n in self.names], "err_res", "iter", "nfev"]
+            table = []
+            for r in self.to_records():
+                notes = ["best"] if r["best"] else ["fits as well"] if r["fits_as_well"] else []
+                if r["at_bound"]:
+                    notes.append(f"at bound: {r['at_bound']}")
+                start = f"{r['start']} ({r['label']})" if r["label"] else r["start"]
+                err = "-" if math.isnan(r["err_res"]) else f"{r['err_res']:.3e}"
+                xs = [r[f"x.{n}"] for n in self.names]
+                table.append(
+                    [start, r["status"], *xs, err, r["iterations"], r["nfev"], "; ".join(notes)]
+                )
+            parts.append(html_table([*head, "note"], table))
+        parts += [f'<p style="color:#b00020">WARNING: {html.escape(w)}</p>' for w in self.warnings]
+        return "".join(parts)
 
     def _jacobian_sources(self) -> str:
         """Where J came from: the option's source, or each source's count where they mix
