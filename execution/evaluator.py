@@ -42,6 +42,7 @@ the evaluators :class:`~fbia.SerialEvaluator`, :class:`~fbia.ProcessPoolEvaluato
 from __future__ import annotations
 
 import dataclasses
+import logging
 import shutil
 import tempfile
 from collections.abc import Callable, Mapping, Sequence
@@ -52,6 +53,8 @@ from ..core.errors import ConfigError
 from ..core.problem import Evaluable, Evaluation, InverseProblem
 from .cache import Plan, RunCache
 from .isolation import RunOutcome
+
+logger = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from ..storage.store import StudyStore
@@ -190,6 +193,15 @@ class BatchEvaluator:
             )
         done: dict[int, Evaluation] = {}
         todo: list[Job] = [(i, self._workdir(i), x) for i, x in plan.to_run]
+        logger.info(
+            "batch: %d points, %d from the store, %d to run on %d slot(s)",
+            len(requests),
+            len(plan.reused) + len(plan.copies),
+            len(todo),
+            self.slots,
+        )
+        for i, wd, x in todo:
+            logger.debug("eval %d starts at %s in %s", i, _point(x), wd)
         if self.listener is not None:
             self.listener.batch_started(len(requests), len(plan.reused), len(todo), self.slots)
         for i, ev in plan.reused.items():
@@ -205,6 +217,7 @@ class BatchEvaluator:
     def _reuse(self, ev: Evaluation) -> Evaluation:
         """A record that did not run now (stored, or a copy of one earlier in the batch)."""
         self.reused.add(ev.index)
+        logger.debug("eval %d %s (from the store)%s", ev.index, ev.status, _brief(ev))
         self.history.append(ev)
         if self.listener is not None:
             self.listener.record(ev, True, None)
@@ -241,6 +254,14 @@ class BatchEvaluator:
             ev.workdir = None
         if self.cache is not None:
             self.cache.record(outcome)
+        logger.info(
+            "eval %d %s in %.3g s on %s%s",
+            ev.index,
+            ev.status,
+            ev.time,
+            outcome.worker or "?",
+            _brief(ev),
+        )
         self.history.append(ev)
         if self.listener is not None:
             self.listener.record(ev, False, outcome.worker)
@@ -262,3 +283,14 @@ class BatchEvaluator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _point(x: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} = {v:.6g}" for k, v in x.items())
+
+
+def _brief(ev: Evaluation) -> str:
+    """D of a run that went through, the reason of one that failed."""
+    if ev.ok:
+        return f", D = {ev.distance:.6g}"
+    return f": {ev.message}" if ev.message else ""

@@ -45,6 +45,7 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import json
+import logging
 import os
 import socket
 import sqlite3
@@ -78,6 +79,8 @@ from .migration import code_change, comparison_rekey, migrate, model_change, rek
 from .output_folder import LockHeld, is_fbia_store, lock_file, this_process
 
 __all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
+
+logger = logging.getLogger(__name__)
 
 #: Written into ``meta``; a store of an unknown format is refused, not misread.
 STORE_FORMAT = "fbia-store-2"
@@ -275,9 +278,19 @@ class StudyStore:
                 db.execute("INSERT INTO meta VALUES ('model_key', ?)", (key,))
                 db.execute("INSERT INTO meta VALUES ('model', ?)", (canonical(model),))
             self.hash = key
+            logger.info("store %s: new, for model %s", self.path, code["class"])
         elif key != self.hash:
             self._rekey_or_refuse(fingerprint, model, problem)
         self._check_code(problem.model, code, reuse_changed_code)
+        counts = self.counts()
+        if counts:
+            logger.info(
+                "store %s holds %d runs of model %s (%s); stored runs are reused",
+                self.path,
+                sum(counts.values()),
+                code["class"],
+                ", ".join(f"{n} {status}" for status, n in sorted(counts.items())),
+            )
         with self._transaction() as db:
             db.execute(
                 "INSERT OR REPLACE INTO meta VALUES ('problem', ?)", (canonical(fingerprint),)
@@ -303,14 +316,17 @@ class StudyStore:
         with self._transaction() as db:
             rekey(db, stored, coordinates_of(old), model, pair)
         self.hash = model_key(model)
+        logger.info("store %s re-keyed: its model part as this fbia keys it", self.path)
 
     def _check_code(self, model: Any, code: dict[str, Any], reuse: bool) -> None:
         text = self._meta("code")
-        if text is None or reuse:
+        if text is None:
             return
         old = json.loads(text)
         message = code_change(old, code_digest_as_stored(old, model, code), len(self))
-        if message is not None:
+        if message is not None and reuse:
+            logger.warning("%s: reused as asked (--reuse-changed-code)", message.split(";")[0])
+        elif message is not None:
             raise StoreMismatchError(message, str(self.path))
 
     @property
@@ -453,6 +469,7 @@ class StudyStore:
             chunk = wanted[start : start + 500]
             for run in self._select(f"r.key IN ({', '.join('?' * len(chunk))})", chunk):
                 out[run.key] = run
+        logger.debug("store lookup: %d of %d runs stored", len(out), len(wanted))
         return out
 
     def solution(self, key: str) -> Solution | None:

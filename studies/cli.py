@@ -133,6 +133,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="TCP",
         help="run on the Dask scheduler at this address (overrides [executor])",
     )
+    r.add_argument(
+        "--log-level",
+        choices=("info", "debug"),
+        default="info",
+        help="what fbia.log records: info (batches, runs, store, GP fits, design checks, "
+        "SMC summaries) or debug (also every run's start, tempering steps, design rounds)",
+    )
 
     rp = sub.add_parser(
         "reproductions",
@@ -289,6 +296,7 @@ def _run(args: argparse.Namespace) -> int:
         retry_failed=args.retry_failed,
         address=args.address,
         reuse_changed_code=args.reuse_changed_code,
+        log_level=args.log_level,
     )
     if study.iterator is None and not result.success:
         return _fail(result.message, 1)

@@ -1,4 +1,11 @@
-"""Progress of a study on the terminal and in ``fbia.log``: one line per batch and record."""
+"""Progress of a study on the terminal, and ``fbia.log``: the ``fbia`` loggers' records.
+
+The lines of ``fbia.log`` come from the modules that do the work, each on its own logger
+(``fbia.execution.evaluator``: every batch and run, with the failure's reason;
+``fbia.storage.store``: what a store holds and reuses; ``fbia.iterators.surrogates.gp``: GP
+fits; ``fbia.iterators.gp_smc.adaptive_loop``: design rounds; ``fbia.iterators.smc.sampler``:
+tempering; ``fbia.core.iteration``: an iterator's steps), and from what the study prints
+(``fbia.studies.runner``)."""
 
 from __future__ import annotations
 
@@ -13,19 +20,25 @@ from typing import Any
 from ..core.problem import Evaluation
 from .evaluation_log import EvaluationLog
 
-__all__ = ["RunProgress", "log_to_file"]
+__all__ = ["LOG_FORMAT", "RunProgress", "log_to_file"]
+
+#: a line of fbia.log: time, level, the logger's name (the module), the message
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
 
 
 # -- progress and the log file -----------------------------------------------------------------
 @contextmanager
-def log_to_file(path: Path, name: str = "fbia") -> Iterator[logging.Logger]:
-    """Append the ``fbia`` logger's records (INFO and up) to ``path`` while inside."""
+def log_to_file(
+    path: Path, name: str = "fbia", level: int = logging.INFO
+) -> Iterator[logging.Logger]:
+    """Append the ``fbia`` loggers' records (``level`` and up) to ``path`` while inside, each
+    line with its logger's name."""
     logger = logging.getLogger(name)
     path.parent.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(path, encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    handler.setFormatter(logging.Formatter(LOG_FORMAT))
     previous = logger.level
-    logger.setLevel(logging.INFO)
+    logger.setLevel(level)
     logger.addHandler(handler)
     try:
         yield logger
@@ -47,12 +60,12 @@ def _duration(seconds: float) -> str:
 class RunProgress:
     """What a study shows and logs while forward runs go on (an evaluator's ``listener``).
 
-    Every record goes to ``evaluations.jsonl`` (with ``reused`` and ``worker``) and to the log
-    file.  On a terminal, a batch with runs to make shows a progress bar (done / failed /
-    running, ETA; tqdm) that disappears when the batch is done.  Elsewhere (a file, a batch
-    job's output) a batch that lasts longer than ``interval`` seconds gets a plain line every
-    ``interval`` seconds (done, failed, running, time left) and one when it ends; quick
-    batches print nothing.
+    Every record goes to ``evaluations.jsonl`` (with ``reused`` and ``worker``; the evaluator
+    logs it, :mod:`fbia.execution.evaluator`).  On a terminal, a batch with runs to make
+    shows a progress bar (done / failed / running, ETA; tqdm) that disappears when the batch
+    is done.  Elsewhere (a file, a batch job's output) a batch that lasts longer than
+    ``interval`` seconds gets a plain line every ``interval`` seconds (done, failed,
+    running, time left) and one when it ends; quick batches print nothing.
 
     Parameters
     ----------
@@ -77,7 +90,6 @@ class RunProgress:
         self.echo = echo
         self.tty = sys.stderr.isatty() if tty is None else tty
         self.interval = interval
-        self.logger = logging.getLogger(__name__)
         self.batch = 0
         self.totals = {"runs": 0, "reused": 0, "failed": 0}
         self._bar: Any = None
@@ -91,14 +103,6 @@ class RunProgress:
         self.reused = reused
         self.t0 = self.shown = time.perf_counter()
         self._lines = 0
-        self.logger.info(
-            "batch %d: %d points, %d from the store, %d to run on %d worker(s)",
-            self.batch,
-            total,
-            reused,
-            to_run,
-            self.slots,
-        )
         if to_run and self.tty:
             from tqdm import tqdm
 
@@ -127,22 +131,11 @@ class RunProgress:
         self.log.append(record, reused=reused, worker=worker)
         if reused:
             self.totals["reused"] += 1
-            self.logger.info(
-                "eval %d %s (from the store)%s", record.index, record.status, _brief(record)
-            )
             return
         self.totals["runs"] += 1
         self.done += 1
         self.failed += not record.ok
         self.totals["failed"] += not record.ok
-        self.logger.info(
-            "eval %d %s in %.3g s on %s%s",
-            record.index,
-            record.status,
-            record.time,
-            worker or "?",
-            _brief(record),
-        )
         if self._bar is not None:
             self._bar.set_postfix_str(self._counts(), refresh=False)
             self._bar.update(1)
@@ -167,9 +160,3 @@ class RunProgress:
             self._bar = None
         elif self._lines:
             self.line()
-
-
-def _brief(record: Evaluation) -> str:
-    if record.ok:
-        return f", D = {record.distance:.6g}"
-    return f": {record.message}" if record.message else ""

@@ -7,6 +7,7 @@ when it has none) and writes the output folder, resuming from its store;
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -32,6 +33,11 @@ from .study_report import SessionTimes, write_report
 from .tables import discrepancy_rows
 
 __all__ = ["STORE_NAME", "forward_study", "run_study", "study_seeds"]
+
+logger = logging.getLogger(__name__)
+
+#: ``run_study``'s ``log_level``: what fbia.log records
+LOG_LEVELS = {"info": logging.INFO, "debug": logging.DEBUG}
 
 #: The study store's file name in the output folder.
 STORE_NAME = "store.sqlite"
@@ -119,6 +125,7 @@ def run_study(
     retry_failed: bool = False,
     address: str | None = None,
     reuse_changed_code: bool = False,
+    log_level: str = "info",
 ) -> Result:
     """Run a study and write its output folder (default: the study's ``output``).
 
@@ -142,6 +149,8 @@ def run_study(
         made (without it such a store is refused: :meth:`StudyStore.bind`).
     address
         Send the runs to the Dask scheduler at this address.
+    log_level
+        What ``fbia.log`` records of the ``fbia`` loggers: ``"info"`` or ``"debug"``.
 
     Raises
     ------
@@ -153,6 +162,8 @@ def run_study(
     ``result.json`` with status ``"interrupted"`` or ``"error"`` is written and the exception
     goes on to the caller.
     """
+    if log_level not in LOG_LEVELS:
+        raise ConfigError(f"log_level {log_level!r}: one of {', '.join(LOG_LEVELS)}", "run")
     out = Path(output) if output is not None else study.output
     started = now()
     if study.iterator is None:
@@ -162,12 +173,17 @@ def run_study(
     if study.synthetic is not None and study.synthetic.draws > 1:  # fbia.studies.draws
 
         def run_one(sub: Study, k: int) -> Result:
-            again = {
-                "fresh": fresh and k == 0,
-                "retry_failed": retry_failed,
-                "reuse_changed_code": reuse_changed_code,
-            }
-            return run_study(sub, sub.output, workers, echo, address=address, **again)
+            return run_study(
+                sub,
+                sub.output,
+                workers,
+                echo,
+                address=address,
+                fresh=fresh and k == 0,
+                retry_failed=retry_failed,
+                reuse_changed_code=reuse_changed_code,
+                log_level=log_level,
+            )
 
         return _run_draws(study, out, store_path, run_one, echo, started)
     problem = study.problem
@@ -175,8 +191,8 @@ def run_study(
     with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh) as store:
         if fresh:
             clear_runs(out / "runs")
-        store.bind(problem, reuse_changed_code=reuse_changed_code)
-        with log_to_file(out / "fbia.log") as logger:
+        with log_to_file(out / "fbia.log", level=LOG_LEVELS[log_level]):
+            store.bind(problem, reuse_changed_code=reuse_changed_code)
 
             def say(line: str) -> None:
                 echo(line)

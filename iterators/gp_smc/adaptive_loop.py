@@ -25,6 +25,7 @@ and the posterior check are the iterator's.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Generator, Mapping, Sequence
@@ -52,6 +53,8 @@ from .adaptive import (
 from .options import GpSmcOptions
 from .result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound, DesignRuns
 from .run import GpSmcState, SmcRun, log_prior
+
+logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 
@@ -182,10 +185,21 @@ def adaptive_design(
                 # and the GP's own uncertainty does not move the posterior either (the
                 # final status's check; with sigma_N inferred the GP models its profile)
                 converged = not _gp_unsure(gp, reweighted, run, opts, rng)
+            logger.info(
+                "design check on %d runs: the last posterior moved %.3g std (quantiles "
+                "%.3g), std changed %.3g, surrogate error %.3g in L at its draws: %s",
+                n_design,
+                change.mean_shift,
+                change.quantile_shift,
+                change.std_change,
+                last[1],
+                "converged" if converged else f"not settled (tolerance {opts.adaptive_tol:g})",
+            )
             if converged:
                 reason = "converged"
                 break
         if n_design >= opts.n_train:
+            logger.info("design stops at its budget: %d runs (n_train)", n_design)
             reason = "budget"
             break
         post = sample(target, opts.round_particles)
@@ -195,6 +209,15 @@ def adaptive_design(
         wide = post.tempered  # the round's SMC passed through exp(mu / 4) p on its way
         batch, n_draws = select_batch(
             gp, post, n_batch, run.inputs, lambda z: log_prior(run.inputs, z), rng, wide
+        )
+        logger.debug(
+            "design round %d: %d runs in the batch (%d posterior draws, the rest by "
+            "variance), floor of L %.6g, hyperparameters %s",
+            len(rounds) + 1,
+            len(batch),
+            n_draws,
+            floor,
+            "optimised" if optimise else "kept",
         )
         new = run.evaluate(batch)
         new_loglik = run.log_likelihoods(new)

@@ -46,6 +46,7 @@ tempering step and returns the :class:`SmcResult`); ``run()`` and :func:`smc` dr
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Generator, Sequence
@@ -67,6 +68,8 @@ from .tempering import (
     logsumexp,
     systematic_resample,
 )
+
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "SequentialMonteCarlo",
@@ -502,9 +505,30 @@ class SequentialMonteCarlo:
                     "seconds_move": t_move,
                 }
             )
+            logger.debug(
+                "tempering step %d: gamma %.6g, ESS %.1f of %d, %s, acceptance %.2f, "
+                "%d likelihood evaluations",
+                step,
+                gamma,
+                current_ess,
+                n,
+                ("resampled, " if resampled else "") + ("moved" if move else "not moved"),
+                acceptance,
+                self.nfev,
+            )
             yield SmcState(step, gamma, current_ess, resampled, acceptance, log_evidence, self.nfev)
         weights = np.exp(log_w - logsumexp(log_w))
         table = self._check_tables(x, weights, table_note)
+        logger.info(
+            "SMC: %d particles to gamma = 1 in %d tempering steps, %.2f s, %d likelihood "
+            "evaluations, log evidence %.6g +- %.2g",
+            n,
+            len(gammas) - 1,
+            time.perf_counter() - t0,
+            self.nfev,
+            log_evidence,
+            math.sqrt(log_evidence_var),
+        )
         return SmcResult(
             particles=x,
             weights=weights,

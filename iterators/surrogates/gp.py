@@ -43,6 +43,7 @@ posterior draws): RMSE in L 6.8 on the input axes, 2.3 rotated (median |error| 0
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import time
 import warnings
@@ -57,6 +58,8 @@ from ...core.errors import ConfigError
 from .guard import ExtrapolationGuard, GuardCounts
 from .mean import SQRT3, KernelTerms, fused_mean
 from .trend import QuadraticTrend
+
+logger = logging.getLogger(__name__)
 
 #: Entries of one block of the cross-kernel matrix k(x*, X) evaluated at once (memory bound).
 _BLOCK = 1 << 18
@@ -451,6 +454,17 @@ class GpSurrogate(ExtrapolationGuard):
             "runs": runs,
             **self.hyperparameters(),
         }
+        logger.info(
+            "GP fit: %d points, %s, %.2f s; signal variance %.4g, length scales %s, "
+            "nugget %.3g, -log evidence %.6g",
+            self.info["n_train"],
+            how,
+            self.info["seconds"],
+            self.info["signal_variance"],
+            "[" + ", ".join(f"{v:.3g}" for v in self.info["lengthscales"]) + "]",
+            self.info["nugget_variance"],
+            neg_log_evidence,
+        )
         return self
 
     def _condition(self, variance: float, lengthscale: NDArray[np.float64]) -> float:
