@@ -14,7 +14,14 @@ import pytest
 
 import fbia
 from fbia.core.errors import ConfigError
-from fbia.imaging.oct import OctOptions, segment_oct
+from fbia.imaging.oct import (
+    MIN_FOOTPRINT,
+    MIN_TRIANGLES,
+    OctOptions,
+    footprint_area,
+    segment_oct,
+    surface_degeneracy,
+)
 from fbia.measures import CppMeasure, RkhsMeasure
 from fbia.studies.oct_figures import write_segmentation_figures
 from fbia.testing.oct import OctPhantom, oct_phantom, oct_volume_from_surface
@@ -301,3 +308,62 @@ def test_a_depth_axis_across_which_the_substratum_does_not_lie_is_one_line():
     moved = segment_oct(np.moveaxis(ph.volume, 0, 2), ph.voxel_size, depth_axis=2)
     same = segment_oct(ph.volume, ph.voxel_size)
     assert np.allclose(moved.interface.vertices, same.interface.vertices)
+
+
+def test_a_surface_that_cannot_be_the_biofilm_is_degenerate():
+    """Issue 43 item 1: the check after segmentation, on surfaces made by hand: too few
+    triangles (however wide), or a footprint too small (however many triangles)."""
+    fov = (0.96, 0.96)  # mm: 48 x 48 voxels of 0.02 mm
+    corners = [[0, 0, 0.01], [1, 0, 0.01], [1, 1, 0.01], [0, 1, 0.01]]
+    voxel = fbia.Interface.surface(np.array(corners) * [0.02, 0.02, 1], [[0, 1, 2], [0, 2, 3]])
+    assert footprint_area(voxel) == pytest.approx(0.02**2)
+    assert surface_degeneracy(voxel, fov) == (
+        "the segmented surface is degenerate: 2 triangles covering 0.043 % of the scan's field "
+        "of view (0.96 x 0.96 mm); a biofilm interface has at least 20 triangles over at least "
+        "5 % of it"
+    )
+    whole = voxel.with_vertices(np.array(corners) * [0.96, 0.96, 1])
+    assert str(surface_degeneracy(whole, fov)).startswith(
+        "the segmented surface is degenerate: 2 triangles covering 100 % of the scan's field"
+    )
+    # the phantom's true dome (the triangles above the substratum of a 64 x 64 grid over
+    # its footprint box): its footprint pi a b (38 % of the field) up to the grid's rim;
+    # shrunk laterally 5 times, as many triangles cover 1.5 %
+    ph = oct_phantom(shape=(32, 48, 48), voxel_size=(0.01, 0.02, 0.02), seed=0)
+    dome = ph.surface(n=64)
+    a, b = ph.semi_axes
+    assert footprint_area(dome) == pytest.approx(np.pi * a * b, rel=0.05)
+    assert surface_degeneracy(dome, fov) is None
+    speck = dome.with_vertices(dome.vertices * [0.2, 0.2, 1])
+    assert footprint_area(speck) == pytest.approx(footprint_area(dome) / 25)
+    assert f"{len(speck)} triangles covering 1.5 %" in str(surface_degeneracy(speck, fov))
+
+
+# Otsu's histogram overflows single precision at 2^58 (issue 44 fixes the segmentation)
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+def test_the_phantom_passes_the_check_and_its_degenerate_scales_are_refused():
+    """The phantom segments into a surface far above both floors; its intensities times
+    1e-30 (float32) or times 2^58 (int64), which the processing does not resolve, segment
+    into 2 and 4 triangles (measured), refused with the cause and the settings."""
+    ph = oct_phantom(shape=(32, 48, 48), voxel_size=(0.01, 0.02, 0.02), seed=0)
+    seg = segment_oct(ph.volume, ph.voxel_size)
+    share = footprint_area(seg.interface) / 0.96**2
+    # measured: 3538 triangles over 33 % of the field; the true dome's cap above half a
+    # voxel covers pi a b (1 - sqrt(dz / 2 H)) = 33 % of it
+    a, b = ph.semi_axes
+    cap = np.pi * a * b * (1.0 - np.sqrt(0.5 * 0.01 / ph.crest)) / 0.96**2
+    assert share == pytest.approx(cap, rel=0.1) and share > 5 * MIN_FOOTPRINT
+    assert len(seg.interface) > 100 * MIN_TRIANGLES
+    assert surface_degeneracy(seg.interface, (0.96, 0.96)) is None
+    scaled = [
+        (ph.volume * np.float32(1e-30), "2 triangles covering 0.011 %"),
+        ((ph.volume.astype(np.float64) * 2.0**58).astype(np.int64), "4 triangles covering 0.028 %"),
+    ]
+    for volume, cause in scaled:
+        with pytest.raises(ConfigError) as info:
+            segment_oct(volume, ph.voxel_size)
+        message = str(info.value)
+        assert "\n" not in message
+        assert message.startswith(f"oct volume: the segmented surface is degenerate: {cause}")
+        assert "; segmentation: substratum row 28, Otsu's threshold " in message
+        assert message.endswith(", attenuation 0 1/mm, denoise gaussian 1")
