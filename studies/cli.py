@@ -240,16 +240,20 @@ def _load(args: argparse.Namespace, build: bool = True) -> Any:
 
 def _validate(args: argparse.Namespace) -> int:
     study = _load(args, build=False)
+    _check_units(study)
     print(study.summary())
-    _warn_units(study)
     print("ok")
     return 0
 
 
-def _warn_units(study: Any) -> None:
-    """The study's unit suspicions (:mod:`fbia.studies.sanity`), one ``warning:`` line each."""
-    from .sanity import unit_warnings
+def _check_units(study: Any) -> None:
+    """The study's units (:mod:`fbia.studies.sanity`): the first mistake no study can mean
+    is a ConfigError (exit 2), the other suspicions are one ``warning:`` line each."""
+    from .sanity import unit_errors, unit_warnings
 
+    errors = unit_errors(study)
+    if errors:
+        raise errors[0]
     for line in unit_warnings(study):
         print(f"{PROG}: warning: {study.file}: {line}", file=sys.stderr)
 
@@ -284,8 +288,9 @@ def _forward(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    study = _load(args)
-    _warn_units(study)
+    study = _load(args, build=False)
+    _check_units(study)
+    _ = study.problem  # the synthetic observations' forward runs, once the units are right
     from .runner import run_study
 
     result = run_study(

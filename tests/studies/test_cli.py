@@ -418,14 +418,14 @@ def test_validate_warns_of_units_that_look_wrong_and_still_says_ok(study_file, c
         "fbia: warning: study.toml: parameter E: bounds [0.1, 0.8] Pa lie outside 1-1e+07 Pa, "
         "where biofilm moduli are reported: in kPa or MPa? fbia's unit is Pa\n"
     )
-    # noise in µm on data in mm
+    # noise in µm on data in mm (as large as the data: an error, tests/studies/test_sanity.py)
     study_file.write_text(
-        STUDY.replace("noise_std = 0.0005\n\n[measure]", "noise_std = 2.0\n\n[measure]")
+        STUDY.replace("noise_std = 0.0005\n\n[measure]", "noise_std = 0.4\n\n[measure]")
     )
     assert main(["validate", "study.toml"]) == 0
     err = capsys.readouterr().err
     assert err == (
-        "fbia: warning: study.toml: observation 1: noise_std = 2 mm is 250 % of the observed "
+        "fbia: warning: study.toml: observation 1: noise_std = 0.4 mm is 50 % of the observed "
         "interfaces' extent (0.8 mm): in µm? fbia's unit is mm\n"
     )
     study_file.write_text(STUDY)
