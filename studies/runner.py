@@ -11,7 +11,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -83,6 +83,7 @@ def _forward_locked(
 ) -> Result:
     t0 = time.perf_counter()
     problem = study.problem
+    _write_oct_records(study, out, echo)
     with EvaluationLog(out / "evaluations.jsonl") as log:
         ev = problem.evaluate(x, workdir=out / "run", index=0, keep_solution=True)
         log.append(ev)
@@ -174,7 +175,7 @@ def run_study(
 
         def run_one(sub: Study, k: int) -> Result:
             return run_study(
-                sub,
+                replace(sub, oct_records=()),  # _run_draws wrote them, once, into `out`
                 sub.output,
                 workers,
                 echo,
@@ -198,6 +199,7 @@ def run_study(
                 echo(line)
                 logger.info(line)
 
+            _write_oct_records(study, out, say)
             return _run_stored(
                 study, problem, executor, store, out, started, say, retry_failed, fresh
             )
@@ -217,6 +219,7 @@ def _run_draws(
 
     t0 = time.perf_counter()
     with OutputLock(out, "fbia run"):
+        _write_oct_records(study, out, echo)
         result = run_draws(study, out, store, run_one, echo)
         text = _finish(study, result, out, started, echo)
         wall = time.perf_counter() - t0
@@ -228,6 +231,16 @@ def _run_draws(
             rows = judge_draws(study.paper, result)
         _reports(study, result, out, text, times, echo, rows=rows)
     return result
+
+
+def _write_oct_records(study: Study, out: Path, echo: Echo) -> None:
+    """The record of each OCT scan's segmentation (:class:`~fbia.studies.study_oct.OctRecord`)
+    into ``out``, the folder the command writes (``--output``), never while reading the study:
+    called holding ``out``'s :class:`OutputLock`, so that a command the lock refuses changes
+    none of the files of the run that holds it."""
+    for record in study.oct_records:
+        record.write(out)
+        echo(f"OCT scan of [[observations]] #{record.observation}: {out / record.folder}")
 
 
 @dataclass

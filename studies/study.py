@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from ..core.problem import InverseProblem
 from ..core.protocols import Discrepancy, ForwardModel, InverseIterator
 from ..execution.executors import ExecutorSpec
 from .paper import PaperSpec
+
+if TYPE_CHECKING:
+    from .study_oct import OctRecord
 
 __all__ = ["Study", "SyntheticSpec", "derived_seed"]
 
@@ -55,6 +58,8 @@ class Study:
 
     The inverse problem (:attr:`problem`) is built on first use: synthetic observations need
     forward runs, which :func:`load_study` with ``build=False`` (``fbia validate``) avoids.
+    Reading writes no file: what a run writes of the study's OCT scans is kept in
+    :attr:`oct_records` until then (:mod:`fbia.studies.study_oct`).
     """
 
     path: Path
@@ -81,6 +86,8 @@ class Study:
     sha256: str = ""
     paper: PaperSpec | None = field(default=None, repr=False)  # [paper]: published numbers
     figures: bool = True  # False: no plots (each noise draw of fbia.studies.draws)
+    # the segmentation record of each OCT scan, written by the runner under the output lock
+    oct_records: tuple[OctRecord, ...] = field(default=(), repr=False)
 
     @property
     def file(self) -> str:

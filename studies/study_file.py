@@ -38,7 +38,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     interface = "data/observed_100.csv"      # CSV x, y[, curve] (2-D); STL/PLY/VTU/... (3-D)
     # oct = { file = "data/scan.npy", voxel_size = [0.005, 0.01, 0.01], threshold = 0.6 }
     #   or an OCT scan (fbia.studies.study_oct), segmented on reading: voxel_size (dz, dy, dx) mm,
-    #   height_axis = "y" for ale_fsi 3-D, options of fbia.imaging.oct; figures <output>/oct/
+    #   height_axis = "y" for ale_fsi 3-D, options of fbia.imaging.oct; run and forward
+    #   write the figures and segmentation.json to oct/ of the output folder they use
     points = "data/points_100.csv"           # optional: x, y[, z][, dx, dy[, dz]]
     noise_std = 0.01                         # optional, mm
     name = "Q100"                            # optional label
@@ -108,7 +109,7 @@ import math
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from ..core.errors import ConfigError
 from ..core.interface import Interface
@@ -141,6 +142,9 @@ from .study_schema import (
     kind_of,
     parse_section,
 )
+
+if TYPE_CHECKING:
+    from .study_oct import OctRecord
 
 __all__ = ["SECTIONS", "load_study"]
 
@@ -213,6 +217,7 @@ class _Reader:
         self.folder = path.parent
         self.raw = raw
         self.registry = registry
+        self.oct_records: list[OctRecord] = []  # written by the runner, never while reading
 
     # -- small checks --------------------------------------------------------------------
     def where(self, section: str, key: str = "") -> str:
@@ -352,7 +357,7 @@ class _Reader:
         meta = parse_section(StudySection, raw.get("study", {}), self.where("[study]"))
         name = meta.name or self.path.stem
         self.seed = meta.seed
-        output = self.output = self.folder / meta.output
+        output = self.folder / meta.output
         store = store_file(self.folder, meta.store, self.where("[study]", "store"))
 
         self.model_name, model = self.plugin("forward_model", "model")
@@ -441,6 +446,7 @@ class _Reader:
             text=text,
             sha256=hashlib.sha256(raw_bytes).hexdigest(),
             paper=paper,
+            oct_records=tuple(self.oct_records),
         )
         if synthetic is None:
             _ = study.problem  # no forward run needed: check the whole problem now
@@ -530,11 +536,11 @@ class _Reader:
         return out
 
     def oct_scan(self, value: Any, k: int, where: str) -> Interface:
-        from .study_oct import read_oct_scan, write_oct_record
+        from .study_oct import OctRecord, read_oct_scan
 
         self.dimension(3, where)
         scan = read_oct_scan(value, self.folder, where)
-        write_oct_record(scan, self.output / "oct" / f"observation_{k + 1}")
+        self.oct_records.append(OctRecord(k + 1, scan))
         return scan.interface
 
     def dimension(self, dim: int, where: str) -> None:

@@ -9,8 +9,9 @@
 >>> scan = read_oct_scan({"file": "scan.npy", "voxel_size": [0.01, 0.02, 0.02]}, Path("."), where)
 >>> scan.interface.dim, scan.segmentation.substratum_row
 (3, 20)
->>> [p.name for p in write_oct_record(scan, Path("output_oct"))]
-['oct_bscan.png', 'oct_surface.png', 'segmented.vtu', 'segmentation.json']
+>>> record = OctRecord(1, scan)
+>>> record.folder, [p.name for p in record.write(Path("output"))]
+('oct/observation_1', ['oct_bscan.png', 'oct_surface.png', 'segmented.vtu', 'segmentation.json'])
 >>> read_oct_scan({"file": "scan.npy", "voxel_size": [0.01, 0.02]}, Path("."), where)
 ... # doctest: +ELLIPSIS
 Traceback (most recent call last):
@@ -29,10 +30,15 @@ geometries: :func:`fbia.imaging.oct.in_model_axes`); and every option of
 the scan's stem beside it (``data/scan.json`` for ``data/scan.npy``, as
 ``examples/oct_3d/make_scan.py`` writes).
 
-:func:`write_oct_record` writes what was segmented into the study's output folder: the
-figures of :func:`fbia.studies.oct_figures.write_segmentation_figures`, the surface in the
-model's axes (``segmented.vtu``) and ``segmentation.json`` (the scan's SHA-256, the options,
-threshold, attenuation, substratum row, and the SHA-256 of the surface).  Resume: a study's
+Reading a study writes nothing (``fbia validate`` leaves every folder as it was): the study
+keeps one :class:`OctRecord` per scan (:attr:`fbia.studies.study.Study.oct_records`), and the
+runner writes them with :func:`write_oct_record` into the output folder the command actually
+uses (``--output``), once it holds that folder's lock, so a run refused because another one
+is running there changes none of its files (issue 44 item 3).  A record is the figures of
+:func:`fbia.studies.oct_figures.write_segmentation_figures`, the surface in the model's axes
+(``segmented.vtu``) and ``segmentation.json`` (the scan's SHA-256, the options, threshold,
+attenuation, substratum row, and the SHA-256 of the surface), in
+``<output>/oct/observation_<k>/``.  Resume: a study's
 fingerprint holds the SHA-256 of every observed interface (:mod:`fbia.storage.fingerprints`), so
 a new scan or an option that changes the segmented surface makes ``fbia run`` compare its
 stored forward runs anew with the new surface, and one that leaves the surface bit-equal
@@ -55,7 +61,7 @@ from ..core.interface import Interface
 from ..imaging.oct import HeightAxis, OctOptions, OctSegmentation, in_model_axes, segment_oct
 from ..storage.fingerprints import interface_digest
 
-__all__ = ["OctScan", "OctScanOptions", "read_oct_scan", "write_oct_record"]
+__all__ = ["OctRecord", "OctScan", "OctScanOptions", "read_oct_scan", "write_oct_record"]
 
 
 #: the voxel sizes an OCT scan can have [mm]: 10 nm to 1 mm
@@ -120,6 +126,26 @@ class OctScan:
     voxel_size: tuple[float, float, float]
     segmentation: OctSegmentation
     interface: Interface
+
+
+@dataclass(frozen=True)
+class OctRecord:
+    """What a study writes of the scan of its ``observation``-th ``[[observations]]`` table
+    (counted from 1, as the study file's messages count them), kept in memory from reading
+    until a run writes it into its output folder (:meth:`write`)."""
+
+    observation: int
+    scan: OctScan
+
+    @property
+    def folder(self) -> str:
+        """Where the record goes, relative to the output folder."""
+        return f"oct/observation_{self.observation}"
+
+    def write(self, output: Path) -> list[Path]:
+        """Write the record into ``output``/:attr:`folder` (the caller holds ``output``'s
+        lock: :class:`fbia.storage.output_folder.OutputLock`); returns the paths."""
+        return write_oct_record(self.scan, output / self.folder)
 
 
 def read_oct_scan(value: Any, folder: Path, where: str) -> OctScan:

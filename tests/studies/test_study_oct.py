@@ -11,8 +11,11 @@ with that option (the store compares its runs with the new surface, never with t
 
 from __future__ import annotations
 
+import hashlib
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -21,6 +24,7 @@ from _studies import one_error_line
 import fbia
 from fbia.imaging.oct import in_model_axes, segment_oct
 from fbia.storage.fingerprints import problem_fingerprint
+from fbia.storage.output_folder import OutputLock
 from fbia.studies.cli import main
 from fbia.testing.oct import oct_phantom, oct_volume_from_surface
 
@@ -94,6 +98,10 @@ def test_the_study_observes_what_segment_oct_gives_and_records_it(folder: Path) 
     assert gamma is not None
     np.testing.assert_array_equal(gamma.vertices, seg.interface.vertices)
     np.testing.assert_array_equal(gamma.cells, seg.interface.cells)
+    assert not (folder / "out").exists()  # reading writes nothing: the runner writes the record
+    (kept,) = study.oct_records
+    assert kept.observation == 1 and kept.folder == "oct/observation_1"
+    kept.write(folder / "out")
     record = folder / "out" / "oct" / "observation_1"
     assert {p.name for p in record.iterdir()} == {
         "oct_bscan.png",
@@ -299,3 +307,209 @@ def test_the_unscaled_phantom_passes(
     write(folder, OCT.replace("scan.npy", "phantom.npy"))
     assert main(["validate", "study.toml"]) == 0
     assert capsys.readouterr().out.rstrip().endswith("ok")
+
+
+# -- where the segmentation record goes (issue 44 item 3) ------------------------------------
+RECORD = {"oct_bscan.png", "oct_surface.png", "segmented.vtu", "segmentation.json"}
+
+
+def listing(root: Path) -> dict[str, tuple[int, int]]:
+    """Every file and folder below ``root``: its mtime [ns] and size."""
+    return {
+        p.relative_to(root).as_posix(): (p.stat().st_mtime_ns, p.stat().st_size)
+        for p in sorted(root.rglob("*"))
+    }
+
+
+def refuse_writes_below(folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make ``folder`` read-only for the code under test when permissions cannot (root ignores
+    them): every call that would create, rename or open for writing a file below it raises
+    PermissionError, as a read-only folder would."""
+    import builtins
+    import errno
+    import io
+    import os
+
+    root = str(folder.resolve())
+
+    def check(path: Any) -> None:
+        if isinstance(path, int):  # a file descriptor: opened elsewhere
+            return
+        target = os.path.abspath(os.fspath(path))
+        if target == root or target.startswith(root + os.sep):
+            raise PermissionError(errno.EACCES, "read-only folder (test)", target)
+
+    real_open, real_os_open = builtins.open, os.open
+    writes = os.O_WRONLY | os.O_RDWR | os.O_CREAT | os.O_TRUNC | os.O_APPEND
+
+    def opener(file: Any, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
+        if any(c in mode for c in "wax+"):
+            check(file)
+        return real_open(file, mode, *args, **kwargs)
+
+    def os_opener(path: Any, flags: int, *args: Any, **kwargs: Any) -> int:
+        if flags & writes:
+            check(path)
+        return real_os_open(path, flags, *args, **kwargs)
+
+    def refused(real: Callable[..., Any]) -> Callable[..., Any]:
+        def call(path: Any, *args: Any, **kwargs: Any) -> Any:
+            check(path)
+            return real(path, *args, **kwargs)
+
+        return call
+
+    monkeypatch.setattr(builtins, "open", opener)
+    monkeypatch.setattr(io, "open", opener)
+    monkeypatch.setattr(os, "open", os_opener)
+    for name in ("mkdir", "rename", "replace", "remove", "unlink", "rmdir"):
+        monkeypatch.setattr(os, name, refused(getattr(os, name)))
+
+
+@pytest.mark.parametrize("old_record", [False, True], ids=["no-output-folder", "old-record"])
+def test_validate_writes_no_file(
+    folder: Path, capsys: pytest.CaptureFixture[str], old_record: bool
+) -> None:
+    """Issue 44 item 3: ``fbia validate`` segmented the scan and wrote its 4 files into the
+    output folder; now it leaves the folder absent, or as it was, files and times."""
+    study = write(folder)
+    if old_record:  # a record of an earlier run, of another option
+        (folder / "out" / "oct" / "observation_1").mkdir(parents=True)
+        (folder / "out" / "oct" / "observation_1" / "segmentation.json").write_text("{}\n")
+    before = listing(folder)
+    assert main(["validate", str(study)]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("ok")
+    assert listing(folder) == before
+    assert (folder / "out").exists() == old_record
+
+
+def test_validate_works_on_a_read_only_study_folder(
+    folder: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A study in a read-only folder (a shared data set) validates: reading writes nothing."""
+    import os
+    import stat
+
+    write(folder)
+    before = listing(folder)
+    paths = [folder, *folder.rglob("*")]
+    modes = {p: stat.S_IMODE(p.stat().st_mode) for p in paths}
+    with pytest.MonkeyPatch.context() as patch:
+        if os.geteuid() == 0:  # root writes through permissions: refuse the calls instead
+            refuse_writes_below(folder, patch)
+        else:
+            for p in paths:
+                p.chmod(modes[p] & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+        try:
+            status = main(["validate", "study.toml"])
+        finally:
+            for p in paths:
+                p.chmod(modes[p])
+    assert status == 0, capsys.readouterr().err
+    assert capsys.readouterr().out.rstrip().endswith("ok")
+    assert listing(folder) == before and not (folder / "out").exists()
+
+
+def test_refuse_writes_below_refuses_what_the_record_would_write(folder: Path) -> None:
+    """The root stand-in for a read-only folder stops the record's writes (its folders, the
+    figures by matplotlib, the VTU by meshio, the JSON by pathlib: each alone), so the test
+    above proves something as root too."""
+    (kept,) = fbia.load_study(write(folder)).oct_records
+    for name in sorted(RECORD):
+        made = folder / "made"
+        kept.write(made)  # the folders made, each file to be replaced
+        before = (made / kept.folder / name).read_bytes()
+        with pytest.MonkeyPatch.context() as patch:
+            refuse_writes_below(made / kept.folder / name, patch)
+            with pytest.raises(PermissionError):
+                kept.write(made)
+        assert (made / kept.folder / name).read_bytes() == before, name
+    with pytest.MonkeyPatch.context() as patch:
+        refuse_writes_below(folder / "out", patch)
+        with pytest.raises(PermissionError):
+            kept.write(folder / "out")
+    assert not (folder / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "iterator"),
+    [("run", True), ("run", False), ("forward", True)],
+    ids=["run", "run-without-iterator", "forward"],
+)
+def test_the_record_goes_to_the_output_folder_given(
+    folder: Path, capsys: pytest.CaptureFixture[str], command: str, iterator: bool
+) -> None:
+    """``--output other``: the record is written into ``other`` (beside the result, listed in
+    its report), nothing into the study's own output folder."""
+    path = write(folder, OCT.replace(" }", ", threshold = 0.6 }"))
+    text = path.read_text().replace("max_iter = 8", "max_iter = 1")
+    if not iterator:
+        text = text.replace('[iterator]\nname = "levenberg_marquardt"\n', "").replace(
+            "options = { max_iter = 1 }\n", ""
+        )
+    path.write_text(text)
+    status = main([command, "study.toml", "--output", "other"])
+    assert status in (0, 3), capsys.readouterr().err  # one LM iteration: not converged, 3
+    assert not (folder / "out").exists()
+    record = folder / "other" / "oct" / "observation_1"
+    assert {p.name for p in record.iterdir()} == RECORD
+    meta = json.loads((record / "segmentation.json").read_text())
+    scan = (folder / "data" / "scan.npy").read_bytes()
+    assert meta["scan_sha256"] == hashlib.sha256(scan).hexdigest()
+    assert meta["options"]["threshold"] == 0.6
+    assert "- `oct/`" in (folder / "other" / "report.md").read_text()
+    assert "other/oct/observation_1" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["run", "second.toml"],
+        ["run", "second.toml", "--fresh"],
+        ["forward", "second.toml", "--output", "out"],
+    ],
+    ids=["run", "run-fresh", "forward"],
+)
+def test_a_refused_run_leaves_the_running_studys_record_as_it_is(
+    folder: Path, capsys: pytest.CaptureFixture[str], scan: np.ndarray, command: list[str]
+) -> None:
+    """Issue 44 item 3: a second study of another scan on the output folder of a running one
+    is refused (the folder's lock), and its refusal left the running study's
+    ``segmentation.json`` with the other scan's hash; now not one file there changes."""
+    running = fbia.load_study(write(folder))
+    out = folder / "out"
+    with OutputLock(out, "fbia run"):  # the running study, as the runner writes its record
+        (kept,) = running.oct_records
+        kept.write(out)
+        segmentation = (out / "oct" / "observation_1" / "segmentation.json").read_bytes()
+        before = listing(out)
+        np.save(folder / "data" / "other.npy", np.ascontiguousarray(scan[:, :, ::-1]))
+        second = write(folder, OCT.replace("scan.npy", "other.npy"))
+        second.rename(folder / "second.toml")
+        assert main(command) == 2
+        assert "out: the output folder is in use by fbia run (pid" in one_error_line(capsys)
+        assert (out / "oct" / "observation_1" / "segmentation.json").read_bytes() == segmentation
+        assert listing(out) == before
+    meta = json.loads(segmentation)
+    assert (
+        meta["scan_sha256"]
+        == kept.scan.sha256
+        == hashlib.sha256((folder / "data" / "scan.npy").read_bytes()).hexdigest()
+    )
+
+
+def test_noise_draws_write_the_record_once_into_the_studys_folder(
+    folder: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A scan beside ``[synthetic]`` noise draws: one record, in the study's output folder
+    (under its lock), none in the draws' folders."""
+    path = write(folder)
+    text = path.read_text().replace("max_iter = 8", "max_iter = 2")
+    path.write_text(
+        text + "\n[synthetic]\ntruth = { E = 400.0 }\ncoordinates = [ { inflow_rate = 50.0 } ]\n"
+        "noise_std = 0.001\ndraws = 2\n"
+    )
+    assert main(["run", "study.toml"]) in (0, 3, 4)  # two LM iterations: no judged draw, 4
+    assert {p.name for p in (folder / "out" / "oct" / "observation_1").iterdir()} == RECORD
+    assert sorted(p.name for p in (folder / "out" / "draws").iterdir()) == ["0", "1"]
+    assert not list((folder / "out" / "draws").rglob("oct"))
