@@ -14,6 +14,12 @@ bounds, priors, the iterator or the executor: changing those reuses every stored
 changing the measure or the observations reuses every stored forward run whose interfaces the
 store holds (the comparison is recomputed, which is cheap).
 
+A plugin's options are keyed by their *effective* values, every option with the value the
+plugin runs with, its default resolved (issue 44): a release that changes an option's default
+changes the key of a study relying on it, and a study that pins the old value keeps it.  The
+fingerprint also names the options at their defaults (``defaults``, left out of the keys), so
+that a refusal can say "its default then".
+
 Keys are SHA-256 digests of canonical JSON (sorted keys, floats by ``repr``: equal text means
 bit-equal values).  The functions work on fingerprint *dicts*, so a stored fingerprint gives
 the same keys as the live problem it was made from (the store's migration relies on it).
@@ -27,7 +33,7 @@ import importlib.metadata
 import json
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,11 +50,11 @@ __all__ = [
     "canonical",
     "code_digest",
     "code_digest_as_stored",
-    "default_options",
-    "without_defaults",
+    "as_keyed_now",
     "comparison_key",
     "comparison_part",
     "coordinates_of",
+    "default_options",
     "describe_change",
     "interface_digest",
     "model_part",
@@ -92,11 +98,16 @@ def _package_version(obj: Any) -> str:
 
 
 def _options(obj: Any) -> dict[str, Any]:
-    """A plugin's options that differ from their defaults (adding an option with a default to
-    a plugin keeps every key); a file option (a ``Path``, e.g. ``mesh_file``) by its content."""
+    """Every option of a plugin with its effective value (its default resolved); a file option
+    (a ``Path``, e.g. ``mesh_file``) by its content."""
     # inf and nan as strings, as canonical() does
-    out = dict(jsonable(plugin_options(obj, exclude_defaults=True)))
+    return _keyed(obj, jsonable(plugin_options(obj)))
+
+
+def _keyed(obj: Any, values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` (options of ``obj``) with each file option replaced by its content digest."""
     opts = getattr(obj, "options", None)
+    out = dict(values)
     for key in out:
         value = getattr(opts, key, None)
         if isinstance(value, Path):
@@ -172,25 +183,40 @@ def interface_digest(gamma: Interface) -> str:
 
 
 def default_options(obj: Any) -> dict[str, Any]:
-    """The options of plugin ``obj`` that are at their defaults, with those values, as they
-    appear in a fingerprint (what :func:`_options` leaves out)."""
+    """The options of plugin ``obj`` that are at their defaults, with their values as they
+    appear in a fingerprint."""
     given = plugin_options(obj, exclude_defaults=True)
-    return {k: v for k, v in jsonable(plugin_options(obj)).items() if k not in given}
+    values = jsonable(plugin_options(obj))
+    return _keyed(obj, {k: v for k, v in values.items() if k not in given})
 
 
-def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -> dict[str, Any]:
-    """A stored model or comparison part (:func:`model_part`, :func:`comparison_part`) with
-    the options of its ``plugin`` ("model" or "measure") left out that are at ``obj``'s
-    defaults now, and the package version it was keyed by replaced by ``obj``'s declared
-    numerics version: the part a store written before options were keyed by their difference
-    from the defaults (or before a defaulted option existed, or before the plugin declared its
-    numerics version, or before a mesh file was keyed by its parsed content) would have
-    today."""
-    defaults = default_options(obj)
+def as_keyed_now(
+    part: Mapping[str, Any],
+    obj: Any,
+    plugin: str = "model",
+    defaults: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """A stored model or comparison part (:func:`model_part`, :func:`comparison_part`) as this
+    fbia keys its ``plugin`` ("model" or "measure") ``obj``, where the stored part tells:
+
+    * the package version it was keyed by becomes ``obj``'s declared numerics version (this
+      release's version, or an earlier one's for a plugin that declares its numerics now:
+      the store's source digest still checks the code);
+    * a file option keyed by its bytes is keyed by its parsed content when the bytes are the
+      same;
+    * an option of ``obj`` that the part does not record gets ``obj``'s value when that is
+      its default now: an option added since (the plugin author's contract: a new option's
+      default keeps the old behaviour), or in a part that recorded only the options that
+      differed from their defaults (fbia before issue 44) one at its default then, which the
+      caller may take only where the plugin's code is unchanged since;
+    * an option the part records that ``obj`` no longer has is left out where it was at its
+      default (``defaults``: the names of the part's options that were, when known).
+
+    An option whose recorded value differs from ``obj``'s effective value stays as recorded:
+    the keys then differ."""
+    at_default = default_options(obj)
     out = json.loads(canonical(part))
     stored, now = out[plugin].get("version"), _class_version(obj)["version"]
-    # Keyed by the package's version: this release's, or (for a plugin that now declares its
-    # numerics) an earlier one's, whose code the store's source digest still checks.
     declares = now.startswith("numerics ")
     if stored == _package_version(obj) or (
         declares and isinstance(stored, str) and not stored.startswith("numerics ")
@@ -203,9 +229,11 @@ def without_defaults(part: Mapping[str, Any], obj: Any, plugin: str = "model") -
         if isinstance(v, dict) and isinstance(path, Path) and "sha256" in v:
             if v["sha256"] is not None and v["sha256"] == _bytes_digest(path):
                 options[k] = _file_digest(path)
-    out[plugin]["options"] = {
-        k: v for k, v in options.items() if not (k in defaults and v == defaults[k])
-    }
+    names = set(plugin_options(obj))
+    gone = set(defaults or ()) - names  # removed from the plugin, at their defaults then
+    options = {k: v for k, v in options.items() if k not in gone}
+    added = {k: v for k, v in at_default.items() if k not in options}
+    out[plugin]["options"] = {**added, **options}
     return out
 
 
@@ -398,7 +426,8 @@ def _folder_digest(obj: Any) -> dict[str, Any]:
 def problem_fingerprint(problem: InverseProblem) -> dict[str, Any]:
     """Everything that determines a run, its comparison and its likelihood, as one dict.
 
-    Parts: ``model`` and ``measure`` (class, version, options), ``observations`` (per
+    Parts: ``model`` and ``measure`` (class, version, every option's effective value, and
+    ``defaults``: the names of the options at their defaults), ``observations`` (per
     observation: coordinate, SHA-256 of the interface's vertices and cells and of the
     measurement points and directions, noise_std), ``fixed`` inputs and the likelihood's
     ``noise_std``.  :func:`model_part` and :func:`comparison_part` take out what runs and
@@ -417,24 +446,38 @@ def problem_fingerprint(problem: InverseProblem) -> dict[str, Any]:
             }
         )
     return {
-        "model": {**_class_version(problem.model), "options": _options(problem.model)},
-        "measure": {**_class_version(problem.measure), "options": _options(problem.measure)},
+        "model": _plugin_part(problem.model),
+        "measure": _plugin_part(problem.measure),
         "observations": observations,
         "fixed": dict(problem.fixed),
         "noise_std": problem.noise_std,
     }
 
 
+def _plugin_part(obj: Any) -> dict[str, Any]:
+    return {
+        **_class_version(obj),
+        "options": _options(obj),
+        "defaults": sorted(default_options(obj)),
+    }
+
+
+def _keyed_part(plugin: Mapping[str, Any]) -> dict[str, Any]:
+    """A plugin's part of a fingerprint without ``defaults``: the key does not depend on
+    whether a value is the default or pinned to it."""
+    return {k: v for k, v in plugin.items() if k != "defaults"}
+
+
 def model_part(fingerprint: Mapping[str, Any]) -> dict[str, Any]:
     """What every forward run of the problem depends on besides x: model and fixed inputs."""
-    return {"model": fingerprint["model"], "fixed": fingerprint["fixed"]}
+    return {"model": _keyed_part(fingerprint["model"]), "fixed": fingerprint["fixed"]}
 
 
 def comparison_part(fingerprint: Mapping[str, Any]) -> dict[str, Any]:
     """What the comparison of a run with the observations depends on."""
     keep = ("coordinate", "interface", "points")
     return {
-        "measure": fingerprint["measure"],
+        "measure": _keyed_part(fingerprint["measure"]),
         "observations": [{k: o[k] for k in keep} for o in fingerprint["observations"]],
     }
 
@@ -467,21 +510,18 @@ def model_key(model: Mapping[str, Any]) -> str:
     return _sha(canonical(model))
 
 
-#: an option a fingerprint leaves out: at its default
+#: an option a fingerprint leaves out: one at its default in a store written when only the
+#: options that differed from their defaults were keyed, or one added to the plugin since
 _DEFAULT = object()
 
 
 # -- explaining a change -------------------------------------------------------------------------
 def describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
-    """What differs between two fingerprints, in words (at most a few items per part)."""
-
-    def values(a: Any, b: Any) -> str:
-        def shown(v: Any) -> str:
-            return "default" if v is _DEFAULT else json.dumps(v)
-
-        text = f"{shown(a)} -> {shown(b)}"
-        return text if len(text) <= 60 else text[:57] + "..."
-
+    """What differs between two fingerprints, the stored ``old`` and ``new``, in words (at
+    most a few items per part).  An option is named with both effective values, each marked
+    when it is the plugin's default (``gain: 0.5 (default then) -> 1.0 (default now)``); one
+    that ``old`` leaves out (at its default then, or added since) is a change only where
+    ``new`` does not take its default."""
     changes: list[str] = []
     for part in ("model", "measure"):
         a, b = old.get(part, {}), new.get(part, {})
@@ -491,15 +531,11 @@ def describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]
             changes.append(f"{part} {a.get('class')} -> {b.get('class')}")
             continue
         if a.get("version") != b.get("version"):
-            changes.append(f"{part} version {values(a.get('version'), b.get('version'))}")
-        oa, ob = a.get("options", {}), b.get("options", {})
-        keys = sorted(k for k in {*oa, *ob} if oa.get(k, _DEFAULT) != ob.get(k, _DEFAULT))
-        if keys:
-            shown = ", ".join(
-                f"{k}: {values(oa.get(k, _DEFAULT), ob.get(k, _DEFAULT))}" for k in keys[:3]
-            )
-            more = f" and {len(keys) - 3} more" if len(keys) > 3 else ""
-            changes.append(f"{part} options ({shown}{more})")
+            changes.append(f"{part} version {_values(a.get('version'), b.get('version'))}")
+        options = _changed_options(a, b)
+        if options:
+            more = f" and {len(options) - 3} more" if len(options) > 3 else ""
+            changes.append(f"{part} options ({', '.join(options[:3])}{more})")
     oa, ob = old.get("observations", []), new.get("observations", [])
     if len(oa) != len(ob):
         changes.append(f"number of observations {len(oa)} -> {len(ob)}")
@@ -509,7 +545,35 @@ def describe_change(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]
             if what:
                 changes.append(f"observation {k + 1} ({', '.join(what)})")
     if old.get("fixed") != new.get("fixed"):
-        changes.append(f"fixed inputs {values(old.get('fixed'), new.get('fixed'))}")
+        changes.append(f"fixed inputs {_values(old.get('fixed'), new.get('fixed'))}")
     if old.get("noise_std") != new.get("noise_std"):
-        changes.append(f"likelihood noise_std {values(old.get('noise_std'), new.get('noise_std'))}")
+        changes.append(
+            f"likelihood noise_std {_values(old.get('noise_std'), new.get('noise_std'))}"
+        )
     return changes or ["the problem description"]
+
+
+def _changed_options(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
+    """``name: old -> new`` for each option that differs between two plugin parts of
+    fingerprints, in name order (see :func:`describe_change`)."""
+    oa, ob = old.get("options", {}), new.get("options", {})
+    da, db = set(old.get("defaults", ())), set(new.get("defaults", ()))
+    out = []
+    for k in sorted({*oa, *ob}):
+        va, vb = oa.get(k, _DEFAULT), ob.get(k, _DEFAULT)
+        if va == vb or (va is _DEFAULT and k in db) or (vb is _DEFAULT and k in da):
+            continue
+        then = _shown(va, "default then" if k in da else "")
+        now = _shown(vb, "default now" if k in db else "", absent="(no such option now)")
+        out.append(f"{k}: {then} -> {now}")
+    return out
+
+
+def _shown(value: Any, note: str = "", absent: str = "default") -> str:
+    text = absent if value is _DEFAULT else json.dumps(value)
+    text = text if len(text) <= 40 else text[:37] + "..."
+    return f"{text} ({note})" if note and value is not _DEFAULT else text
+
+
+def _values(a: Any, b: Any) -> str:
+    return f"{_shown(a)} -> {_shown(b)}"

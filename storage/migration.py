@@ -11,20 +11,25 @@ observations reruns the migrated runs, since format 1 kept no interfaces to comp
 The original file is copied first (``VACUUM INTO <name>.v1.sqlite``); the migration is one
 transaction, so an interrupted migration leaves the format-1 store as it was.
 
-:func:`rekey` carries a store's runs over to a model part written without the options at
-their defaults (a store written before a defaulted option existed, or before fbia keyed
-options by their difference from the defaults): same runs, new keys.
+:func:`rekey` carries a store's runs over to the model part this fbia keys them by (every
+option's effective value, :func:`fbia.storage.fingerprints.as_keyed_now`): same runs, new
+keys, where the stored values agree with the current ones.  A store keyed by the options that
+differed from their defaults (fbia before issue 44) says nothing of the values its runs had
+for the others: it is re-keyed only while the model's code is unchanged since, so that no
+default can have changed (:func:`unknown_defaults` says why not otherwise).
 """
 
 from __future__ import annotations
 
 import json
 import sqlite3
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from ..core.errors import ConfigError
 from .fingerprints import (
+    as_keyed_now,
     canonical,
     comparison_key,
     comparison_part,
@@ -33,10 +38,16 @@ from .fingerprints import (
     model_key,
     model_part,
     run_key,
-    without_defaults,
 )
 
-__all__ = ["code_change", "comparison_rekey", "migrate", "model_change", "rekey"]
+__all__ = [
+    "code_change",
+    "comparison_rekey",
+    "migrate",
+    "model_change",
+    "rekey",
+    "unknown_defaults",
+]
 
 _V1_COLUMNS = (
     "key, idx, session, attempt, x, uncertain, status, message, residuals, distances, "
@@ -105,11 +116,15 @@ def rekey(
     coordinates: list[dict[str, Any]],
     new_model: dict[str, Any],
     comparisons: tuple[str, str] | None = None,
+    defaults: Sequence[str] | None = None,
 ) -> int:
     """Give every run stored under ``old_model`` (at ``coordinates``) its key under
     ``new_model``, and the comparisons stored under the comparison key ``comparisons[0]``
     the key ``comparisons[1]``, in the caller's transaction; runs stored under other
-    coordinates keep their keys.  Returns the number of runs re-keyed."""
+    coordinates keep their keys.  ``defaults``: the names of ``new_model``'s options at their
+    defaults, recorded as meta ``model_defaults``, which says that the part keys every
+    option's value; None removes it (a part keyed by the options that differ from their
+    defaults, as fbia before issue 44 wrote it).  Returns the number of runs re-keyed."""
     n = 0
     for key, x in db.execute("SELECT key, x FROM runs").fetchall():
         values = json.loads(x)
@@ -126,6 +141,12 @@ def rekey(
         )
     db.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (model_key(new_model),))
     db.execute("INSERT OR REPLACE INTO meta VALUES ('model', ?)", (canonical(new_model),))
+    if defaults is None:
+        db.execute("DELETE FROM meta WHERE key = 'model_defaults'")
+    else:
+        db.execute(
+            "INSERT OR REPLACE INTO meta VALUES ('model_defaults', ?)", (canonical(defaults),)
+        )
     return n
 
 
@@ -133,12 +154,17 @@ def comparison_rekey(
     old: dict[str, Any], new: dict[str, Any], measure: Any
 ) -> tuple[str, str] | None:
     """(old, new) comparison key when the stored problem fingerprint ``old`` compares as
-    ``new`` does once the ``measure``'s options at their defaults are left out; else None."""
+    ``new`` does with the ``measure``'s options as this fbia keys them
+    (:func:`~fbia.storage.fingerprints.as_keyed_now`); else None, and the stored runs are
+    compared anew from their interfaces.  The caller passes only a fingerprint that records
+    every option's value (a measure's default may have changed since one that records the
+    options differing from their defaults was written, and its code is not digested)."""
     if not old:
         return None
     stored = comparison_part(old)
     target = comparison_key(comparison_part(new))
-    if comparison_key(without_defaults(stored, measure, "measure")) != target:
+    defaults = old["measure"].get("defaults")
+    if comparison_key(as_keyed_now(stored, measure, "measure", defaults)) != target:
         return None
     return comparison_key(stored), target
 
@@ -177,10 +203,37 @@ def _changed_files(old: Any, new: dict[str, str] | str, most: int = 6) -> str:
     return ", ".join(marked(f) for f in names[:most]) + more if names else "its files"
 
 
-def model_change(old: dict[str, Any], new: dict[str, Any], n: int) -> str:
-    """Why a store's ``n`` runs of the problem fingerprint ``old`` are not reused for ``new``."""
+def unknown_defaults(old: Mapping[str, Any], code: Mapping[str, Any], n: int) -> str | None:
+    """Why the ``n`` runs of a store keyed by the options that differed from their defaults
+    (fbia before issue 44), made by the model code ``old`` (a :func:`code_digest`), cannot
+    be given keys with every option's value by the code ``code`` (None: they can).  Only
+    unchanged code says that no default changed since: a new release with the same declared
+    numerics and ``--reuse-changed-code`` vouch for the numbers, not for the defaults a study
+    relies on."""
+    if n == 0 or old.get("class") != code["class"] or old.get("sha256") == code["sha256"]:
+        return None
+    return (
+        f"the store holds {n} run{'s' if n != 1 else ''} keyed by an earlier fbia by the "
+        "options that differed from their defaults only, and the source of the model plugin "
+        f"{code['class']} changed since ({_changed_files(old.get('files'), code['files'])}): "
+        "whether a default they relied on changed cannot be checked, so they are not reused: "
+        "run with --fresh to start over, or write to another --output (or run once with the "
+        "plugin's code that made them, which records every option's value)"
+    )
+
+
+def model_change(
+    old: dict[str, Any], new: dict[str, Any], n: int, pins: Mapping[str, Any] | None = None
+) -> str:
+    """Why a store's ``n`` runs of the problem fingerprint ``old`` are not reused for ``new``;
+    ``pins``: the model options (name: the runs' value) that differ only because this study
+    takes their defaults, which setting them to the runs' values would reuse."""
+    pin = ""
+    if pins:
+        values = ", ".join(f"{k} = {json.dumps(v)}" for k, v in sorted(pins.items()))
+        pin = f"set {values} in the model's options to reuse them, "
     return (
         f"the store holds {n} run{'s' if n != 1 else ''} of a different model "
         f"(changed: {'; '.join(describe_change(old, new))}); they cannot be "
-        "reused: run with --fresh to start over, or write to another --output"
+        f"reused: {pin}run with --fresh to start over, or write to another --output"
     )

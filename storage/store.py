@@ -19,23 +19,26 @@
 (1, True, {0})
 
 Two layers (:mod:`fbia.storage.fingerprints`): a **forward run** is keyed by what it depends on
-(model class, version and options, fixed inputs, requested coordinates, input values) and
-stored with the interfaces it gave; its **comparison** with the observations (residuals and
-distances) is keyed by the measure and the observed data.  The likelihood is not stored: it is
-computed from the distances when a run is read (:mod:`fbia.core.likelihood`).  So a change of
-σ_N, bounds, priors, iterator or executor reuses every stored run, and a change of the measure
-or the observations reuses every forward run and recomputes only its comparison (from the
-stored interfaces).  A store holds the runs of one model: binding it to another model, other
-model options or other fixed inputs is an error that says what changed.
+(model class, version and every option's effective value, fixed inputs, requested coordinates,
+input values) and stored with the interfaces it gave; its **comparison** with the observations
+(residuals and distances) is keyed by the measure and the observed data.  The likelihood is not
+stored: it is computed from the distances when a run is read (:mod:`fbia.core.likelihood`).  So
+a change of σ_N, bounds, priors, iterator or executor reuses every stored run, and a change of
+the measure or the observations reuses every forward run and recomputes only its comparison
+(from the stored interfaces).  A store holds the runs of one model: binding it to another model,
+other model options or other fixed inputs is an error that says what changed, and so is an
+option whose default changed since the runs were made (a study that sets the runs' value
+reuses them).
 
 Every run is written in its own transaction the moment it finishes (WAL journal,
 ``synchronous=NORMAL``: a killed process loses nothing that was committed).  Tables: ``meta``
-(format, model key and fingerprint, the last problem bound, creation time), ``sessions`` (one
-row per ``fbia run``: start and end, host, pid, fbia version, study file hash, executor,
-status), ``runs`` (key, index, session, attempt, x, uncertain, status, message, wall time,
-worker, working folder, artifacts, diagnostics, finish time, interfaces as an ``.npz``) and
-``comparisons`` (run key, comparison key, status, message, residuals as float64 bytes,
-distances).  Read it with any SQLite client, e.g.
+(format, model key and fingerprint, the names of its options at their defaults, the last
+problem bound, the model's code digest, creation time), ``sessions`` (one row per ``fbia
+run``: start and end, host, pid, fbia version, study file hash, executor, status), ``runs``
+(key, index, session, attempt, x, uncertain, status, message, wall time, worker, working
+folder, artifacts, diagnostics, finish time, interfaces as an ``.npz``) and ``comparisons``
+(run key, comparison key, status, message, residuals as float64 bytes, distances).  Read it
+with any SQLite client, e.g.
 ``sqlite3 output/store.sqlite "select status, count(*) from runs group by status"``.  Stores of
 the first format (``fbia-store-1``) are migrated when opened (:mod:`fbia.storage.migration`).
 """
@@ -62,6 +65,7 @@ from ..core.observation import CoordinateKey, Solution
 from ..core.problem import Evaluation, InverseProblem
 from .db import connect
 from .fingerprints import (
+    as_keyed_now,
     canonical,
     code_digest,
     code_digest_as_stored,
@@ -72,10 +76,16 @@ from .fingerprints import (
     model_part,
     problem_fingerprint,
     run_key,
-    without_defaults,
 )
 from .interface_blob import pack_interfaces, unpack_interfaces
-from .migration import code_change, comparison_rekey, migrate, model_change, rekey
+from .migration import (
+    code_change,
+    comparison_rekey,
+    migrate,
+    model_change,
+    rekey,
+    unknown_defaults,
+)
 from .output_folder import LockHeld, is_fbia_store, lock_file, this_process
 
 __all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
@@ -138,6 +148,27 @@ def _now() -> str:
 
 def _floats(array: np.ndarray | None) -> bytes | None:
     return None if array is None else np.ascontiguousarray(array, dtype="<f8").tobytes()
+
+
+def _pins(
+    stored: Mapping[str, Any], model: Mapping[str, Any], fingerprint: Mapping[str, Any]
+) -> dict[str, Any]:
+    """The options (name: the stored value) by which the stored model part differs from
+    ``model`` while this study takes their defaults (of ``fingerprint``), when the parts
+    differ in no other way: setting them to the stored values reuses the runs."""
+    a, b = stored["model"], model["model"]
+    if (a.get("class"), a.get("version"), stored.get("fixed")) != (
+        b.get("class"),
+        b.get("version"),
+        model.get("fixed"),
+    ):
+        return {}
+    oa, ob = a.get("options", {}), b.get("options", {})
+    changed = {k for k in {*oa, *ob} if oa.get(k) != ob.get(k)}
+    defaults = set(fingerprint["model"]["defaults"])
+    if not changed <= defaults or not changed <= set(oa):
+        return {}
+    return {k: oa[k] for k in changed}
 
 
 # -- the store ---------------------------------------------------------------------------------
@@ -260,11 +291,13 @@ class StudyStore:
         """Tie the store to ``problem``: the first time, record its model; later, check it.
 
         Returns the model key.  Raises :class:`StoreMismatchError` (a ConfigError) naming
-        what changed when the store holds runs of another model, or runs made by other code
-        of the model plugin (its source files changed, :func:`code_digest`) unless
-        ``reuse_changed_code``.  A store whose model part differs only by options that are at
-        their defaults now (written before a defaulted option existed) is re-keyed.  The
-        measure, the observations and the likelihood may differ from earlier sessions.
+        what changed when the store holds runs of another model (an option's effective value
+        differs, whether set or a default that changed), or runs made by other code of the
+        model plugin (its source files changed, :func:`code_digest`) unless
+        ``reuse_changed_code``, which waives the code check only.  A store keyed another way
+        is re-keyed where its recorded values agree with the current ones
+        (:meth:`_rekey_or_refuse`).  The measure, the observations and the likelihood may
+        differ from earlier sessions.
         """
         if self._binding is not None and self._binding.problem is problem:
             assert self.hash is not None
@@ -273,14 +306,19 @@ class StudyStore:
         model = model_part(fingerprint)
         key = model_key(model)
         code = code_digest(problem.model)
+        defaults = canonical(fingerprint["model"]["defaults"])
         if self.hash is None:
             with self._transaction() as db:
                 db.execute("INSERT INTO meta VALUES ('model_key', ?)", (key,))
                 db.execute("INSERT INTO meta VALUES ('model', ?)", (canonical(model),))
+                db.execute("INSERT OR REPLACE INTO meta VALUES ('model_defaults', ?)", (defaults,))
             self.hash = key
             logger.info("store %s: new, for model %s", self.path, code["class"])
         elif key != self.hash:
-            self._rekey_or_refuse(fingerprint, model, problem)
+            self._rekey_or_refuse(fingerprint, model, problem, code)
+        elif self._meta("model_defaults") is None:  # keyed by an earlier fbia, every option
+            with self._transaction() as db:
+                db.execute("INSERT INTO meta VALUES ('model_defaults', ?)", (defaults,))
         self._check_code(problem.model, code, reuse_changed_code)
         counts = self.counts()
         if counts:
@@ -306,15 +344,40 @@ class StudyStore:
         return key
 
     def _rekey_or_refuse(
-        self, fingerprint: dict[str, Any], model: dict[str, Any], problem: InverseProblem
+        self,
+        fingerprint: dict[str, Any],
+        model: dict[str, Any],
+        problem: InverseProblem,
+        code: dict[str, Any],
     ) -> None:
+        """Re-key the store to ``model`` where its stored model part, as this fbia keys it
+        (:func:`as_keyed_now`), is ``model``; else refuse it naming what changed.
+
+        The stored part records every option's value when meta ``model_defaults`` is there
+        (this fbia) or ``code`` is not (fbia before it left the defaults out of the keys; the
+        fbia in between re-keyed every store it opened and recorded its code): an option it
+        lacks was added since, and is re-keyed at its default.  A part of the fbia in between
+        records the options that differed from their defaults only: it is re-keyed only while
+        the model's code is unchanged since, so that no default can have changed."""
         stored = json.loads(self._meta("model") or "{}")
         old = json.loads(self._meta("problem") or "{}")
-        if not stored or model_key(without_defaults(stored, problem.model)) != model_key(model):
-            raise StoreMismatchError(model_change(old, fingerprint, len(self)), str(self.path))
-        pair = comparison_rekey(old, fingerprint, problem.measure)
+        then = self._meta("model_defaults")
+        recorded = self._meta("code")
+        every_option = then is not None or recorded is None
+        n = len(self)
+        if then is None and recorded is not None:
+            was = json.loads(recorded)
+            why = unknown_defaults(was, code_digest_as_stored(was, problem.model, code), n)
+            if why is not None:
+                raise StoreMismatchError(why, str(self.path))
+        defaults = None if then is None else json.loads(then)
+        candidate = as_keyed_now(stored, problem.model, "model", defaults) if stored else {}
+        if model_key(candidate) != model_key(model):
+            pins = _pins(candidate, model, fingerprint) if stored else {}
+            raise StoreMismatchError(model_change(old, fingerprint, n, pins), str(self.path))
+        pair = comparison_rekey(old, fingerprint, problem.measure) if every_option else None
         with self._transaction() as db:
-            rekey(db, stored, coordinates_of(old), model, pair)
+            rekey(db, stored, coordinates_of(old), model, pair, fingerprint["model"]["defaults"])
         self.hash = model_key(model)
         logger.info("store %s re-keyed: its model part as this fbia keys it", self.path)
 

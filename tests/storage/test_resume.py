@@ -212,8 +212,8 @@ def test_changes_that_keep_the_runs_reuse_them_others_are_refused_until_fresh(fo
     err = capsys.readouterr().err.strip()
     assert err == (
         f"fbia: error: output/store.sqlite: the store holds {n + new} runs "
-        "of a different model (changed: model options (delay: default -> 0.001)); they cannot "
-        "be reused: run with --fresh to start over, or write to another --output"
+        "of a different model (changed: model options (delay: 0.0 (default then) -> 0.001)); "
+        "they cannot be reused: run with --fresh to start over, or write to another --output"
     )
     assert _rows(folder / "output" / "store.sqlite") == rows  # nothing touched
     assert main(["run", "toy.toml", "--fresh"]) == 0

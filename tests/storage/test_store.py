@@ -159,7 +159,8 @@ def test_a_store_of_another_model_says_what_changed(tmp_path):
             store.bind(_problem(delay=0.25, noise_std=0.03))
     message = str(info.value)
     assert message.startswith(f"{tmp_path / 's.sqlite'}: the store holds 2 runs of a different ")
-    assert "model options (delay: default -> 0.25); likelihood noise_std 0.02 -> 0.03" in message
+    changed = "model options (delay: 0.0 (default then) -> 0.25); likelihood noise_std 0.02 -> 0.03"
+    assert changed in message
     assert message.endswith("run with --fresh to start over, or write to another --output")
 
 
@@ -287,7 +288,7 @@ def test_a_file_option_counts_by_its_content_not_its_folder(tmp_path):
     assert a == b and a["mesh_file"]["file"] == "cell.msh"
     (tmp_path / "b" / "cell.msh").write_text("mesh v2")
     assert _options(Model(tmp_path / "b" / "cell.msh")) != a
-    assert _options(Model(None)) == {}  # at its default: not keyed
+    assert _options(Model(None)) == {"mesh_file": None}  # at its default: keyed as None
 
 
 @pytest.mark.parametrize("isolate", [False, True])
