@@ -37,7 +37,7 @@ import warnings
 from collections.abc import Callable, Generator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -144,6 +144,16 @@ class SobolIndicesResult(Result):
     indices: SobolIndices | None = None
     surrogate: dict[str, Any] = field(default_factory=dict)
     test_relative_rmse: float = math.nan
+    #: what every sobol_indices result.json holds (fbia.load_result)
+    required_fields: ClassVar[tuple[str, ...]] = ("quantity", "indices")
+
+    def check_loaded(self) -> None:
+        """The indices and their intervals: one of each per input."""
+        ind = self.indices
+        if ind is not None:
+            for key in ("s1", "s1_conf", "st", "st_conf"):
+                if len(getattr(ind, key)) != len(ind.names):
+                    raise ValueError(f"info.indices.{key} has not one value per input {ind.names}")
 
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()

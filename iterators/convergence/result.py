@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +31,8 @@ class ConvergenceRow(KeepsSurrogate):
     test_max_abs: float
     test_relative_l2: float  # ||error|| / ||L_test - mean L_test||
     reference_distance: float  # |ML point - reference| in units of the box (nan: none)
-    state: dict[str, Any] = field(repr=False, compare=False)  # the GP (GpSurrogate.state)
+    #: the GP (GpSurrogate.state), not in result.json (read back: None)
+    state: dict[str, Any] = field(repr=False, compare=False, metadata={"in_file": False})
 
     def to_dict(self) -> dict[str, Any]:
         """The row without the GP's state (for result.json)."""
@@ -49,16 +50,27 @@ class SurrogateConvergenceResult(Result):
     log_likelihood: FloatArray = field(default_factory=lambda: np.zeros(0))
     n_test: int = 0
     reference: dict[str, float] | None = None
+    #: what every surrogate_convergence result.json holds (fbia.load_result)
+    required_fields: ClassVar[tuple[str, ...]] = ("rows", "n_test")
 
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()
         parts = {
+            "names": self.names,
             "rows": [row.to_dict() for row in self.rows],
+            "points": self.points,
+            "log_likelihood": self.log_likelihood,
             "n_test": self.n_test,
             "reference": self.reference,
         }
         out["info"] = {**out["info"], **jsonable(parts)}
         return out
+
+    def check_loaded(self) -> None:
+        """Every row's ML point over ``names`` (the table's columns)."""
+        for i, row in enumerate(self.rows):
+            if not set(self.names) <= set(row.ml_point):
+                raise ValueError(f"info.rows[{i}].ml_point has no value of each of {self.names}")
 
     def quantities(self) -> dict[str, float]:
         """Besides :meth:`Result.quantities` (``x.<name>`` is the ML point of the largest

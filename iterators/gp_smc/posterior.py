@@ -11,8 +11,12 @@
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import os
+import stat
+import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -25,9 +29,16 @@ from ...core.parameters import Parameter, Prior
 from ...core.problem import jsonable
 from ..smc.sampler import SmcResult
 from .inference_data import inference_data
-from .result import FloatArray, GpSmcResult, LaplaceApproximation, ParticlePosterior
+from .result import (
+    FloatArray,
+    GpSmcResult,
+    LaplaceApproximation,
+    ParticlePosterior,
+    check_particles,
+)
 
 __all__ = [
+    "MAX_POSTERIOR_BYTES",
     "POSTERIOR_FORMAT",
     "hpd_mass",
     "laplace_approximation",
@@ -241,16 +252,128 @@ def save_posterior(result: GpSmcResult, folder: str | Path) -> tuple[Path, Path]
     return npz, js
 
 
+#: the largest posterior file read, and the most its arrays may unpack to
+MAX_POSTERIOR_BYTES = 2 << 30
+#: the arrays of posterior.npz: always, and those of a design (all four or none)
+_PER_PARTICLE = ("log_likelihood", "log_prior", "log_posterior")
+_ARRAYS = ("format", "names", "n_x", "particles", "weights", *_PER_PARTICLE, "theta")
+_DESIGN = ("design", "design_log_likelihood", "design_ok", "train_mask")
+#: the dtype kinds of the arrays (numpy's ``dtype.kind``; the rest are numbers, "iuf")
+_KINDS = {"format": "U", "names": "U", "n_x": "iu", "design_ok": "b", "train_mask": "b"}
+_KIND_NAMES = {"U": "text", "iu": "an integer", "b": "true/false", "iuf": "numbers"}
+
+
 def load_posterior(folder: str | Path) -> dict[str, Any]:
-    """Read :func:`save_posterior`'s files: the npz arrays plus ``"meta"`` (the JSON)."""
+    """Read :func:`save_posterior`'s files: the npz arrays plus ``"meta"`` (the JSON).
+
+    A strict reader (as :func:`fbia.load_result`): regular files (a FIFO or a device is never
+    read) of at most :data:`MAX_POSTERIOR_BYTES`, the npz without pickled objects and with
+    exactly the arrays :func:`save_posterior` writes, their shapes consistent (a column of
+    ``particles`` per name, a weight per particle, the weights summing to 1), the JSON of
+    the same format, names and ``n_x``; any problem is one ConfigError naming the file and
+    the array or key."""
     folder = Path(folder)
-    with np.load(folder / "posterior.npz") as data:
-        out: dict[str, Any] = {k: data[k] for k in data.files}
-    if str(out.get("format")) != POSTERIOR_FORMAT:
-        raise ConfigError(f"not an {POSTERIOR_FORMAT} file", str(folder / "posterior.npz"))
+    npz, js = folder / "posterior.npz", folder / "posterior.json"
+    out = _read_npz(npz)
+    where = str(npz)
+    try:
+        if "format" in out and str(out["format"]) != POSTERIOR_FORMAT:
+            raise ValueError(f"format is {str(out['format'])!r}, not {POSTERIOR_FORMAT!r}")
+        _check_arrays(out)
+    except ValueError as exc:
+        raise ConfigError(str(exc), where) from None
     out["names"] = [str(n) for n in out["names"]]
-    out["meta"] = json.loads((folder / "posterior.json").read_text())
+    meta = _read_meta(js)
+    same = {"format": POSTERIOR_FORMAT, "names": out["names"], "n_x": int(out["n_x"])}
+    for key, value in same.items():
+        if meta.get(key) != value or isinstance(meta.get(key), bool):
+            raise ConfigError(f"{key} is {meta.get(key)!r}, not posterior.npz's {value!r}", str(js))
+    out["meta"] = meta
     return out
+
+
+def _regular_bytes(path: Path) -> bytes:
+    """The bytes of the regular file ``path``; never reads a FIFO (opening one does not wait
+    for a writer) or a device."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise ConfigError(f"cannot be read ({exc.strerror})", str(path)) from None
+    try:
+        found = os.fstat(fd)
+        if not stat.S_ISREG(found.st_mode):
+            raise ConfigError("not a regular file: not read", str(path))
+        raw = b""
+        if found.st_size <= MAX_POSTERIOR_BYTES:
+            with os.fdopen(os.dup(fd), "rb") as file:
+                raw = file.read(MAX_POSTERIOR_BYTES + 1)
+    finally:
+        os.close(fd)
+    if found.st_size > MAX_POSTERIOR_BYTES or len(raw) > MAX_POSTERIOR_BYTES:
+        raise ConfigError(f"larger than {MAX_POSTERIOR_BYTES} bytes", str(path))
+    return raw
+
+
+def _read_npz(path: Path) -> dict[str, Any]:
+    raw = _regular_bytes(path)
+    try:
+        with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+            unpacked = sum(member.file_size for member in archive.infolist())
+        if unpacked > MAX_POSTERIOR_BYTES:
+            raise ValueError(f"its arrays unpack to {unpacked} bytes")
+        with np.load(io.BytesIO(raw), allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise ConfigError(f"not a posterior.npz of fbia ({exc})", str(path)) from None
+
+
+def _check_arrays(out: Mapping[str, Any]) -> None:
+    """ValueError naming the first array of posterior.npz that is missing, unknown, of
+    another kind or does not fit the others."""
+    expected = {*_ARRAYS, *(_DESIGN if any(k in out for k in _DESIGN) else ())}
+    missing, unknown = sorted(expected - set(out)), sorted(set(out) - expected)
+    if missing:
+        raise ValueError(f"has no array {missing[0]}")
+    if unknown:
+        raise ValueError(f"has an array {unknown[0]}, which fbia does not write")
+    for key, value in out.items():
+        kinds = _KINDS.get(key, "iuf")
+        if value.dtype.kind not in kinds:
+            raise ValueError(f"{key} holds {value.dtype} values, not {_KIND_NAMES[kinds]}")
+    names, n_x = [str(n) for n in np.atleast_1d(out["names"])], out["n_x"]
+    if out["names"].ndim != 1 or n_x.ndim != 0:
+        raise ValueError(f"names has shape {out['names'].shape}, n_x {n_x.shape}: not (d,), ()")
+    particles = np.asarray(out["particles"], dtype=float)
+    per_particle = {k: np.asarray(out[k], dtype=float) for k in _PER_PARTICLE}
+    weights = np.asarray(out["weights"], dtype=float)
+    check_particles("", names, int(n_x), particles, weights, per_particle)
+    theta = (len(particles), len(names) - int(n_x))
+    if out["theta"].shape != theta:
+        raise ValueError(f"theta has shape {out['theta'].shape}, not {theta}: the last columns")
+    if "design" in out:
+        n = len(out["design"])
+        if out["design"].ndim != 2:
+            raise ValueError(f"design has shape {out['design'].shape}, not (n, d)")
+        for key in _DESIGN[1:]:
+            if out[key].shape != (n,):
+                raise ValueError(f"{key} has shape {out[key].shape}, not ({n},): one per run")
+
+
+def _read_meta(path: Path) -> dict[str, Any]:
+    def constant(name: str) -> float:
+        raise ValueError(f"{name} is not JSON as fbia writes it")
+
+    try:
+        meta = json.loads(_regular_bytes(path).decode("utf-8"), parse_constant=constant)
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 text (byte {exc.start})", str(path)) from None
+    except RecursionError:
+        raise ConfigError("nested too deeply: not a posterior.json", str(path)) from None
+    except ValueError as exc:
+        raise ConfigError(f"not JSON ({exc})", str(path)) from None
+    if not isinstance(meta, dict):
+        raise ConfigError("not a JSON object", str(path))
+    return meta
 
 
 def to_inference_data(posterior: Mapping[str, Any], n_draws: int | None = None, seed: int = 0):

@@ -14,8 +14,9 @@ read these attributes; ``to_dict()`` (``result.json``) writes them under ``"info
 from __future__ import annotations
 
 import html
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,6 +43,7 @@ __all__ = [
     "PosteriorCheck",
     "SmcSummary",
     "SurrogateFit",
+    "check_particles",
     "marginal_mode",
 ]
 
@@ -291,6 +293,43 @@ class ParticlePosterior:
         return np.asarray(self.log_likelihood + self.log_prior)
 
 
+def check_particles(
+    where: str,
+    names: Sequence[str],
+    n_x: int,
+    particles: FloatArray,
+    weights: FloatArray,
+    per_particle: Mapping[str, FloatArray],
+) -> None:
+    """ValueError naming the first array of weighted particles read back that does not fit
+    (``where``: the prefix of the arrays' names): ``names`` distinct, 1 <= ``n_x`` <= d of
+    them, ``particles`` (N, d) finite, a column per name, ``weights`` (N,) non-negative and
+    summing to 1, each of ``per_particle`` (N,) without NaN or +inf."""
+    d = len(names)
+    if len(set(names)) != d:
+        raise ValueError(f"{where}names {list(names)} holds a name twice")
+    if not 1 <= n_x <= d:
+        raise ValueError(f"{where}n_x is {n_x}, not 1 to {d} (the number of names)")
+    if particles.ndim != 2 or particles.shape[1] != d or len(particles) == 0:
+        raise ValueError(
+            f"{where}particles has shape {particles.shape}, not (N, {d}): a column per name of "
+            f"{list(names)}"
+        )
+    n = len(particles)
+    if not np.all(np.isfinite(particles)):
+        raise ValueError(f"{where}particles holds NaN or infinite values")
+    if weights.shape != (n,):
+        raise ValueError(f"{where}weights has shape {weights.shape}, not ({n},): one per particle")
+    total = float(np.sum(weights))
+    if not (np.all(weights >= 0.0) and abs(total - 1.0) <= 1e-6):
+        raise ValueError(f"{where}weights are not non-negative numbers summing to 1 ({total:.6g})")
+    for key, values in per_particle.items():
+        if values.shape != (n,):
+            raise ValueError(f"{where}{key} has shape {values.shape}, not ({n},): one per particle")
+        if np.any(np.isnan(values) | (values == np.inf)):
+            raise ValueError(f"{where}{key} holds NaN or +inf")
+
+
 @dataclass(frozen=True)
 class SmcSummary:
     """How the sampler ran (Algorithm 1)."""
@@ -348,6 +387,50 @@ class GpSmcResult(Result):
     failed_checks: list[float] = field(default_factory=list)
     seconds: float = 0.0
     model_check: ModelCheck | None = None
+    #: what every gp_smc result.json holds (fbia.load_result)
+    required_fields: ClassVar[tuple[str, ...]] = ("names", "n_x", "mode", "posterior")
+
+    def check_loaded(self) -> None:
+        """The posterior's arrays against its names and particles (:func:`check_particles`)
+        and its summaries' shapes; the design's arrays, one entry per design point."""
+        post = self.posterior
+        if post is not None:
+            where = "info.posterior."
+            per_particle = {"log_likelihood": post.log_likelihood, "log_prior": post.log_prior}
+            check_particles(where, post.names, post.n_x, post.particles, post.weights, per_particle)
+            d, n_x = len(post.names), post.n_x
+            arrays = {
+                "mean": (post.mean, (n_x,)),
+                "cov": (post.cov, (n_x, n_x)),
+                "mean_all": (post.mean_all, (d,)),
+                "cov_all": (post.cov_all, (d, d)),
+                "max_likelihood": (post.max_likelihood, (d,)),
+                "map": (post.map, (n_x,)),
+                "best_particle": (post.best_particle, (d,)),
+            }
+            if post.laplace is not None:
+                arrays["laplace.mean"] = (post.laplace.mean, (n_x,))
+                arrays["laplace.hessian"] = (post.laplace.hessian, (n_x, n_x))
+                arrays["laplace.cov"] = (post.laplace.cov, (n_x, n_x))
+            for key, (values, shape) in arrays.items():
+                if values is not None and values.shape != shape:
+                    raise ValueError(f"{where}{key} has shape {values.shape}, not {shape}")
+            for name in post.names:
+                if len(post.credible_intervals.get(name, ())) != 3:
+                    raise ValueError(f"{where}credible_intervals.{name} is not 3 numbers")
+        design = self.design
+        if design is not None:
+            n = len(design.points)
+            if design.points.ndim != 2:
+                raise ValueError(f"info.design.points has shape {design.points.shape}, not (n, d)")
+            sizes = {
+                "log_likelihood": design.log_likelihood.shape,
+                "status": (len(design.status),),
+                "train_mask": design.train_mask.shape,
+            }
+            for key, shape in sizes.items():
+                if shape != (n,):
+                    raise ValueError(f"info.design.{key} has shape {shape}, not ({n},)")
 
     def summary(self) -> str:
         """The status line, the MAP, then per input (x, theta, sigma_N when inferred) the

@@ -21,7 +21,7 @@ import html
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, ClassVar, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -90,6 +90,32 @@ class LMState:
         return f"round {self.round}, {self.nfev} runs ({self.n_failed} failed): " + "; ".join(parts)
 
 
+class _StartKeys(TypedDict):
+    start: int
+    status: str
+    success: bool
+    x: dict[str, float] | None
+    err_res: float | None
+    err_grad: float | None
+    iterations: int
+    nfev: int
+    at_bound: list[str]
+    best: bool
+    equally_good: bool
+
+
+class StartRecord(_StartKeys, total=False):
+    """One row of :attr:`LMResult.starts` as ``result.json`` holds it (what
+    :func:`fbia.load_result` checks it against): the keys above always, these where the
+    run gave them; the rows may hold more."""
+
+    x0: dict[str, float]
+    message: str
+    mu: float | None
+    n_failed: int
+    label: str
+
+
 #: How each ``jacobian`` option computes J, for the summary.
 _JACOBIAN_SOURCE = {
     "tangent": "the model's tangents",
@@ -148,9 +174,13 @@ class LMResult(Result):
     cov_rank: int = 0
     aic: float | None = None
     bic: float | None = None
-    starts: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    starts: list[dict[str, Any]] = field(
+        default_factory=list, repr=False, metadata={"read_as": list[StartRecord]}
+    )
     warnings: list[str] = field(default_factory=list)
     quality: FitQuality | None = None
+    #: what every LM result.json holds (fbia.load_result)
+    required_fields: ClassVar[tuple[str, ...]] = ("names", "starts", "err_res")
 
     @property
     def x_array(self) -> FloatArray | None:
@@ -158,6 +188,34 @@ class LMResult(Result):
         if self.x is None:
             return None
         return np.array([self.x[n] for n in self.names])
+
+    def check_loaded(self) -> None:
+        """The optimum, the standard errors and the arrays against ``names``: ``x`` and every
+        start's optimum over the names, ``residuals`` a vector, ``jac`` (n_r, n_x), ``cov``
+        and ``corr`` (n_x, n_x)."""
+        names, n = self.names, len(self.names)
+        if len(set(names)) != n:
+            raise ValueError(f"names {names} holds a name twice")
+        for key, value in (("x", self.x), ("jac_x", self.jac_x), ("stderr", self.stderr)):
+            if value is not None and not set(value) <= set(names):
+                raise ValueError(f"{key} is over {sorted(value)}, not over names {names}")
+        if self.x is not None and set(self.x) != set(names):
+            raise ValueError(f"x is over {sorted(self.x)}, not over names {names}")
+        shapes = {"jac": (None, n), "cov": (n, n), "corr": (n, n), "residuals": (None,)}
+        for key, shape in shapes.items():
+            a = getattr(self, key)
+            if a is not None and (
+                a.ndim != len(shape)
+                or any(s not in (None, m) for s, m in zip(shape, a.shape, strict=True))
+            ):
+                want = ", ".join("n_r" if s is None else str(s) for s in shape)
+                raise ValueError(f"{key} has shape {a.shape}, not ({want}) for names {names}")
+        for i, s in enumerate(self.starts):
+            if s["x"] is not None and (set(s["x"]) != set(names) or s["err_res"] is None):
+                raise ValueError(
+                    f"starts[{i}].x is over {sorted(s['x'])} with err_res {s['err_res']}, not "
+                    f"over names {names} with a number"
+                )
 
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()

@@ -98,25 +98,32 @@ def test_what_is_not_a_result_is_one_line(tmp_path):
     with pytest.raises(fbia.ConfigError, match="not an fbia result"):
         fbia.load_result(tmp_path)
     (tmp_path / "result.json").write_text("{")
-    with pytest.raises(fbia.ConfigError, match="not a readable result file"):
+    with pytest.raises(fbia.ConfigError, match=r"result.json: not JSON \(Expecting property"):
         fbia.load_result(tmp_path / "result.json")
 
 
 def test_a_field_the_file_does_not_hold_is_none_and_a_wrong_type_is_one_line(tmp_path):
-    from dataclasses import dataclass
+    from dataclasses import dataclass, field
 
-    from fbia.studies.result_io import from_dict
+    from fbia.studies.result_io import FieldError, from_dict
 
     @dataclass
     class Row:
         n: int
-        state: dict  # a live object the JSON leaves out
+        state: dict = field(metadata={"in_file": False})  # a live object the JSON leaves out
+
+    @dataclass
+    class Strict:
+        n: int
+        m: int
 
     assert from_dict(Row, {"n": 3}) == Row(3, None)
+    with pytest.raises(FieldError, match="^m is missing$"):
+        from_dict(Strict, {"n": 3})
     (tmp_path / "result.json").write_text(
         json.dumps({"status": "completed", "success": True, "message": "", "nfev": "many"})
     )
-    with pytest.raises(fbia.ConfigError, match=r"cannot be read as a Result \(invalid literal"):
+    with pytest.raises(fbia.ConfigError, match=r'result.json: nfev is "many", not a whole number'):
         fbia.load_result(tmp_path)
 
 
