@@ -24,6 +24,13 @@ normals point out of the biofilm into the fluid.
 
 Steps of :func:`segment_oct`:
 
+0. intensities (:func:`normalise_intensities`): the (cropped) scan's least intensity is
+   subtracted exactly and the rest divided by its range, so that every later step sees
+   float32 values from 0 to 1 whatever the scan's scale, offset or dtype (measured on fbia's
+   phantoms: times 1e-300 to 1e300, or as int64 near 2^58 or 2^58 plus the signal times
+   2^35 to 2^42, into the bit-identical surface; quantised to uint16 or uint8, within a
+   voxel of it with the Gaussian filter, 2.1 voxels with the median one on uint8).
+   Thresholds, reported or given, stay in the scan's units;
 1. substratum (and a check of ``depth_axis``: a reflection that stands out three times more
    across another axis of the scan is an error naming that axis): the upper edge of the
    bright flat reflection of the substratum, the depth
@@ -31,12 +38,15 @@ Steps of :func:`segment_oct`:
    second difference, which an exponential decay with depth leaves unchanged), or
    ``substratum_depth`` given by the user; the rows under it are dropped;
 2. denoising: a Gaussian filter (default) or a median filter;
-3. depth-attenuation compensation: intensity times ``exp(mu d)`` at depth d below the first
-   row, the inverse of a Beer–Lambert decay ``exp(-mu d)`` with ``mu`` [1/mm] given by the
-   user (0: none) or ``"auto"``: estimated from the biofilm's own decay (a rough estimate,
-   see ``_estimate_attenuation``; give the value when it is known);
-4. threshold: Otsu's (Otsu 1979) between biofilm and fluid, or a user value (applied to the
-   denoised, compensated intensity);
+3. depth-attenuation compensation: the intensity's excess over the scan's least one times
+   ``exp(mu d)`` at depth d below the first row, the inverse of a Beer–Lambert decay
+   ``exp(-mu d)`` with ``mu`` [1/mm] given by the user (0: none) or ``"auto"``: estimated from
+   the biofilm's own decay (a rough estimate, see ``_estimate_attenuation``; give the value
+   when it is known); the least intensity stands for a background that is not attenuated
+   (the noise floor of :mod:`fbia.testing.oct`, an offset of the scan);
+4. threshold: Otsu's (Otsu 1979) between biofilm and fluid, or a user value, of the
+   processed intensity in the scan's units: the least intensity plus the denoised,
+   compensated excess over it (with ``attenuation = 0``, the denoised intensity itself);
 5. cleanup: only the biofilm connected to the substratum is kept, in parts of at least
    ``min_voxels`` voxels (speckle specks on it go); fluid pockets closed off from the top and
    the side walls are filled (both by connected-component labelling);
@@ -46,9 +56,13 @@ Steps of :func:`segment_oct`:
    on the crop box's walls;
 7. check (:func:`surface_degeneracy`): a surface of fewer than :data:`MIN_TRIANGLES`
    triangles, or whose footprint on the substratum covers less than :data:`MIN_FOOTPRINT`
-   of the scan's lateral field of view, cannot be the biofilm's interface (an intensity scale
-   the processing cannot resolve, a wrong substratum) and is refused, so that no calibration
+   of the scan's lateral field of view, cannot be the biofilm's interface (a wrong substratum
+   or threshold, a biofilm too small for the field) and is refused, so that no calibration
    starts from it.
+
+Every refusal is one :class:`~fbia.core.errors.ConfigError` line, and the warnings of the
+libraries called (NumPy, scikit-image) are either avoided (Otsu's histogram in double
+precision) or that line, so nothing is printed before it.
 
 :mod:`fbia.imaging.oct_reader` reads the volume;
 :func:`fbia.studies.oct_figures.write_segmentation_figures` draws a B-scan with the segmented
@@ -59,7 +73,9 @@ segmented.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Self
@@ -78,19 +94,25 @@ from .oct_reader import read_oct_volume
 __all__ = [
     "HeightAxis",
     "MIN_FOOTPRINT",
+    "MIN_LEVELS",
     "MIN_TRIANGLES",
     "OctOptions",
     "OctSegmentation",
     "footprint_area",
     "in_model_axes",
+    "normalise_intensities",
     "observation_from_oct",
     "segment_oct",
     "surface_degeneracy",
 ]
 
 Crop = tuple[tuple[int, int] | None, tuple[int, int] | None, tuple[int, int] | None]
-#: the largest intensity a scan may have, in float32's resolvable range
-INTENSITY_RANGE = (1e-30, 1e30)
+#: the fewest distinct intensities a scan must take to be segmented
+#: (:func:`normalise_intensities`)
+MIN_LEVELS = 32
+#: processed intensities closer than this share of the greatest are one value (Otsu's
+#: histogram cannot divide a narrower range into its bins)
+_UNIFORM = 1e-9
 CropMm = tuple[tuple[float, float] | None, tuple[float, float] | None, tuple[float, float] | None]
 #: the forward model's axis along the height above the substratum (:func:`in_model_axes`)
 HeightAxis = Literal["z", "y"]
@@ -131,14 +153,19 @@ class OctOptions(PluginOptions):
         1.0, gt=0, le=10, description="Gaussian sigma or median half-width [voxels]"
     )
     threshold: float | None = Field(
-        None, description="biofilm/fluid threshold of the processed intensity; None: Otsu"
+        None,
+        description=(
+            "biofilm/fluid threshold of the processed intensity, in the scan's units (the "
+            "denoised intensity when attenuation is 0); None: Otsu"
+        ),
     )
     min_contrast: float = Field(
         2.0,
         gt=1,
         description=(
-            "least ratio of the mean biofilm to the mean fluid intensity for Otsu's split to "
-            "count as biofilm (a lower one splits one population: no biofilm) [-]"
+            "least ratio of the mean biofilm to the mean fluid intensity (both above the "
+            "scan's least intensity) for Otsu's split to count as biofilm (a lower one splits "
+            "one population: no biofilm) [-]"
         ),
     )
     min_voxels: int = Field(
@@ -210,7 +237,8 @@ class OctSegmentation:
     substratum_row
         First depth row (full volume) under the substratum surface.
     threshold
-        Threshold of the processed intensity (Otsu's or the user's).
+        Threshold of the processed intensity (Otsu's or the user's), in the scan's units
+        (step 4 of the module docstring): given as ``threshold``, it segments the same.
     attenuation
         Attenuation coefficient compensated [1/mm].
     biofilm_voxels
@@ -218,10 +246,10 @@ class OctSegmentation:
     bscan_row
         y index (full volume) of the B-scan kept for the figures.
     bscan
-        That B-scan of the cropped input, shape (crop depth, crop nx).
+        That B-scan of the cropped input, shape (crop depth, crop nx), in double precision.
     field
         The same B-scan processed (denoised, compensated, cleaned), rows down to
-        ``substratum_row``.
+        ``substratum_row``, in the scan's units (those of ``threshold``).
     """
 
     interface: Interface
@@ -232,8 +260,8 @@ class OctSegmentation:
     attenuation: float
     biofilm_voxels: int
     bscan_row: int
-    bscan: NDArray[np.float32]
-    field: NDArray[np.float32]
+    bscan: NDArray[np.float64]
+    field: NDArray[np.float64]
 
     @property
     def substratum_depth(self) -> float:
@@ -281,20 +309,11 @@ def segment_oct(
     spacing = _voxel_size(voxel_size, where)
     full = read_oct_volume(source, opts.depth_axis)
     if opts.crop_mm is not None:
-        volume, origin = _crop(full, _crop_indices(opts.crop_mm, spacing), "crop_mm", where)
+        scan, origin = _crop(full, _crop_indices(opts.crop_mm, spacing), "crop_mm", where)
     else:
-        volume, origin = _crop(full, opts.crop, "crop", where)
-    if float(volume.min()) < 0.0:
-        raise ConfigError("OCT intensities must be >= 0 (linear, not log or dB)", where)
-    if float(volume.max()) <= float(volume.min()):
-        raise ConfigError("volume is constant: nothing to segment", where)
-    if not INTENSITY_RANGE[0] <= float(volume.max()) <= INTENSITY_RANGE[1]:
-        raise ConfigError(
-            f"intensities up to {float(volume.max()):.3g}: outside {INTENSITY_RANGE[0]:g}-"
-            f"{INTENSITY_RANGE[1]:g}, which the single-precision processing cannot resolve; "
-            "scale the scan (e.g. to 0-1 or 0-65535)",
-            where,
-        )
+        scan, origin = _crop(full, opts.crop, "crop", where)
+    # 0. intensities of order 1 whatever the scan's scale, offset and dtype
+    volume, least, span = normalise_intensities(scan, where)
     dz = spacing[0]
     if opts.substratum_depth is None:
         _check_depth_axis(volume, opts.depth_axis, where)
@@ -319,26 +338,37 @@ def segment_oct(
             where,
         )
     above *= np.exp(mu * depth).astype(np.float32)[:, None, None]
-    # 4. threshold
+    del volume  # the rows needed are in field
+
+    def in_scan_units(value: float) -> float:  # a processed intensity, as the scan's
+        return float(least) + span * value
+
+    # 4. threshold (the user's is in the scan's units, like the one reported)
+    lo, hi = float(above.min()), float(above.max())
     if opts.threshold is not None:
-        lo, hi = float(above.min()), float(above.max())
-        if not lo < float(opts.threshold) < hi:
+        t = (float(opts.threshold) - float(least)) / span
+        if not lo < t < hi:
             raise ConfigError(
                 f"threshold {opts.threshold:g} lies outside the processed intensities "
-                f"({lo:.4g} to {hi:.4g}): give one between them, or none (Otsu's)",
+                f"({in_scan_units(lo):.4g} to {in_scan_units(hi):.4g}): give one between "
+                "them, or none (Otsu's)",
                 where,
             )
-    t = float(opts.threshold) if opts.threshold is not None else _otsu(above)
+    else:
+        t = _otsu(above, lo, hi, where)
     mask = above > t
     if not mask.any():
-        raise ConfigError(f"no biofilm found: no voxel above the threshold {t:.4g}", where)
-    high = float(above[mask].mean())
-    low = float(above[~mask].mean()) if not mask.all() else t
+        raise ConfigError(
+            f"no biofilm found: no voxel above the threshold {in_scan_units(t):.4g}", where
+        )
+    high = float(above[mask].mean(dtype=np.float64))
+    low = float(above[~mask].mean(dtype=np.float64)) if not mask.all() else t
     if opts.threshold is None and high < opts.min_contrast * low:
         raise ConfigError(
-            f"no biofilm found: Otsu's threshold {t:.4g} splits one population (class means "
-            f"{high:.4g} and {low:.4g}, ratio below min_contrast = {opts.min_contrast:g}); "
-            "give a threshold if there is biofilm",
+            f"no biofilm found: Otsu's threshold {in_scan_units(t):.4g} splits one population "
+            f"(class means {span * high:.4g} and {span * low:.4g} above the scan's least "
+            f"intensity, ratio below min_contrast = {opts.min_contrast:g}); give a threshold "
+            "if there is biofilm",
             where,
         )
     # 5. keep what hangs on the substratum, fill closed fluid pockets
@@ -346,7 +376,7 @@ def segment_oct(
     if not solid.any():
         raise ConfigError(
             f"no biofilm found: no part of at least {opts.min_voxels} voxels above the threshold "
-            f"{t:.4g} touches the substratum (row {ks + origin[0]})",
+            f"{in_scan_units(t):.4g} touches the substratum (row {ks + origin[0]})",
             where,
         )
     above[mask & ~solid] = min(low, t)
@@ -361,10 +391,10 @@ def segment_oct(
     if cause is not None:
         otsu = "Otsu's threshold" if opts.threshold is None else "threshold"
         raise ConfigError(
-            f"{cause}; the intensity scale (intensities {float(volume.min()):.3g} to "
-            f"{float(volume.max()):.3g}) or the substratum may be wrong, or a biofilm this "
-            f"small needs crop_mm around it; segmentation: substratum row {ks + origin[0]}, "
-            f"{otsu} {t:.4g}, attenuation {mu:g} 1/mm, denoise {opts.denoise} "
+            f"{cause}; the substratum or the threshold may be wrong, or a biofilm this small "
+            f"needs crop_mm around it; segmentation: intensities {float(least):.4g} to "
+            f"{float(least) + span:.4g}, substratum row {ks + origin[0]}, {otsu} "
+            f"{in_scan_units(t):.4g}, attenuation {mu:g} 1/mm, denoise {opts.denoise} "
             f"{opts.denoise_size:g}",
             where,
         )
@@ -374,12 +404,12 @@ def segment_oct(
         voxel_size=spacing,
         origin=origin,
         substratum_row=ks + origin[0],
-        threshold=t,
+        threshold=in_scan_units(t),
         attenuation=float(mu),
         biofilm_voxels=int(np.count_nonzero(solid)),
         bscan_row=j + origin[1],
-        bscan=np.array(volume[:, j, :]),
-        field=np.array(field[:, j, :]),
+        bscan=scan[:, j, :].astype(np.float64),
+        field=float(least) + span * field[:, j, :].astype(np.float64),
     )
 
 
@@ -421,15 +451,14 @@ def surface_degeneracy(surface: Interface, field_of_view: tuple[float, float]) -
     estimated value): 836 to 7086 triangles over 29 to 36 % of the field; on the scans of
     ``examples/oct_3d/make_scan.py`` (loaded, unloaded, matched; its voxels and twice them):
     12329 to 49633 triangles over 31 to 32 %.  The floors lie about 40 and 6 times lower.
-    The same phantoms with intensities times 1e-30, or times 2^58 stored as int64 (which
-    single precision and Otsu's histogram do not resolve), segment into 1 to 10 and 2 to 197
-    triangles covering at most 0.22 and 3.2 % of the field (2 and 4 triangles on the
-    32 x 48 x 48 phantom of the tests); some are specks scattered over 98 % of the lateral
-    extent, so the vertices' span does not tell them apart (the footprint bounds it anyway).
-    Not caught: some scales over-segment instead (60-80 % of the field at 2^54), and with
-    ``attenuation = "auto"`` 8 of 188 mis-scaled scans (2^54 to 2^62) came out at 5 to 9.4 %;
-    no rule on the surface alone tells those from a biofilm.  A real biofilm covering less
-    than 5 % of a wide scan is a case for ``crop_mm``.
+    Before the intensities were normalised (issue 44), the same phantoms times 1e-30, or
+    times 2^58 stored as int64, segmented into 1 to 10 and 2 to 197 triangles covering at
+    most 0.22 and 3.2 % of the field; some were specks scattered over 98 % of the lateral
+    extent, so the vertices' span does not tell them apart (the footprint bounds it anyway),
+    and some scales over-segmented instead, which no rule on the surface alone catches.  Now
+    every scale segments alike, and what the check meets is a biofilm too small for the
+    field (the phantom's dome shrunk to semi-axes of 0.1 mm, 3.1 % of a 0.96 mm field: a
+    case for ``crop_mm``) or a wrong substratum or threshold.
 
     >>> square = Interface.surface([[0, 0, 0.01], [0.02, 0, 0.01], [0.02, 0.02, 0.01],
     ...                             [0, 0.02, 0.01]], [[0, 1, 2], [0, 2, 3]])
@@ -447,6 +476,96 @@ def surface_degeneracy(surface: Interface, field_of_view: tuple[float, float]) -
         f"{field_of_view[1]:.3g} mm); a biofilm interface has at least {MIN_TRIANGLES} "
         f"triangles over at least {100 * MIN_FOOTPRINT:g} % of it"
     )
+
+
+def normalise_intensities(
+    scan: NDArray[Any], where: str = "oct volume"
+) -> tuple[NDArray[np.float32], Any, float]:
+    """The intensities of ``scan`` (a volume in its own integer or floating dtype) as float32
+    from 0 to 1, ``(I - least) / span``, with ``least`` (in the scan's dtype) and ``span``,
+    the greatest intensity minus ``least``: step 0 of :func:`segment_oct`, which then sees the
+    same numbers whatever the scan's scale, offset or dtype.
+
+    ``least`` is removed exactly (in the scan's integer dtype, or in double or its own wider
+    precision) before the values are rounded, so that an int64 scan near 2^58 keeps every
+    step.  Refused, one line each: negative intensities (OCT intensities are linear, not log
+    or dB), a constant scan, one of fewer than :data:`MIN_LEVELS` (32) distinct values (a
+    mask, a coarse quantisation, or an offset its dtype cannot hold the signal on: fbia's
+    phantom quantised to 32 levels or more segments within a voxel of its full-resolution
+    surface, to 8-24 levels up to 5 voxels off, or its substratum or biofilm is lost), and
+    voxels whose excess over ``least`` is under float32's smallest normal number (1.2e-38)
+    of the span.
+
+    >>> v = np.arange(64).reshape(4, 4, 4) * 3 + 5
+    >>> a, least, span = normalise_intensities(v)
+    >>> int(least), span, a.dtype.name, float(a.min()), float(a.max())
+    (5, 189.0, 'float32', 0.0, 1.0)
+    >>> same = [normalise_intensities(w)[0] for w in (2**58 + 2**40 * v, v * 1e-300, v * 1e300)]
+    >>> all(np.array_equal(a, b) for b in same)
+    True
+    """
+    least, greatest = scan.min(), scan.max()
+    if least < 0:
+        raise ConfigError(
+            f"OCT intensities must be >= 0 (linear, not log or dB), got {least:.4g}", where
+        )
+    if greatest == least:
+        raise ConfigError(
+            f"volume is constant ({greatest:.6g} everywhere): nothing to segment", where
+        )
+    integer = np.issubdtype(scan.dtype, np.integer)
+    work = np.dtype(np.float64) if integer else np.promote_types(scan.dtype, np.float64)
+    span = work.type(greatest - least) if integer else work.type(greatest) - work.type(least)
+    distinct = _distinct_values(scan)
+    if distinct < MIN_LEVELS:
+        step = 1 if integer else np.spacing(greatest)
+        cause = (
+            f"an offset of {least:.6g} swamps the signal ({span:.3g}) in {scan.dtype}, whose "
+            f"steps there are {step:.3g}: store the scan with the offset subtracted"
+            if not integer and span < MIN_LEVELS * step
+            else "a mask, or a coarse quantisation? give the linear intensities"
+        )
+        raise ConfigError(
+            f"the intensities take only {distinct} distinct values ({least:.10g} to "
+            f"{greatest:.10g}), segmentation needs at least {MIN_LEVELS}: {cause}",
+            where,
+        )
+    out = np.empty(scan.shape, dtype=np.float32)
+    lost = 0
+    tiny = np.finfo(np.float32).tiny
+    for k in range(scan.shape[0]):  # row by row: no double-precision copy of the volume
+        excess = (scan[k] - least).astype(work) if integer else scan[k].astype(work) - least
+        out[k] = excess / span
+        lost += int(np.count_nonzero((out[k] < tiny) & (excess > 0)))
+    if lost:
+        raise ConfigError(
+            f"{lost} voxel(s) exceed the least intensity by under {tiny:.2g} of the range "
+            f"({least:.4g} to {greatest:.4g}), which single precision does not hold: clip or "
+            "crop out the brightest voxels",
+            where,
+        )
+    return out, least, float(span)
+
+
+def _distinct_values(scan: NDArray[Any]) -> int:
+    """How many distinct values ``scan`` takes, or at least MIN_LEVELS: a lateral sample of
+    about a million voxels, and the whole scan when the sample shows fewer."""
+    stride = max(1, math.ceil(math.sqrt(scan.size / 1e6)))
+    seen = len(np.unique(scan[:, ::stride, ::stride]))
+    return seen if seen >= MIN_LEVELS or stride == 1 else len(np.unique(scan))
+
+
+@contextmanager
+def _no_library_warnings(step: str, where: str) -> Iterator[None]:
+    """A numerical warning of the library calls inside (NumPy's, scikit-image's: overflow,
+    an invalid value, a rank-deficient fit), which would print before fbia's own line and
+    leave a result not to be trusted, is that line instead, naming the step."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        try:
+            yield
+        except RuntimeWarning as warning:
+            raise ConfigError(f"{step} failed: {warning}", where) from None
 
 
 def _options(options: Any, kwargs: Mapping[str, Any], where: str) -> OctOptions:
@@ -483,8 +602,8 @@ def _crop_indices(box: CropMm, spacing: tuple[float, float, float]) -> Crop:
 
 
 def _crop(
-    volume: NDArray[np.float32], crop: Crop | None, option: str, where: str
-) -> tuple[NDArray[np.float32], tuple[int, int, int]]:
+    volume: NDArray[Any], crop: Crop | None, option: str, where: str
+) -> tuple[NDArray[Any], tuple[int, int, int]]:
     ranges = list(crop) if crop is not None else [None, None, None]
     slices, origin = [], []
     for axis, (name, n, r) in enumerate(zip("zyx", volume.shape, ranges, strict=True)):
@@ -564,12 +683,23 @@ def _denoise(volume: NDArray[np.float32], out: NDArray[np.float32], kind: str, s
         out[...] = volume
 
 
-def _otsu(values: NDArray[np.float32]) -> float:
-    """Otsu's threshold (Otsu 1979) of a sample of at most about 4 million values."""
+def _otsu(values: NDArray[np.float32], lo: float, hi: float, where: str) -> float:
+    """Otsu's threshold (Otsu 1979) of a sample of at most about 4 million of the processed
+    intensities ``values`` (from ``lo`` to ``hi``), in double precision: the compensated
+    intensities reach e^30, whose squared class means times squared counts overflow single
+    precision, and the histogram needs a range its bins can divide."""
     from skimage.filters import threshold_otsu
 
+    if not hi - lo > _UNIFORM * hi:
+        raise ConfigError(
+            "no biofilm found: the processed intensities above the substratum are one value "
+            f"(they differ by under {_UNIFORM:g} of the greatest)",
+            where,
+        )
     step = max(1, int(math.ceil(math.sqrt(values.size / 4e6))))
-    return float(threshold_otsu(values[:, ::step, ::step], nbins=1024))
+    sample = values[:, ::step, ::step].astype(np.float64).ravel()  # 1-D: no "RGB image" warning
+    with _no_library_warnings("Otsu's threshold", where):
+        return float(threshold_otsu(sample, nbins=1024))
 
 
 def _estimate_attenuation(
@@ -589,22 +719,26 @@ def _estimate_attenuation(
     sample = g[:, ::step, ::step]
     mask = np.zeros(sample.shape, dtype=bool)
     for k, row in enumerate(sample):
-        if float(row.max()) <= float(row.min()):
+        lo, hi = float(row.min()), float(row.max())
+        if not hi - lo > _UNIFORM * hi:
             continue
-        bright = row > threshold_otsu(row, nbins=256)
+        with _no_library_warnings("attenuation 'auto': Otsu's split of a depth row", where):
+            bright = row > threshold_otsu(row.astype(np.float64), nbins=256)
         if not bright.all() and row[bright].mean() >= min_contrast * row[~bright].mean():
             mask[k] = bright
     interior = ndimage.binary_erosion(mask, iterations=2)
     counts = interior.sum(axis=(1, 2))
     rows = np.flatnonzero(counts >= 20)
+    med = np.array([np.median(sample[k][interior[k]]) for k in rows])
+    rows, med = rows[med > 0.0], med[med > 0.0]  # a log needs it above the least intensity
     if len(rows) < 3:
         raise ConfigError(
             f"attenuation 'auto': only {len(rows)} depth row(s) show enough biofilm to fit a "
             "decay (3 needed); give the attenuation in 1/mm",
             where,
         )
-    med = np.array([np.median(sample[k][interior[k]]) for k in rows])
-    slope = np.polyfit(depth[rows], np.log(med), 1, w=np.sqrt(counts[rows]))[0]
+    with _no_library_warnings("attenuation 'auto': the fit of the decay", where):
+        slope = np.polyfit(depth[rows], np.log(med), 1, w=np.sqrt(counts[rows]))[0]
     return max(0.0, -float(slope))
 
 
