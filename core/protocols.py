@@ -94,6 +94,9 @@ class ForwardModel(Protocol):
     * ``pickle_options_only`` (optional, default False): pickle by options only.
     * ``numerics_version`` (optional, default None): the store keys its runs by it.
     * ``dim`` (optional, default None: seen on the first run): its interfaces' dimension.
+    * ``up_axis`` (optional, default None: not declared): the axis of its 3-D interfaces along
+      the height above the substratum, ``"z"`` or ``"y"``; a study's OCT scan must map its
+      height onto it (``height_axis``).
     * ``parameter_names()`` (required): every model input it can vary.
     * ``undeformed()`` (optional): the unloaded interface, for synthetic point placement.
     * ``solve(parameters, coordinates, workdir)`` (required): an :class:`fbia.Solution`

@@ -78,7 +78,7 @@ from ..core.options import settings_from
 from ..core.problem import Evaluation, InverseProblem, ProblemLike
 from .lm.chains import LMChain, LMSettings, Outcome, PaperChain, err_res_of
 from .lm.fit_quality import fit_quality
-from .lm.handoff import POSTERIOR_LABELS, posterior_starts
+from .lm.handoff import POSTERIOR_LABELS
 from .lm.options import LMOptions
 from .lm.result import FitStatistics, LMResult, LMState, compare_starts
 from .lm.robust import RobustChain
@@ -247,8 +247,8 @@ class LevenbergMarquardtIterator(IteratorBase):
         self, problem: Any, names: list[str], lower: FloatArray, upper: FloatArray
     ) -> list[FloatArray]:
         x0 = self.options.x0
-        if self.options.x0_from is not None:
-            x0 = posterior_starts(self.options.x0_from)
+        if self.options.x0_from_starts is not None:
+            x0 = self.options.x0_from_starts
         if x0 is None:
             params = list(getattr(problem, "parameters", ()))
             missing = [p.name for p in params if p.initial is None]

@@ -106,7 +106,8 @@ CREATE TABLE IF NOT EXISTS sessions (
     pid INTEGER NOT NULL,
     fbia TEXT NOT NULL,
     study_sha256 TEXT,
-    executor TEXT NOT NULL
+    executor TEXT NOT NULL,
+    study_file TEXT
 );
 CREATE TABLE IF NOT EXISTS runs (
     id INTEGER PRIMARY KEY,
@@ -213,10 +214,21 @@ class StudyStore:
         or the process ends.
     fresh
         Delete what the file holds first (``fbia run --fresh``).
+    study
+        The study file of this run (its resolved path) and its SHA-256: every session
+        records them, and ``fresh`` refuses a store that holds runs of other study files'
+        sessions (studies that name the same store share it): :meth:`check_fresh`.
     """
 
-    def __init__(self, path: str | Path, lock: bool = True, fresh: bool = False) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        lock: bool = True,
+        fresh: bool = False,
+        study: tuple[str, str] | None = None,
+    ) -> None:
         self.path = Path(path)
+        self.study = study
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock: IO[str] | None = self._take_lock() if lock else None
         if fresh and self.path.exists():  # under the lock: no other run is using the file
@@ -227,6 +239,11 @@ class StudyStore:
                     "damaged): move it away yourself",
                     str(self.path),
                 )
+            try:
+                self.check_fresh()
+            except ConfigError:
+                self._release_lock()
+                raise
             for suffix in ("", "-wal", "-shm"):
                 Path(f"{self.path}{suffix}").unlink(missing_ok=True)
         try:
@@ -259,17 +276,60 @@ class StudyStore:
             self._lock.close()  # closing the file releases the flock
             self._lock = None
 
+    def check_fresh(self) -> None:
+        """Refuse ``--fresh`` (a ConfigError naming the other study files) when the file
+        holds forward runs made by sessions of other study files than :attr:`study`: a
+        session with its study file recorded is this study's when it is the same file;
+        one without (stores of an fbia that recorded none) when it had the same SHA-256.  Runs are
+        keyed by the model, not by the study, so deleting only "this study's" runs has no
+        meaning: the user deletes the file by hand, or gives the study a store of its own."""
+        if self.study is None:
+            return
+        db = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True)
+        try:
+            columns = {row[1] for row in db.execute("PRAGMA table_info(sessions)")}
+            file_col = "study_file" if "study_file" in columns else "NULL"
+            sha_col = "study_sha256" if "study_sha256" in columns else "NULL"
+            rows = db.execute(
+                f"SELECT s.{file_col}, s.{sha_col}, count(r.id) FROM sessions s "
+                "JOIN runs r ON r.session = s.id GROUP BY s.id"
+            ).fetchall()
+            total = db.execute("SELECT count(*) FROM runs").fetchone()[0]
+        except sqlite3.Error:
+            return  # a store too damaged to tell: opening it reports that
+        finally:
+            db.close()
+        mine_file, mine_sha = self.study
+        others: dict[str, int] = {}
+        for file, sha, n in rows:
+            if file == mine_file or (file is None and sha == mine_sha):
+                continue
+            name = file or "a study file it did not record (an earlier fbia)"
+            others[name] = others.get(name, 0) + n
+        if others:
+            raise ConfigError(
+                f"--fresh would delete the runs of other studies too: {sum(others.values())} "
+                f"of its {total} forward runs were made by {'; '.join(others)}; give this "
+                "study a store of its own ([study] store), or delete the file by hand to start "
+                "every study that shares it over",
+                str(self.path),
+            )
+
     def _open_format(self) -> None:
         self._db.execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT)")
         fmt = self._meta("format")
         if fmt is not None and fmt != STORE_FORMAT:
             migrate(self._db, self.path, fmt, STORE_FORMAT, SCHEMA)
-            return
-        self._db.executescript(SCHEMA)
+        else:
+            self._db.executescript(SCHEMA)
         if fmt is None:
             with self._transaction() as db:
                 db.execute("INSERT OR IGNORE INTO meta VALUES ('format', ?)", (STORE_FORMAT,))
                 db.execute("INSERT OR IGNORE INTO meta VALUES ('created', ?)", (_now(),))
+        columns = {row[1] for row in self._db.execute("PRAGMA table_info(sessions)")}
+        if "study_file" not in columns:  # a store of an fbia that did not record it
+            with self._transaction() as db:
+                db.execute("ALTER TABLE sessions ADD COLUMN study_file TEXT")
 
     @contextlib.contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:
@@ -415,8 +475,8 @@ class StudyStore:
 
         with self._transaction() as db:
             cur = db.execute(
-                "INSERT INTO sessions (started, status, host, pid, fbia, study_sha256, executor) "
-                "VALUES (?, 'running', ?, ?, ?, ?, ?)",
+                "INSERT INTO sessions (started, status, host, pid, fbia, study_sha256, executor, "
+                "study_file) VALUES (?, 'running', ?, ?, ?, ?, ?, ?)",
                 (
                     _now(),
                     socket.gethostname(),
@@ -424,6 +484,7 @@ class StudyStore:
                     __version__,
                     study_sha256,
                     canonical(dict(executor)),
+                    None if self.study is None else self.study[0],
                 ),
             )
         self.session = int(cur.lastrowid or 0)

@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -156,7 +157,11 @@ def _parser() -> argparse.ArgumentParser:
         "--iterator", default="levenberg_marquardt", metavar="NAME", help="iterator plugin"
     )
     it.add_argument("--measure", default="ray", metavar="NAME", help="measure plugin")
-    it.add_argument("--force", action="store_true", help="overwrite an existing FILE")
+    it.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite an existing FILE (a regular file: links and FIFOs are refused)",
+    )
     pl = sub.add_parser("plugins", help="list the installed forward models, measures, iterators")
     pl.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pl.add_argument(
@@ -350,11 +355,18 @@ def _init(args: argparse.Namespace) -> int:
     from .study_template import study_template
 
     path = Path(args.study)
+    if path.is_symlink():  # a dangling one too: the template would land where it points
+        raise ConfigError("is a symbolic link: not written through; give another FILE", str(path))
+    if path.exists() and not path.is_file():  # a FIFO would block the write, a device ...
+        raise ConfigError("exists and is not a regular file; give another FILE", str(path))
     if path.exists() and not args.force:
         raise ConfigError("exists already; give another FILE or --force to overwrite", str(path))
     name = "".join(c if c.isalnum() or c in "_-" else "_" for c in path.stem) or "my_study"
     text = study_template(args.model, args.iterator, args.measure, name=name)
-    path.write_text(text, encoding="utf-8")
+    # O_NOFOLLOW, O_NONBLOCK: a link or FIFO put there since is refused, never waited on
+    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_NONBLOCK
+    with os.fdopen(os.open(path, flags, 0o666), "w", encoding="utf-8") as file:
+        file.write(text)
     print(f"wrote {path}; next: {PROG} validate {path}, then {PROG} run {path}")
     return 0
 

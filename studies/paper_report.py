@@ -276,6 +276,10 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     error (a summary of nothing would hide that the examples were not run).
     """
     target = Path(target)
+    if target.suffix.lower() != ".md":
+        raise ConfigError(
+            "the summary is a markdown page: give a file name ending in .md", str(target)
+        )
     records: list[tuple[Path, PaperRecord]] = []
     for folder in folders:
         folder = Path(folder)
@@ -287,6 +291,7 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
             f"no {RECORD_NAME} below them: run the examples first (make reproduce)",
             ", ".join(str(f) for f in folders),
         )
+    _check_target(target, records, [Path(f) for f in folders])
     records, left_out = _current(records)
     not_run = _not_run(folders, records)
     lines = [
@@ -400,11 +405,27 @@ def _not_run(folders: Sequence[str | Path], records: list[tuple[Path, PaperRecor
     return [f for f in files if f not in done and _has_paper(f)]
 
 
-def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path) -> list[str]:
-    """Per example (the nearest folder above a ``paper.json`` that holds a README.md, within
-    ``folders``) its README's section ``## Measured times``: the wall time of a fresh run,
-    which a session that took its runs from the store cannot measure. Links rebased to
-    ``root``."""
+def _check_target(
+    target: Path, records: list[tuple[Path, PaperRecord]], folders: Sequence[Path]
+) -> None:
+    """The page is written to none of the files the summary reads or links to (a
+    ``paper.json``, its study file and ``report.md``, an example's README), nor to
+    something that is not a regular file (a FIFO would block the write)."""
+    if target.is_symlink() or (target.exists() and not target.is_file()):
+        raise ConfigError("not a regular file: the summary is not written through it", str(target))
+    read = {p.resolve() for p, _ in records}
+    read |= {(p.parent / MARKDOWN_NAME).resolve() for p, _ in records}
+    read |= {Path(rec.study_file).resolve() for _, rec in records}
+    read |= {f / "README.md" for f in _examples([p for p, _ in records], folders)}
+    if target.resolve() in read:
+        raise ConfigError(
+            "is a file the summary reads or links to: give another page to write", str(target)
+        )
+
+
+def _examples(records: Sequence[Path], folders: Sequence[Path]) -> list[Path]:
+    """The example of each record: the nearest folder above it holding a README.md, within
+    ``folders``."""
     tops = [f.resolve() for f in folders]
     examples: list[Path] = []
     for path in records:
@@ -415,8 +436,15 @@ def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path
             folder = folder.parent
         if (folder / "README.md").is_file() and folder not in examples:
             examples.append(folder)
+    return examples
+
+
+def _measured_times(records: Sequence[Path], folders: Sequence[Path], root: Path) -> list[str]:
+    """Per example (:func:`_examples`) its README's section ``## Measured times``: the wall
+    time of a fresh run, which a session that took its runs from the store cannot measure.
+    Links rebased to ``root``."""
     lines: list[str] = []
-    for folder in examples:
+    for folder in _examples(records, folders):
         section = _section(folder / "README.md", TIMES_HEADING)
         if section:
             link, name = _rel_or_abs(folder, root), _rel_or_abs(folder, Path.cwd().resolve())

@@ -142,7 +142,9 @@ def run_study(
     Parameters
     ----------
     fresh
-        Delete the store (and the run folders) first and start over.
+        Delete the store (and the run folders) first and start over; refused (ConfigError)
+        when the store holds runs that sessions of other study files made
+        (:meth:`StudyStore.check_fresh`).
     retry_failed
         Run stored failed runs again (once) instead of reusing their failure.
     reuse_changed_code
@@ -189,7 +191,8 @@ def run_study(
         return _run_draws(study, out, store_path, run_one, echo, started)
     problem = study.problem
     executor = study.executor.with_workers(workers).with_address(address)
-    with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh) as store:
+    identity = (str(study.path.resolve()), study.sha256)  # sessions record it; --fresh checks
+    with OutputLock(out, "fbia run"), StudyStore(store_path, fresh=fresh, study=identity) as store:
         if fresh:
             clear_runs(out / "runs")
         with log_to_file(out / "fbia.log", level=LOG_LEVELS[log_level]):

@@ -12,7 +12,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     output = "output"           # output folder, relative to the study file (default "output")
     store = "../runs.sqlite"    # the study store, relative to the study file (default
                                 # <output>/store.sqlite): studies of one model that name the
-                                # same store share its forward runs (one study at a time)
+                                # same store share its forward runs (one study at a time;
+                                # --fresh refuses it then); a regular file, no control characters
 
     [model]                     # a forward model from the registry (`fbia plugins`)
     name = "analytic_mound_2d"
@@ -38,8 +39,9 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     interface = "data/observed_100.csv"      # CSV x, y[, curve] (2-D); STL/PLY/VTU/... (3-D)
     # oct = { file = "data/scan.npy", voxel_size = [0.005, 0.01, 0.01], threshold = 0.6 }
     #   or an OCT scan (fbia.studies.study_oct), segmented on reading: voxel_size (dz, dy, dx) mm,
-    #   height_axis = "y" for ale_fsi 3-D, options of fbia.imaging.oct; run and forward
-    #   write the figures and segmentation.json to oct/ of the output folder they use
+    #   height_axis = "y" for ale_fsi 3-D (checked against the model's up_axis), options of
+    #   fbia.imaging.oct; run and forward write the figures and segmentation.json to oct/ of
+    #   the output folder they use
     points = "data/points_100.csv"           # optional: x, y[, z][, dx, dy[, dz]]
     noise_std = 0.01                         # optional, mm
     name = "Q100"                            # optional label
@@ -106,6 +108,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import stat
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
@@ -292,9 +295,8 @@ class _Reader:
             path = Path(value).expanduser()
             path = path if path.is_absolute() else (self.folder / path).resolve()
             if not path.is_file():
-                raise ConfigError(
-                    f"file not found: {path}", self.where(f"[{section}.options]", key)
-                )
+                problem = "file not found" if not path.exists() else "not a regular file"
+                raise ConfigError(f"{problem}: {path}", self.where(f"[{section}.options]", key))
             options[key] = path
         return options
 
@@ -305,6 +307,26 @@ class _Reader:
         if isinstance(x0, list) and x0 and all(isinstance(s, dict) for s in x0):
             return [self.start(s, f"{where}[{k}]") for k, s in enumerate(x0)]
         return x0  # other forms (a plain vector, ...) are the iterator's to check
+
+    def check_x0_from(self, iterator: Any) -> None:
+        """The starts an iterator read from its option ``x0_from`` (a posterior's MAP and
+        mean, ``options.x0_from_starts``) against the calibration parameters: each names all
+        of them and no other, inside their bounds."""
+        starts = getattr(iterator.options, "x0_from_starts", None)
+        if not starts:
+            return
+        where = self.where("[iterator.options]", "x0_from")
+        labels = ("posterior MAP", "posterior mean")
+        for k, start in enumerate(starts):
+            at = f"{where} ({labels[k] if k < len(labels) else f'start {k + 1}'})"
+            names = [p.name for p in self.parameters]
+            if sorted(start) != sorted(names):
+                raise ConfigError(
+                    f"the posterior is of the parameters {', '.join(start)}; the study "
+                    f"calibrates {', '.join(names)}",
+                    at,
+                )
+            self.start(start, at)
 
     def start(self, x0: dict[str, Any], where: str) -> dict[str, float]:
         by_name = {p.name: p for p in self.parameters}
@@ -359,6 +381,12 @@ class _Reader:
         self.seed = meta.seed
         output = self.folder / meta.output
         store = store_file(self.folder, meta.store, self.where("[study]", "store"))
+        if store is not None and store.exists() and not store.is_file():
+            raise ConfigError(
+                f"{meta.store!r} is not a regular file ({_file_kind(store)}): name the "
+                "store's file, e.g. 'runs.sqlite'",
+                self.where("[study]", "store"),
+            )
 
         self.model_name, model = self.plugin("forward_model", "model")
         try:
@@ -372,6 +400,7 @@ class _Reader:
                 self.where("[model]"),
             ) from None
         self.model_dim = _model_dim(model)
+        self.model_up = getattr(model, "up_axis", None)
 
         self.parameters = self.read_parameters("parameters")
         uncertain = self.read_parameters("uncertain") if "uncertain" in raw else []
@@ -417,6 +446,8 @@ class _Reader:
         iterator_name, iterator = (
             self.plugin("iterator", "iterator") if "iterator" in raw else (None, None)
         )
+        if iterator is not None:
+            self.check_x0_from(iterator)
         executor = self.read_executor()
         paper = (
             read_paper(raw["paper"], self.file, iterator is not None) if "paper" in raw else None
@@ -539,9 +570,22 @@ class _Reader:
         from .study_oct import OctRecord, read_oct_scan
 
         self.dimension(3, where)
+        self.height_axis(value, where)
         scan = read_oct_scan(value, self.folder, where)
         self.oct_records.append(OctRecord(k + 1, scan))
         return scan.interface
+
+    def height_axis(self, value: Any, where: str) -> None:
+        """An OCT scan's ``height_axis`` against the axis the forward model declares up
+        (``up_axis``, optional in its contract), before the scan is segmented."""
+        up = self.model_up
+        given = value.get("height_axis", "z") if isinstance(value, dict) else "z"
+        if up in ("z", "y") and given in ("z", "y") and given != up:
+            raise ConfigError(
+                f"height_axis = {given!r}, but the forward model {self.model_name!r} has the "
+                f"height above the substratum along {up}: give height_axis = {up!r}",
+                f"{where} height_axis",
+            )
 
     def dimension(self, dim: int, where: str) -> None:
         if isinstance(self.model_dim, int) and dim != self.model_dim:
@@ -586,6 +630,13 @@ class _Reader:
             spec.cluster,
             dict(spec.cluster_options),
         )
+
+
+def _file_kind(path: Path) -> str:
+    """What a path that is no regular file is, in words."""
+    mode = path.stat().st_mode
+    kinds = [(stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder")]
+    return next((name for test, name in kinds if test(mode)), "a device")
 
 
 def _model_dim(model: Any) -> int | None:

@@ -114,9 +114,14 @@ def _pair(value: Any) -> tuple[float, float]:
 def _folder(value: str) -> str:
     if not value.strip():
         raise ValueError('an empty folder name (give a folder, e.g. "output")')
+    return _no_control(value, "folder name")
+
+
+def _no_control(value: str, what: str = "file name") -> str:
+    """A path without control characters: NUL cannot be in one, a newline is a typo."""
     bad = next((c for c in value if ord(c) < 32 or ord(c) == 127), None)
     if bad is not None:
-        raise ValueError(f"a control character ({bad!r}) in the folder name {value!r}")
+        raise ValueError(f"a control character ({bad!r}) in the {what} {value!r}")
     return value
 
 
@@ -133,6 +138,7 @@ Flag = Annotated[bool, BeforeValidator(_flag)]
 Table = Annotated[dict[str, Any], BeforeValidator(as_table)]
 Label = Annotated[str, BeforeValidator(_any_string)]
 Folder = Annotated[str, BeforeValidator(lambda v: _folder(_string(v)))]
+FileName = Annotated[str, BeforeValidator(lambda v: _no_control(_string(v)))]
 Pair = Annotated[tuple[float, float], BeforeValidator(_pair)]
 
 
@@ -189,7 +195,7 @@ class StudySection(Section):
     name: Text | None = None
     seed: Annotated[Integer, Field(ge=0)] = 0
     output: Folder = "output"
-    store: Text | None = None  # the study store's file; default <output>/store.sqlite
+    store: FileName | None = None  # the study store's file; default <output>/store.sqlite
 
 
 class LikelihoodSection(Section):
@@ -346,9 +352,37 @@ def is_path_type(annotation: Any) -> bool:
     return annotation is Path or Path in typing.get_args(annotation)
 
 
+#: pydantic's names of numeric bounds -> JSON Schema's
+_BOUND_KEYWORDS = {
+    "ge": "minimum",
+    "gt": "exclusiveMinimum",
+    "le": "maximum",
+    "lt": "exclusiveMaximum",
+}
+
+
+def _standard_bounds(schema: Any) -> Any:
+    """``schema`` with pydantic's ``ge``/``gt``/``le``/``lt`` as JSON Schema's ``minimum``,
+    ``exclusiveMinimum``, ``maximum``, ``exclusiveMaximum``: pydantic writes its own names
+    for a bound on an ``Annotated`` type with a validator before it (``Number``, ``Integer``),
+    which JSON Schema validators ignore."""
+    if isinstance(schema, list):
+        return [_standard_bounds(s) for s in schema]
+    if not isinstance(schema, dict):
+        return schema
+    numeric = schema.get("type") in ("number", "integer")
+    return {
+        (_BOUND_KEYWORDS[k] if numeric and k in _BOUND_KEYWORDS else k): (
+            v if numeric and k in _BOUND_KEYWORDS else _standard_bounds(v)
+        )
+        for k, v in schema.items()
+    }
+
+
 def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
     """A JSON Schema (draft 2020-12) of a study file, for editors that check TOML against
-    one (Taplo, Even Better TOML): every section's keys, types, bounds and descriptions from
+    one (Taplo, Even Better TOML): every section's keys, types, bounds (as ``minimum``,
+    ``exclusiveMinimum``, ``maximum``, ``exclusiveMaximum``) and descriptions from
     the models above; a plugin's ``options`` is an open table (``fbia plugins --options NAME``
     lists them); ``sections`` names the top-level tables (``study_file.SECTIONS``)."""
     tables: dict[str, type[Section]] = {
@@ -369,9 +403,9 @@ def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
     properties: dict[str, Any] = {}
     for name, text in sections.items():
         if name in tables:
-            schema = tables[name].model_json_schema()
+            schema = _standard_bounds(tables[name].model_json_schema())
         elif name in arrays:
-            schema = {"type": "array", "items": arrays[name].model_json_schema()}
+            schema = {"type": "array", "items": _standard_bounds(arrays[name].model_json_schema())}
         else:  # fixed: name = value
             schema = {"type": "object", "additionalProperties": {"type": "number"}}
         properties[name] = {**schema, "description": text}

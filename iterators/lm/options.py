@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, PrivateAttr, model_validator
 
 from ...core.options import PluginOptions
 from ...core.problem import Result
@@ -38,7 +38,8 @@ class LMOptions(PluginOptions):
     x0_from: Path | None = Field(
         None,
         description="result.json of a Bayesian calibration (gp_smc): start from its "
-        "posterior MAP and posterior mean (instead of x0) [path]",
+        "posterior MAP and posterior mean (instead of x0), read when the options are made "
+        "[path]",
     )
     mode: Literal["robust", "paper"] = Field(
         "robust",
@@ -155,6 +156,15 @@ class LMOptions(PluginOptions):
         "by more than agree_rtol·max(|x|, α/β) [-]",
     )
 
+    #: the posterior MAP and mean read from x0_from when the options were made
+    _x0_from_starts: list[dict[str, float]] | None = PrivateAttr(None)
+
+    @property
+    def x0_from_starts(self) -> list[dict[str, float]] | None:
+        """The starts ``x0_from`` gave (``[MAP, mean]``, :data:`.handoff.POSTERIOR_LABELS`),
+        read and checked when the options were made (``fbia validate``); None without it."""
+        return self._x0_from_starts
+
     @model_validator(mode="before")
     @classmethod
     def _posterior_as_x0(cls, data: Any) -> Any:
@@ -194,6 +204,8 @@ class LMOptions(PluginOptions):
             raise ValueError("x0 is an empty list of initial guesses")
         if self.x0 is not None and self.x0_from is not None:
             raise ValueError("give x0 or x0_from, not both")
+        if self.x0_from is not None:  # read now: a bad file is found before any run
+            self._x0_from_starts = posterior_starts(self.x0_from)
         n_starts = len(self.x0) if isinstance(self.x0, list) else 1
         if self.x0_labels is not None and len(self.x0_labels) != n_starts:
             raise ValueError(f"x0_labels names {len(self.x0_labels)} starts, x0 has {n_starts}")

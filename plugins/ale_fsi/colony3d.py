@@ -36,6 +36,11 @@ z = span) by :func:`fbia.imaging.oct.in_model_axes`, write.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -69,6 +74,10 @@ MAX_HEIGHT_FRACTION = 0.9
 MAX_FILLED = 0.02
 #: Smallest part of the colony kept, as a fraction of the largest part's volume.
 MIN_PART = 0.01
+#: Fewest triangles of a colony surface: it closes a volume with the floor, as the three sides
+#: of a tetrahedron standing on it do at least (one triangle passed validate, then netgen
+#: failed on the cell: issue 44).
+MIN_TRIANGLES = 3
 #: Most nodes of a colony's height field (4e6: 2000 x 2000, 0.5 mm at 0.25 um; a surface in um
 #: read as mm would ask for 1e6 times more).
 MAX_GRID_NODES = 4_000_000
@@ -182,6 +191,7 @@ def colony_height_field(
     directions = np.tile([0.0, -1.0, 0.0], (gx.size, 1))
     mesh = trimesh.Trimesh(surface.vertices, surface.cells, process=False)
     hits, ray, _ = mesh.ray.intersects_location(origins, directions, multiple_hits=True)
+    hits = np.reshape(hits, (-1, 3))  # no hit at all: shape (0,)
     above = hits[:, 1] > floor_tol
     height = np.full(gx.size, -np.inf)
     np.maximum.at(height, ray[above], hits[above, 1])
@@ -289,16 +299,38 @@ def build_colony_cell(
     colony.faces.Min(Y).name = "solid_fixed"
     colony.faces.maxh = interface_mesh_size
     colony.mat(SOLID)
+    said: list[str] = []
     try:
         fluid = box - colony
         fluid.mat(FLUID)
         # curvaturesafety 0.5: the spline's curvature, not the options, would set the size
-        ngmesh = OCCGeometry(Glue([fluid, colony])).GenerateMesh(
-            maxh=mesh_size, grading=grading, curvaturesafety=0.5
-        )
+        with _stderr_kept(said):
+            ngmesh = OCCGeometry(Glue([fluid, colony])).GenerateMesh(
+                maxh=mesh_size, grading=grading, curvaturesafety=0.5
+            )
     except Exception as exc:  # netgen raises bare Exception/NgException subclasses
-        raise ConfigError(f"netgen could not mesh the colony cell: {exc}", where) from None
+        why = f"{exc} ({' '.join(''.join(said).split())})" if "".join(said).strip() else exc
+        raise ConfigError(f"netgen could not mesh the colony cell: {why}", where) from None
+    sys.stderr.write("".join(said))  # a mesh was made: what netgen said stays in sight
     return _with_named_regions(ngmesh, where)
+
+
+@contextlib.contextmanager
+def _stderr_kept(said: list[str]) -> Iterator[None]:
+    """What netgen's C++ code writes to file descriptor 2 meanwhile, appended to ``said``
+    instead of printed: when meshing fails, fbia's one line carries it (netgen printed
+    "Meshing of domain 2 failed ..." before it)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as kept:
+        os.dup2(kept.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            kept.seek(0)
+            said.append(kept.read().decode("utf-8", "replace"))
 
 
 def colony_field(
@@ -313,13 +345,21 @@ def colony_field(
     """The colony's height field in the duct: every check of :func:`build_colony_cell` short
     of meshing (``fbia validate`` runs it): the file reads as a 3-D triangle surface with
     finite vertices, moved by ``offset`` it samples as a height field on the duct's floor,
-    away from its walls, not overhanging, below the ceiling."""
+    away from its walls, not overhanging, of at least :data:`MIN_TRIANGLES` triangles, below
+    the ceiling."""
     where = str(surface) if isinstance(surface, str | Path) else "colony surface"
     shape = surface if isinstance(surface, Interface) else read_colony_surface(surface)
     shape = shape.translated(np.asarray(offset, dtype=float))
     field = colony_height_field(
         shape, resolution, smoothing, within=(0.0, length, 0.0, width), where=where
     )
+    n = len(shape.cells)
+    if n < MIN_TRIANGLES:
+        raise ConfigError(
+            f"{n} triangle{'s' * (n != 1)}: a colony surface closes a volume with the floor, "
+            f"which takes at least {MIN_TRIANGLES} (the sides of a tetrahedron on the floor)",
+            where,
+        )
     top = float(field.height.max())
     if top >= MAX_HEIGHT_FRACTION * height:
         raise ConfigError(

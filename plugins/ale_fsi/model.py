@@ -91,6 +91,8 @@ class AleFsiForwardModel(Configurable):
     #: package version: fbia.storage.fingerprints)
     numerics_version = "1"
     pickle_options_only = True  # process pools and Dask rebuild it from its options
+    #: the height above the substratum is y in every geometry (x along the flow, z across)
+    up_axis = "y"
 
     Options = AleFsiOptions
 

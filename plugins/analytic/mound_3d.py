@@ -56,6 +56,8 @@ class AnalyticMound3DForwardModel(MoundModel):
 
     #: Spatial dimension of the interfaces it returns (checked against data files).
     dim = 3
+    #: x downstream, y across the channel, z up (fbia's frame, an OCT scan's own)
+    up_axis = "z"
 
     class Options(MoundOptions):
         channel_length: float = Field(2.0, gt=0, description="channel length L along x [mm]")

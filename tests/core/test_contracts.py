@@ -24,7 +24,7 @@ def test_the_contracts_are_read_from_the_protocols_docstrings():
     for kind in ("forward_model", "measure", "iterator"):
         assert roles[kind][:4] == common
     assert [n for n, _ in roles["forward_model"][4:]] == [
-        "numerics_version", "dim", "parameter_names()", "undeformed()",
+        "numerics_version", "dim", "up_axis", "parameter_names()", "undeformed()",
         "solve(parameters, coordinates, workdir)", "tangent_inputs()", "prepare()",
         "warm_state()", "adopt_warm_state(state)", "example_parameters()", "example_options()",
     ]  # fmt: skip
