@@ -4,7 +4,7 @@
 >>> # a LocalCluster of 4 worker processes, started for the study and stopped with it:
 >>> # with fbia.make_evaluator("dask", workers=4, timeout=3600.0) as ev:
 >>> #     records = ev.evaluate(problem, points)
->>> # an existing scheduler:   make_evaluator("dask", address="tcp://10.0.0.5:8786")
+>>> # an existing scheduler:   make_evaluator("dask", address="tls://10.0.0.5:8786")
 >>> # a SLURM allocation:      make_evaluator("dask", cluster="slurm", workers=20,
 >>> #     cluster_options={"cores": 8, "memory": "16GB", "walltime": "04:00:00"})
 
@@ -12,11 +12,20 @@ Three ways to get workers, chosen by the options (the study file's ``[executor]`
 
 * ``address``: connect to a running scheduler (``dask scheduler`` + ``dask worker`` started by
   hand or by a batch script).  The working folders must lie on a file system the workers share.
-  Dask's protocol is unauthenticated unless TLS is configured (Dask's ``security``): whoever
-  reaches the scheduler's port can run code on its workers, so start it on a trusted network
-  or with TLS.
+  Its security is the user's: fbia connects with the security of Dask's configuration
+  (``distributed.comm.tls.ca-file``, ``.client.cert``, ``.client.key`` in ``~/.config/dask/``),
+  so a ``tls://`` scheduler started with the user's certificates is reached with them.  A
+  ``tcp://`` scheduler is unauthenticated: whoever reaches its port can run code on its
+  workers, so start it on a trusted network or with TLS.
 * ``cluster = "local"`` (default): a ``distributed.LocalCluster`` of ``workers`` processes with
-  one thread each, started for the study and closed with it.
+  one thread each, started for the study and closed with it.  It speaks TLS with certificates
+  made for it (``distributed.Security.temporary()``, in this process's memory and handed to
+  the worker processes by their nannies): a client of another process, of this user or
+  another, cannot connect to it, so cannot run code on its workers (short of reading this
+  process's memory).  It serves no HTTP (Dask starts its HTTP servers all the same: they get
+  no pages and are closed once the cluster is up) unless ``cluster_options = { dashboard =
+  true }``, which serves Dask's dashboard on a free loopback port, readable by every user of
+  the machine.
 * ``cluster = "slurm" | "pbs" | "sge" | "lsf" | "htcondor" | "moab" | "oar"``: a
   ``dask-jobqueue`` cluster (``pip install dask-jobqueue``) built from ``cluster_options``
   (``cores``, ``memory``, ``walltime``, ``queue``, ``account``, ``job_extra_directives``,
@@ -24,7 +33,9 @@ Three ways to get workers, chosen by the options (the study file's ``[executor]`
 
 ``cluster_options`` are checked against an allow-list (:mod:`fbia.execution.cluster_options`): the
 options that run code (``preload``, ``job_script_prologue``, ``python``, ...) or bind network
-interfaces (``host``, ``interface``, ...) are refused.
+interfaces (``host``, ``interface``, ...) are refused, and so are values the job script would
+run: a ``job_extra_directives`` entry is a flag of the batch system's allow-list
+(``--partition=short``), never ``--export=ALL,LD_PRELOAD=...``.
 
 Every run is a task that evaluates in a child process of the worker
 (:mod:`fbia.execution.isolation`, ``isolate = True`` by default here): a time-out kills that
@@ -36,6 +47,7 @@ scattered to the workers once; each task sends back only the record.
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 import shutil
@@ -105,8 +117,8 @@ class DaskExecutor:
         ``"local"`` or a dask-jobqueue kind (see :data:`JOBQUEUE_CLUSTERS`).
     cluster_options
         Keyword arguments of the cluster class (for ``"local"``: those of
-        ``distributed.LocalCluster``, e.g. ``memory_limit``), from an allow-list
-        (:mod:`fbia.execution.cluster_options`).
+        ``distributed.LocalCluster``, e.g. ``memory_limit``, and ``dashboard``: true serves
+        Dask's dashboard), from an allow-list (:mod:`fbia.execution.cluster_options`).
     connect_timeout
         Seconds to wait for the scheduler at ``address``.
     timeout, isolate
@@ -143,6 +155,9 @@ class DaskExecutor:
         self._token = uuid.uuid4().hex[:8]
         self._scattered: tuple[Evaluable, Any] | None = None
         self.client: Any = None
+        #: the TLS credentials of a local cluster (``distributed.Security``), held by this
+        #: process only; None for a cluster fbia did not start here
+        self.security: Any = None
         t0 = time.perf_counter()
         try:
             self._connect(distributed, address, workers, cluster, cluster_options, connect_timeout)
@@ -167,30 +182,29 @@ class DaskExecutor:
                     "with an address the cluster exists already: workers, cluster and "
                     "cluster_options do not apply"
                 )
-            try:
+            failure = None
+            try:  # with the security of Dask's configuration (distributed.comm.tls.*)
                 self.client = distributed.Client(address, timeout=connect_timeout)
-            except OSError as exc:
-                raise ConfigError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+            except (OSError, TypeError) as exc:  # TypeError: tls:// without a certificate
+                failure = str(exc)
+            if failure is not None:
+                # The Client that failed to start is closed by its __del__, which deadlocks if
+                # the garbage collector runs it while another Client starts (both take
+                # distributed's LoopRunner lock): run it now, its traceback gone.
+                gc.collect()
+                hint = (
+                    " (a tls:// scheduler needs this user's certificate in Dask's configuration: "
+                    "distributed.comm.tls.ca-file, .client.cert, .client.key)"
+                    if address.startswith("tls://")
+                    else ""
+                )
+                raise ConfigError(f"cannot reach the Dask scheduler at {address}: {failure}{hint}")
         elif cluster == "local":
-            check_workers(workers or os.cpu_count() or 1, "dask executor (local cluster)")
-            settings: dict[str, Any] = {
-                "n_workers": workers or os.cpu_count() or 1,
-                "threads_per_worker": 1,
-                "processes": True,
-                "dashboard_address": None,
-                # the scheduler's HTTP server (health, metrics) starts even without a
-                # dashboard, on port 8787 by default: a second cluster warned "port 8787 in
-                # use"; any free port of this machine only
-                "scheduler_kwargs": {"dashboard_address": "127.0.0.1:0"},
-                "silence_logs": logging.ERROR,  # no warnings about tasks cancelled by Ctrl-C
-                **cluster_options,
-            }
-            try:
-                with workers_ignore_sigint():  # Ctrl-C reaches the study, which stops them
-                    self._cluster = distributed.LocalCluster(**settings)
-            except TypeError as exc:
-                raise ConfigError(f"bad cluster_options for the local cluster: {exc}") from None
+            self._cluster = _local_cluster(distributed, workers, cluster_options)
+            self.security = self._cluster.security
             self.client = distributed.Client(self._cluster)
+            if not cluster_options.get("dashboard", False):
+                _close_http_servers(self._cluster, self.client)
         else:
             self._cluster = _jobqueue_cluster(cluster, cluster_options)
             self._cluster.scale(n=workers or 1)
@@ -345,3 +359,70 @@ def _jobqueue_cluster(kind: str, options: Mapping[str, Any]) -> Any:
         return factory(**options)
     except TypeError as exc:
         raise ConfigError(f"bad cluster_options for {JOBQUEUE_CLUSTERS[kind]}: {exc}") from None
+
+
+def _local_cluster(distributed: Any, workers: int | None, options: Mapping[str, Any]) -> Any:
+    """A ``distributed.LocalCluster`` that only this process can use: its scheduler, nannies
+    and workers speak TLS with certificates made for it (``Security.temporary()``, kept in
+    memory and handed to the worker processes by the nannies), so a client of another process
+    cannot connect, whichever user runs it; and it serves no HTTP unless ``dashboard``."""
+    import dask
+
+    n_workers = workers or os.cpu_count() or 1
+    check_workers(n_workers, "dask executor (local cluster)")
+    options = dict(options)
+    dashboard = options.pop("dashboard", False)
+    try:
+        security = distributed.Security.temporary()
+    except ImportError:
+        raise ConfigError(
+            "needs cryptography (the TLS certificates of the local cluster), which is not "
+            "installed: pip install 'fbia[dask]'",
+            "the dask executor",
+        ) from None
+    settings: dict[str, Any] = {
+        "n_workers": n_workers,
+        "threads_per_worker": 1,
+        "processes": True,
+        "security": security,
+        "protocol": "tls://",
+        "dashboard_address": None,
+        # the scheduler's HTTP server starts even without a dashboard (on port 8787 by
+        # default, where a second cluster warned "port 8787 in use"): any free loopback port
+        "scheduler_kwargs": {"dashboard_address": "127.0.0.1:0"},
+        "silence_logs": logging.ERROR,  # no warnings about tasks cancelled by Ctrl-C
+        **options,
+    }
+    # Without a dashboard the HTTP servers (which Dask starts all the same) get no pages to
+    # serve while they run, and _close_http_servers closes them once the cluster is up.
+    # Dask reads these routes from its configuration only; the nannies pass it on to the
+    # worker processes.
+    routes: dict[str, list[str]] = {}
+    if not dashboard:
+        routes = {f"distributed.{role}.http.routes": [] for role in ("scheduler", "worker")}
+    try:
+        with dask.config.set(routes), workers_ignore_sigint():  # Ctrl-C reaches the study,
+            return distributed.LocalCluster(**settings)  # which stops them
+    except TypeError as exc:
+        raise ConfigError(f"bad cluster_options for the local cluster: {exc}") from None
+
+
+def _close_http_servers(cluster: Any, client: Any) -> None:
+    """Stop the HTTP servers of ``cluster``'s scheduler and workers, which Dask starts even
+    without a dashboard (dask/distributed#7207)."""
+    client.run_on_scheduler(_close_scheduler_http)
+    client.run(_close_worker_http)
+    cluster.scheduler_info.get("services", {}).pop("dashboard", None)  # no dashboard_link
+
+
+def _close_http(server: Any) -> None:
+    server.http_server.stop()
+    server.services.pop("dashboard", None)
+
+
+def _close_scheduler_http(dask_scheduler: Any) -> None:
+    _close_http(dask_scheduler)
+
+
+def _close_worker_http(dask_worker: Any) -> None:
+    _close_http(dask_worker)

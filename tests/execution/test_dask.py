@@ -11,6 +11,7 @@ import importlib.util
 import json
 import os
 
+import dask
 import numpy as np
 import pytest
 from _models import FAULT_BOUNDS, PLUGIN, check_injected_faults, toy_problem
@@ -102,7 +103,17 @@ def test_a_study_with_faults_completes_on_the_cluster_at_an_address(
     monkeypatch.chdir(tmp_path)
     (tmp_path / "faults.toml").write_text(STUDY)
     address = dask_ev.client.scheduler.address
-    assert main(["run", "faults.toml", "--address", address]) == 0
+    assert address.startswith("tls://")
+    # a tls:// scheduler is reached with the certificate Dask's configuration names (here the
+    # cluster's own, in memory)
+    security = dask_ev.dask.security
+    tls = {
+        "distributed.comm.tls.ca-file": security.tls_ca_file,
+        "distributed.comm.tls.client.cert": security.tls_client_cert,
+        "distributed.comm.tls.client.key": security.tls_client_key,
+    }
+    with dask.config.set(tls):
+        assert main(["run", "faults.toml", "--address", address]) == 0
     out = capsys.readouterr().out
     assert (
         f"running grid on toy_mound with the vertical measure (dask, scheduler {address}, " in out
@@ -225,7 +236,7 @@ EXECUTOR_CASES += [
         ),
         (
             'job_extra_directives = ["--qos=low\\ncurl x | sh"]',
-            "'job_extra_directives': a value with a line break is not allowed",
+            "'job_extra_directives': '--qos=low\\ncurl x | sh' is refused (a line break would ",
         ),
     ]
 ]
