@@ -58,8 +58,10 @@ __all__ = [
     "describe_change",
     "interface_digest",
     "model_part",
+    "option_values",
     "problem_fingerprint",
     "run_key",
+    "same_model_class",
 ]
 
 
@@ -508,6 +510,25 @@ def comparison_key(comparison: Mapping[str, Any]) -> str:
 def model_key(model: Mapping[str, Any]) -> str:
     """The digest of a model part (a store holds runs of one model)."""
     return _sha(canonical(model))
+
+
+def same_model_class(stored: Mapping[str, Any], model: Mapping[str, Any]) -> bool:
+    """Whether two model parts are of one model class, version and fixed inputs (they may
+    differ in their options' values only: a store holds the runs of both)."""
+    a, b = stored.get("model", {}), model["model"]
+    return (a.get("class"), a.get("version"), stored.get("fixed")) == (
+        b.get("class"),
+        b.get("version"),
+        model.get("fixed"),
+    )
+
+
+def option_values(stored: Mapping[str, Any], model: Mapping[str, Any]) -> str:
+    """The options of the model part ``stored`` whose values differ from ``model``'s, as
+    ``name = value`` (an option ``model`` has and ``stored`` lacks: ``(no such option)``)."""
+    a, b = stored["model"].get("options", {}), model["model"].get("options", {})
+    names = sorted(k for k in {*a, *b} if a.get(k) != b.get(k))
+    return ", ".join(f"{k} = {json.dumps(a[k]) if k in a else '(no such option)'}" for k in names)
 
 
 #: an option a fingerprint leaves out: one at its default in a store written when only the

@@ -8,8 +8,13 @@ observations; the stored log-likelihoods are dropped (the likelihood is computed
 after the migration a change of σ_N reuses every run.  A change of the measure or of the
 observations reruns the migrated runs, since format 1 kept no interfaces to compare anew.
 
-The original file is copied first (``VACUUM INTO <name>.v1.sqlite``); the migration is one
-transaction, so an interrupted migration leaves the format-1 store as it was.
+Format ``fbia-store-2`` held the runs of one model part (meta ``model_key``); format 3 records
+each run's model key (``runs.model``) and every model part bound (table ``models``), so that
+runs of one model class at other option values share a store: a format-2 store's runs get its
+model key.
+
+The original file is copied first (``VACUUM INTO <name>.v1.sqlite``, ``.v2``); the migration
+is one transaction, so an interrupted migration leaves the store as it was.
 
 :func:`rekey` carries a store's runs over to the model part this fbia keys them by (every
 option's effective value, :func:`fbia.storage.fingerprints.as_keyed_now`): same runs, new
@@ -45,6 +50,7 @@ __all__ = [
     "comparison_rekey",
     "migrate",
     "model_change",
+    "record_part",
     "rekey",
     "unknown_defaults",
 ]
@@ -58,14 +64,18 @@ _V1_COLUMNS = (
 def migrate(db: sqlite3.Connection, path: Path, found: str, target: str, schema: str) -> int:
     """Bring the store at ``path`` (open as ``db``) from format ``found`` to ``target``;
     returns the number of runs carried over."""
-    if found != "fbia-store-1" or target != "fbia-store-2":
+    steps = {"fbia-store-1": [_v1_to_v2, _v2_to_v3], "fbia-store-2": [_v2_to_v3]}
+    if found not in steps or target != "fbia-store-3":
         raise ConfigError(f"store format {found!r}, this fbia reads {target!r}", str(path))
-    backup = path.with_name(f"{path.stem}.v1{path.suffix}")
+    version = found.rsplit("-", 1)[1]
+    backup = path.with_name(f"{path.stem}.v{version}{path.suffix}")
     if not backup.exists():
         db.execute("VACUUM INTO ?", (str(backup),))
     db.execute("BEGIN IMMEDIATE")
     try:
-        n = _v1_to_v2(db, schema)
+        n = 0
+        for step in steps[found]:
+            n = step(db, schema)
     except BaseException:
         db.execute("ROLLBACK")
         raise
@@ -110,6 +120,28 @@ def _v1_to_v2(db: sqlite3.Connection, schema: str) -> int:
     return len(rows)
 
 
+def _v2_to_v3(db: sqlite3.Connection, schema: str) -> int:
+    """Format 2 held the runs of one model part (meta ``model_key``); format 3 records each
+    run's model key (column ``runs.model``) and every model part bound (table ``models``),
+    so that runs of one model class at other option values can share the store."""
+    columns = {row[1] for row in db.execute("PRAGMA table_info(runs)")}
+    if "model" not in columns:
+        db.execute("ALTER TABLE runs ADD COLUMN model TEXT")
+    for statement in schema.split(";"):
+        if statement.strip():
+            db.execute(statement)
+    meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
+    key = meta.get("model_key")
+    if key is not None:
+        db.execute("UPDATE runs SET model = ? WHERE model IS NULL", (key,))
+        db.execute(
+            "INSERT OR IGNORE INTO models VALUES (?, ?, ?, ?)",
+            (key, meta.get("model", "{}"), meta.get("model_defaults"), meta.get("created", "")),
+        )
+    db.execute("UPDATE meta SET value = 'fbia-store-3' WHERE key = 'format'")
+    return int(db.execute("SELECT count(*) FROM runs").fetchone()[0])
+
+
 def rekey(
     db: sqlite3.Connection,
     old_model: dict[str, Any],
@@ -126,12 +158,13 @@ def rekey(
     option's value; None removes it (a part keyed by the options that differ from their
     defaults, as fbia before issue 44 wrote it).  Returns the number of runs re-keyed."""
     n = 0
+    old_key, new_key = model_key(old_model), model_key(new_model)
     for key, x in db.execute("SELECT key, x FROM runs").fetchall():
         values = json.loads(x)
         if run_key(old_model, coordinates, values) != key:
             continue
         new = run_key(new_model, coordinates, values)
-        db.execute("UPDATE runs SET key = ? WHERE key = ?", (new, key))
+        db.execute("UPDATE runs SET key = ?, model = ? WHERE key = ?", (new, new_key, key))
         db.execute("UPDATE comparisons SET run_key = ? WHERE run_key = ?", (new, key))
         n += 1
     if comparisons is not None and comparisons[0] != comparisons[1]:
@@ -139,15 +172,37 @@ def rekey(
             "UPDATE OR IGNORE comparisons SET comparison = ? WHERE comparison = ?",
             (comparisons[1], comparisons[0]),
         )
-    db.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (model_key(new_model),))
+    db.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (new_key,))
     db.execute("INSERT OR REPLACE INTO meta VALUES ('model', ?)", (canonical(new_model),))
-    if defaults is None:
+    recorded = None if defaults is None else canonical(defaults)
+    if recorded is None:
         db.execute("DELETE FROM meta WHERE key = 'model_defaults'")
     else:
-        db.execute(
-            "INSERT OR REPLACE INTO meta VALUES ('model_defaults', ?)", (canonical(defaults),)
-        )
+        db.execute("INSERT OR REPLACE INTO meta VALUES ('model_defaults', ?)", (recorded,))
+    db.execute("DELETE FROM models WHERE key = ?", (old_key,))
+    db.execute(
+        "INSERT OR REPLACE INTO models VALUES (?, ?, ?, datetime('now'))",
+        (new_key, canonical(new_model), recorded),
+    )
     return n
+
+
+def record_part(db: sqlite3.Connection, key: str, model: dict[str, Any], defaults: str) -> None:
+    """Register the model part ``model`` under ``key`` in table ``models`` (a part registered
+    before keeps its place and the names of its options at their defaults, ``defaults`` as
+    JSON) and make it the part bound last (meta), in the caller's transaction."""
+    db.execute(
+        "INSERT INTO models VALUES (?, ?, ?, datetime('now')) ON CONFLICT(key) DO UPDATE SET "
+        "defaults = coalesce(models.defaults, excluded.defaults)",
+        (key, canonical(model), defaults),
+    )
+    db.execute("INSERT OR REPLACE INTO meta VALUES ('model_key', ?)", (key,))
+    db.execute("INSERT OR REPLACE INTO meta VALUES ('model', ?)", (canonical(model),))
+    db.execute(
+        "INSERT OR REPLACE INTO meta VALUES ('model_defaults', "
+        "(SELECT defaults FROM models WHERE key = ?))",
+        (key,),
+    )
 
 
 def comparison_rekey(

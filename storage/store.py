@@ -25,22 +25,28 @@ input values) and stored with the interfaces it gave; its **comparison** with th
 stored: it is computed from the distances when a run is read (:mod:`fbia.core.likelihood`).  So
 a change of σ_N, bounds, priors, iterator or executor reuses every stored run, and a change of
 the measure or the observations reuses every forward run and recomputes only its comparison
-(from the stored interfaces).  A store holds the runs of one model: binding it to another model,
-other model options or other fixed inputs is an error that says what changed, and so is an
-option whose default changed since the runs were made (a study that sets the runs' value
-reuses them).
+(from the stored interfaces).  A store holds the runs of one model class, at any option values:
+every run records its model part (model key), so binding the store to other option values,
+set or a default that changed since the runs were made, adds a model part whose runs are made
+anew beside the others, which are kept and not reused (a study that sets their values reuses
+them).  Binding it to another model class, version or other fixed inputs is an error that
+says what changed.  :func:`len`, :meth:`StudyStore.counts` and :meth:`StudyStore.runs` concern
+the model part bound, :meth:`StudyStore.total` every run.
 
 Every run is written in its own transaction the moment it finishes (WAL journal,
 ``synchronous=NORMAL``: a killed process loses nothing that was committed).  Tables: ``meta``
-(format, model key and fingerprint, the names of its options at their defaults, the last
-problem bound, the model's code digest, creation time), ``sessions`` (one row per ``fbia
-run``: start and end, host, pid, fbia version, study file hash, executor, status), ``runs``
-(key, index, session, attempt, x, uncertain, status, message, wall time, worker, working
-folder, artifacts, diagnostics, finish time, interfaces as an ``.npz``) and ``comparisons``
+(format, the model part bound last: its key, fingerprint and the names of its options at their
+defaults, the last problem bound, the model's code digest, creation time), ``models`` (every
+model part bound: key, fingerprint, options at their defaults, time added), ``sessions`` (one
+row per ``fbia run``: start and end, host, pid, fbia version, study file hash, executor,
+status), ``runs`` (key, model key, index, session, attempt, x, uncertain, status, message,
+wall time, worker, working folder, artifacts, diagnostics, finish time, interfaces as an
+``.npz``) and ``comparisons``
 (run key, comparison key, status, message, residuals as float64 bytes, distances).  Read it
 with any SQLite client, e.g.
-``sqlite3 output/store.sqlite "select status, count(*) from runs group by status"``.  Stores of
-the first format (``fbia-store-1``) are migrated when opened (:mod:`fbia.storage.migration`).
+``sqlite3 output/store.sqlite "select model, status, count(*) from runs group by 1, 2"``.
+Stores of earlier formats (``fbia-store-1``, ``fbia-store-2``) are migrated when opened
+(:mod:`fbia.storage.migration`).
 """
 
 from __future__ import annotations
@@ -74,8 +80,10 @@ from .fingerprints import (
     coordinates_of,
     model_key,
     model_part,
+    option_values,
     problem_fingerprint,
     run_key,
+    same_model_class,
 )
 from .interface_blob import pack_interfaces, unpack_interfaces
 from .migration import (
@@ -83,6 +91,7 @@ from .migration import (
     comparison_rekey,
     migrate,
     model_change,
+    record_part,
     rekey,
     unknown_defaults,
 )
@@ -93,7 +102,7 @@ __all__ = ["STORE_FORMAT", "StoreMismatchError", "StoredRun", "StudyStore"]
 logger = logging.getLogger(__name__)
 
 #: Written into ``meta``; a store of an unknown format is refused, not misread.
-STORE_FORMAT = "fbia-store-2"
+STORE_FORMAT = "fbia-store-3"
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -109,9 +118,16 @@ CREATE TABLE IF NOT EXISTS sessions (
     executor TEXT NOT NULL,
     study_file TEXT
 );
+CREATE TABLE IF NOT EXISTS models (
+    key TEXT PRIMARY KEY,
+    part TEXT NOT NULL,
+    defaults TEXT,
+    added TEXT NOT NULL
+);
 CREATE TABLE IF NOT EXISTS runs (
     id INTEGER PRIMARY KEY,
     key TEXT NOT NULL UNIQUE,
+    model TEXT,
     idx INTEGER NOT NULL,
     session INTEGER,
     attempt INTEGER NOT NULL DEFAULT 1,
@@ -127,6 +143,7 @@ CREATE TABLE IF NOT EXISTS runs (
     finished TEXT NOT NULL,
     interfaces BLOB
 );
+CREATE INDEX IF NOT EXISTS runs_model ON runs (model);
 CREATE TABLE IF NOT EXISTS comparisons (
     run_key TEXT NOT NULL,
     comparison TEXT NOT NULL,
@@ -151,30 +168,10 @@ def _floats(array: np.ndarray | None) -> bytes | None:
     return None if array is None else np.ascontiguousarray(array, dtype="<f8").tobytes()
 
 
-def _pins(
-    stored: Mapping[str, Any], model: Mapping[str, Any], fingerprint: Mapping[str, Any]
-) -> dict[str, Any]:
-    """The options (name: the stored value) by which the stored model part differs from
-    ``model`` while this study takes their defaults (of ``fingerprint``), when the parts
-    differ in no other way: setting them to the stored values reuses the runs."""
-    a, b = stored["model"], model["model"]
-    if (a.get("class"), a.get("version"), stored.get("fixed")) != (
-        b.get("class"),
-        b.get("version"),
-        model.get("fixed"),
-    ):
-        return {}
-    oa, ob = a.get("options", {}), b.get("options", {})
-    changed = {k for k in {*oa, *ob} if oa.get(k) != ob.get(k)}
-    defaults = set(fingerprint["model"]["defaults"])
-    if not changed <= defaults or not changed <= set(oa):
-        return {}
-    return {k: oa[k] for k in changed}
-
-
 # -- the store ---------------------------------------------------------------------------------
 class StoreMismatchError(ConfigError):
-    """The store holds runs of another model (class, version, options or fixed inputs)."""
+    """The store holds runs of another model (class, version or fixed inputs; options whose
+    recorded values cannot be checked), or made by other code of the model plugin."""
 
 
 @dataclass(frozen=True)
@@ -350,14 +347,17 @@ class StudyStore:
     def bind(self, problem: InverseProblem, reuse_changed_code: bool = False) -> str:
         """Tie the store to ``problem``: the first time, record its model; later, check it.
 
-        Returns the model key.  Raises :class:`StoreMismatchError` (a ConfigError) naming
-        what changed when the store holds runs of another model (an option's effective value
-        differs, whether set or a default that changed), or runs made by other code of the
-        model plugin (its source files changed, :func:`code_digest`) unless
-        ``reuse_changed_code``, which waives the code check only.  A store keyed another way
-        is re-keyed where its recorded values agree with the current ones
-        (:meth:`_rekey_or_refuse`).  The measure, the observations and the likelihood may
-        differ from earlier sessions.
+        Returns the model key.  A model part bound before (a study pinning the values of
+        earlier runs) is bound again, and its runs are reused.  Other option values of the
+        same model class, whether set or a default that changed, add a model part: its runs
+        are made anew beside the stored ones, which are kept and not reused
+        (:meth:`other_models`).  A store keyed another way is re-keyed where its recorded
+        values agree with the current ones (:meth:`_rekey_or_add`).  Raises
+        :class:`StoreMismatchError` (a ConfigError) naming what changed when the store holds
+        runs of another model class, version or fixed inputs, or runs made by other code of
+        the model plugin (its source files changed, :func:`code_digest`) unless
+        ``reuse_changed_code``, which waives the code check only.  The measure, the
+        observations and the likelihood may differ from earlier sessions.
         """
         if self._binding is not None and self._binding.problem is problem:
             assert self.hash is not None
@@ -367,19 +367,24 @@ class StudyStore:
         key = model_key(model)
         code = code_digest(problem.model)
         defaults = canonical(fingerprint["model"]["defaults"])
+        parts = self._parts()
+        checked = False
         if self.hash is None:
             with self._transaction() as db:
-                db.execute("INSERT INTO meta VALUES ('model_key', ?)", (key,))
-                db.execute("INSERT INTO meta VALUES ('model', ?)", (canonical(model),))
-                db.execute("INSERT OR REPLACE INTO meta VALUES ('model_defaults', ?)", (defaults,))
+                record_part(db, key, model, defaults)
             self.hash = key
             logger.info("store %s: new, for model %s", self.path, code["class"])
-        elif key != self.hash:
-            self._rekey_or_refuse(fingerprint, model, problem, code)
-        elif self._meta("model_defaults") is None:  # keyed by an earlier fbia, every option
+        elif key in parts:  # the part bound last, or another one bound before
+            then = parts[key][1]  # None: keyed by an earlier fbia, every option
             with self._transaction() as db:
-                db.execute("INSERT INTO meta VALUES ('model_defaults', ?)", (defaults,))
-        self._check_code(problem.model, code, reuse_changed_code)
+                record_part(db, key, model, defaults if then is None else canonical(then))
+            self.hash = key
+        else:
+            checked = self._rekey_or_add(
+                fingerprint, model, problem, code, parts, reuse_changed_code
+            )
+        if not checked:
+            self._check_code(problem.model, code, reuse_changed_code)
         counts = self.counts()
         if counts:
             logger.info(
@@ -403,50 +408,111 @@ class StudyStore:
         )
         return key
 
-    def _rekey_or_refuse(
+    def _parts(self) -> dict[str, tuple[dict[str, Any], list[str] | None]]:
+        """Every model part bound (key: the part, the names of its options at their defaults
+        or None for a part keyed by an earlier fbia), the part bound last first."""
+        rows = self._db.execute("SELECT key, part, defaults FROM models ORDER BY rowid").fetchall()
+        parts = {str(k): (json.loads(p), None if d is None else json.loads(d)) for k, p, d in rows}
+        if self.hash is None:
+            return parts
+        last = parts.get(self.hash)
+        if last is None:  # a part recorded in meta only (a store written by hand)
+            then = self._meta("model_defaults")
+            last = (
+                json.loads(self._meta("model") or "{}"),
+                None if then is None else json.loads(then),
+            )
+        return {self.hash: last, **parts}
+
+    def _rekey_or_add(
         self,
         fingerprint: dict[str, Any],
         model: dict[str, Any],
         problem: InverseProblem,
         code: dict[str, Any],
-    ) -> None:
-        """Re-key the store to ``model`` where its stored model part, as this fbia keys it
-        (:func:`as_keyed_now`), is ``model``; else refuse it naming what changed.
+        parts: Mapping[str, tuple[dict[str, Any], list[str] | None]],
+        reuse_changed_code: bool,
+    ) -> bool:
+        """Re-key a stored model part to ``model`` where, as this fbia keys it
+        (:func:`as_keyed_now`), it is ``model``; else add ``model`` as a part of its own
+        where a stored part is of the same model class (version and fixed inputs) and differs
+        in option values only: the store then holds runs of both, and reuses each part's
+        runs for that part only; else refuse the store naming what changed.
 
-        The stored part records every option's value when meta ``model_defaults`` is there
-        (this fbia) or ``code`` is not (fbia before it left the defaults out of the keys; the
+        A stored part records every option's value when its defaults are recorded (this
+        fbia) or meta ``code`` is not (fbia before it left the defaults out of the keys; the
         fbia in between re-keyed every store it opened and recorded its code): an option it
         lacks was added since, and is re-keyed at its default.  A part of the fbia in between
         records the options that differed from their defaults only: it is re-keyed only while
-        the model's code is unchanged since, so that no default can have changed."""
-        stored = json.loads(self._meta("model") or "{}")
+        the model's code is unchanged since, so that no default can have changed.
+
+        Returns whether the code check (:meth:`_check_code`) was made: before a part is
+        added, so that a refused store is left as it was."""
         old = json.loads(self._meta("problem") or "{}")
-        then = self._meta("model_defaults")
         recorded = self._meta("code")
-        every_option = then is not None or recorded is None
-        n = len(self)
-        if then is None and recorded is not None:
-            was = json.loads(recorded)
-            why = unknown_defaults(was, code_digest_as_stored(was, problem.model, code), n)
-            if why is not None:
-                raise StoreMismatchError(why, str(self.path))
-        defaults = None if then is None else json.loads(then)
-        candidate = as_keyed_now(stored, problem.model, "model", defaults) if stored else {}
-        if model_key(candidate) != model_key(model):
-            pins = _pins(candidate, model, fingerprint) if stored else {}
-            raise StoreMismatchError(model_change(old, fingerprint, n, pins), str(self.path))
-        pair = comparison_rekey(old, fingerprint, problem.measure) if every_option else None
+        n = self.total()
+        key = model_key(model)
+        candidates = {}
+        for part_key, (stored, then) in parts.items():
+            if then is None and recorded is not None:
+                was = json.loads(recorded)
+                why = unknown_defaults(was, code_digest_as_stored(was, problem.model, code), n)
+                if why is not None:
+                    raise StoreMismatchError(why, str(self.path))
+            candidate = as_keyed_now(stored, problem.model, "model", then)
+            candidates[part_key] = candidate
+            if model_key(candidate) != key:
+                continue
+            every_option = then is not None or recorded is None
+            pair = comparison_rekey(old, fingerprint, problem.measure) if every_option else None
+            with self._transaction() as db:
+                rekey(
+                    db, stored, coordinates_of(old), model, pair, fingerprint["model"]["defaults"]
+                )
+            self.hash = key
+            logger.info("store %s re-keyed: its model part as this fbia keys it", self.path)
+            return False
+        others = {k: c for k, c in candidates.items() if same_model_class(c, model)}
+        if not others:
+            raise StoreMismatchError(model_change(old, fingerprint, n), str(self.path))
+        self._check_code(problem.model, code, reuse_changed_code)
         with self._transaction() as db:
-            rekey(db, stored, coordinates_of(old), model, pair, fingerprint["model"]["defaults"])
-        self.hash = model_key(model)
-        logger.info("store %s re-keyed: its model part as this fbia keys it", self.path)
+            record_part(db, key, model, canonical(fingerprint["model"]["defaults"]))
+        self.hash = key
+        logger.info(
+            "store %s: model %s at other option values (%s): its %d stored runs at the "
+            "others are kept and not reused",
+            self.path,
+            code["class"],
+            "; ".join(option_values(c, model) for c in others.values()),
+            n,
+        )
+        return True
+
+    def other_models(self) -> list[tuple[str, int]]:
+        """The other model parts of the bound model's class with runs in the store: (how
+        their options differ from the bound part's, e.g. ``"gain = 0.5"``, number of runs)."""
+        b = self._bound()
+        out = []
+        for part_key, (stored, then) in self._parts().items():
+            if part_key == self.hash:
+                continue
+            candidate = as_keyed_now(stored, b.problem.model, "model", then)
+            if not same_model_class(candidate, b.model):
+                continue
+            n = self._db.execute(
+                "SELECT count(*) FROM runs WHERE model = ?", (part_key,)
+            ).fetchone()[0]
+            if n:
+                out.append((option_values(candidate, b.model), int(n)))
+        return out
 
     def _check_code(self, model: Any, code: dict[str, Any], reuse: bool) -> None:
         text = self._meta("code")
         if text is None:
             return
         old = json.loads(text)
-        message = code_change(old, code_digest_as_stored(old, model, code), len(self))
+        message = code_change(old, code_digest_as_stored(old, model, code), self.total())
         if message is not None and reuse:
             logger.warning("%s: reused as asked (--reuse-changed-code)", message.split(";")[0])
         elif message is not None:
@@ -550,15 +616,15 @@ class StudyStore:
         blob = None if interfaces is None else pack_interfaces(interfaces)
         with self._transaction() as db:
             db.execute(
-                f"INSERT INTO runs ({_RUN_COLUMNS}, interfaces) "
-                f"VALUES ({', '.join('?' * (len(row) + 1))}) ON CONFLICT(key) DO UPDATE SET "
+                f"INSERT INTO runs ({_RUN_COLUMNS}, interfaces, model) "
+                f"VALUES ({', '.join('?' * (len(row) + 2))}) ON CONFLICT(key) DO UPDATE SET "
                 + ", ".join(
                     f"{c} = excluded.{c}"
-                    for c in [*_RUN_COLUMNS.split(", "), "interfaces"]
+                    for c in [*_RUN_COLUMNS.split(", "), "interfaces", "model"]
                     if c not in ("key", "attempt")
                 )
                 + ", attempt = runs.attempt + 1",
-                (*row, blob),
+                (*row, blob, self.hash),
             )
             db.execute("DELETE FROM comparisons WHERE run_key = ?", (key,))
             if solved:
@@ -602,9 +668,9 @@ class StudyStore:
         return None if row is None or row[0] is None else unpack_interfaces(row[0])
 
     def runs(self) -> list[StoredRun]:
-        """Every stored run with its comparison under the bound problem (unbound: the problem
-        bound last), in the order first written."""
-        return self._select("1", [])
+        """Every stored run of the model part bound with its comparison under the bound
+        problem (unbound: the part and problem bound last), in the order first written."""
+        return self._select("r.model IS ?", [self.hash])
 
     def _comparison(self) -> str | None:
         if self._binding is not None:
@@ -692,11 +758,20 @@ class StudyStore:
         return row is not None
 
     def counts(self) -> dict[str, int]:
-        """Number of stored forward runs per status (``ok``: the model gave interfaces)."""
-        cur = self._db.execute("SELECT status, count(*) FROM runs GROUP BY status")
+        """Number of stored forward runs of the model part bound (unbound: bound last) per
+        status (``ok``: the model gave interfaces)."""
+        cur = self._db.execute(
+            "SELECT status, count(*) FROM runs WHERE model IS ? GROUP BY status", (self.hash,)
+        )
         return {str(s): int(n) for s, n in cur.fetchall()}
 
     def __len__(self) -> int:
+        """The number of stored forward runs of the model part bound (unbound: bound last)."""
+        row = self._db.execute("SELECT count(*) FROM runs WHERE model IS ?", (self.hash,))
+        return int(row.fetchone()[0])
+
+    def total(self) -> int:
+        """The number of stored forward runs of every model part."""
         return int(self._db.execute("SELECT count(*) FROM runs").fetchone()[0])
 
     def describe(self) -> dict[str, Any]:

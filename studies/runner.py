@@ -158,8 +158,9 @@ def run_study(
     Raises
     ------
     ConfigError
-        The store holds runs of a different model (the message says what changed), or is
-        in use by another run.
+        The store holds runs of a different model class, version or fixed inputs (the
+        message says what changed; runs of this model class at other option values are
+        kept beside this model's), or is in use by another run.
 
     On Ctrl-C or an error the evaluations finished so far are already stored; a
     ``result.json`` with status ``"interrupted"`` or ``"error"`` is written and the exception
@@ -498,17 +499,27 @@ def _announce_resume(
     if fresh:
         echo(f"starting over (--fresh): the store {store.path} was emptied")
     n = len(store)
+    others = store.other_models()  # this model's class at other option values
+    also = ""
+    if others:
+        values = "; ".join(v for v, _ in others)
+        also = (
+            f"{sum(k for _, k in others)} of the same model class with other option values "
+            f"({values}), which are not reused"
+        )
     if not n:
+        if also:
+            echo(f"store: {store.path} holds 0 forward runs of this model and {also}")
         return
     failed = n - store.counts().get("ok", 0)
     again = " (failed ones run again: --retry-failed)" if retry_failed and failed else ""
     echo(
         f"resuming: {store.path} holds {n} forward runs of this model ({failed} failed); "
-        f"each is reused, not run again{again}"
+        f"each is reused, not run again{again}{'; it also holds ' + also if also else ''}"
     )
     sessions = store.sessions()
     last = sessions[-1] if sessions else None
-    if last is not None and last["study_sha256"] != study.sha256:
+    if last is not None and last["study_sha256"] != study.sha256 and not others:
         echo(
             "note: the study file changed since the last run; its model did not, so the "
             "stored forward runs stay valid (compared anew if the measure or data changed)"

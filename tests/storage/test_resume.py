@@ -185,7 +185,7 @@ def test_a_killed_study_resumes_to_the_uninterrupted_result_repeating_no_run(fol
     ]
 
 
-def test_changes_that_keep_the_runs_reuse_them_others_are_refused_until_fresh(folder, capsys):
+def test_changes_that_keep_the_runs_reuse_them_others_run_anew_until_fresh(folder, capsys):
     _write(folder, delay=0.0, kind="serial")
     assert main(["run", "toy.toml"]) == 0
     n = len(_rows(folder / "output" / "store.sqlite"))
@@ -206,16 +206,22 @@ def test_changes_that_keep_the_runs_reuse_them_others_are_refused_until_fresh(fo
     assert f"evaluations: {new} run now (0 failed), " in out
     result = json.loads((folder / "output" / "result.json").read_text())
     assert len(result["starts"]) == 3 and result["success"]
-    # the model's options changed: the stored runs are of another problem
+    # the model's options changed: the stored runs are of another model part, kept beside
+    # the new one's runs and not reused
     _write(folder, delay=0.001, kind="serial")
-    assert main(["run", "toy.toml"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err == (
-        f"fbia: error: output/store.sqlite: the store holds {n + new} runs "
-        "of a different model (changed: model options (delay: 0.0 (default then) -> 0.001)); "
-        "they cannot be reused: run with --fresh to start over, or write to another --output"
+    assert main(["run", "toy.toml"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        out.count(
+            f"store: output/store.sqlite holds 0 forward runs of this model and {n + new} of the "
+            "same model class with other option values (delay = 0.0), which are not reused\n"
+        )
+        == 1
     )
-    assert _rows(folder / "output" / "store.sqlite") == rows  # nothing touched
+    assert "resuming" not in out and "its model did not" not in out
+    both = _rows(folder / "output" / "store.sqlite")
+    assert both[: len(rows)] == rows and len(both) > len(rows)  # the stored ones untouched
+    assert f"evaluations: {len(both) - len(rows)} run now (0 failed), 0 taken" in out
     assert main(["run", "toy.toml", "--fresh"]) == 0
     assert "starting over (--fresh)" in capsys.readouterr().out
     rows = _rows(folder / "output" / "store.sqlite")

@@ -12,7 +12,7 @@ import sqlite3
 
 import numpy as np
 import pytest
-from _models import toy_curve, toy_problem
+from _models import ToyMoundForwardModel, toy_curve, toy_problem
 
 import fbia
 from fbia.core.likelihood import gaussian_log_likelihood
@@ -147,7 +147,11 @@ def test_keys_are_exact_in_every_bit():
     assert run_key(m, c, {"E": 1.0}) != run_key({"model": "n"}, c, {"E": 1.0})
 
 
-def test_a_store_of_another_model_says_what_changed(tmp_path):
+class _OtherToyForwardModel(ToyMoundForwardModel):
+    """Another model class (the same numbers: what matters is the class)."""
+
+
+def test_other_option_values_share_the_store_another_model_class_says_what_changed(tmp_path):
     with StudyStore(tmp_path / "s.sqlite") as store:
         store.bind(_problem())
         with fbia.SerialEvaluator(store=store) as ev:
@@ -155,12 +159,19 @@ def test_a_store_of_another_model_says_what_changed(tmp_path):
     with StudyStore(tmp_path / "s.sqlite") as store:
         store.bind(_problem())  # the same problem, built again: fine
         store.bind(_problem(noise_std=0.02))  # another likelihood: fine
+        assert (len(store), store.total(), store.other_models()) == (2, 2, [])
+        store.bind(_problem(delay=0.25, noise_std=0.03))  # other option values: kept apart
+        assert (len(store), store.counts(), store.total()) == (0, {}, 2)
+        assert store.other_models() == [("delay = 0.0", 2)]
+        other = dataclasses.replace(
+            _problem(noise_std=0.03), model=_OtherToyForwardModel(fail_above=650.0)
+        )
         with pytest.raises(fbia.ConfigError) as info:
-            store.bind(_problem(delay=0.25, noise_std=0.03))
+            store.bind(other)
     message = str(info.value)
     assert message.startswith(f"{tmp_path / 's.sqlite'}: the store holds 2 runs of a different ")
-    changed = "model options (delay: 0.0 (default then) -> 0.25); likelihood noise_std 0.02 -> 0.03"
-    assert changed in message
+    assert "(changed: model _models.ToyMoundForwardModel -> " in message
+    assert "_OtherToyForwardModel)" in message
     assert message.endswith("run with --fresh to start over, or write to another --output")
 
 

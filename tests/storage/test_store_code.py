@@ -110,11 +110,8 @@ def test_a_new_option_with_a_default_keeps_every_run(tmp_path, plugin):
     # re-keyed with the new option at its default (its author's contract: it keeps the old
     # behaviour); only the code changed
     assert _evaluate(path, _problem(grown), reuse_changed_code=True) == ({0, 1, 2}, 3)
-    # the new option set to another value is another model
-    with pytest.raises(
-        fbia.ConfigError, match=r"model options \(scale: 1.0 \(default then\) -> 2.0\)"
-    ):
-        _evaluate(path, _problem(lambda: grown(scale=2.0)))
+    # the new option set to another value is another model part: its runs are made anew
+    assert _evaluate(path, _problem(lambda: grown(scale=2.0))) == (set(), 3)
 
 
 def test_a_store_keyed_with_every_option_is_rekeyed_and_reused(tmp_path):
@@ -230,9 +227,8 @@ def test_a_mesh_file_is_keyed_by_its_content_not_its_header(tmp_path, plugin):
     assert _evaluate(path, _problem(lambda: model(surface=surface))) == (set(), 3)
     _ply(surface, "written 2026-11-28 12:34:56 by another run")
     assert _evaluate(path, _problem(lambda: model(surface=surface))) == ({0, 1, 2}, 3)
-    _ply(surface, "written again", z=0.5)
-    with pytest.raises(fbia.ConfigError, match="different model"):
-        _evaluate(path, _problem(lambda: model(surface=surface)))
+    _ply(surface, "written again", z=0.5)  # another surface: its runs are made anew
+    assert _evaluate(path, _problem(lambda: model(surface=surface))) == (set(), 3)
 
 
 def test_a_store_keyed_by_a_mesh_files_bytes_is_rekeyed_when_the_bytes_are_the_same(
@@ -266,8 +262,7 @@ def test_a_store_keyed_by_a_mesh_files_bytes_is_rekeyed_when_the_bytes_are_the_s
     assert rekey(db, new, coordinates_of(fingerprint), old) == 3
     db.execute("COMMIT")
     db.close()
-    with pytest.raises(fbia.ConfigError, match="different model"):
-        _evaluate(path, rewritten)
+    assert _evaluate(path, rewritten) == (set(), 3)  # not reused: made anew
 
 
 def test_a_new_release_with_the_same_numerics_keeps_the_runs_an_edit_does_not(

@@ -1,5 +1,6 @@
-"""A release that changes an option's default never reuses the runs made with the old one, and
-a study that pins the old value reuses them (issue 44 item 1).
+"""A release that changes an option's default never reuses the runs made with the old one: it
+reruns them, beside them in the same store, and a study that pins the old value reuses them
+(issue 44 item 1).
 
 The plugin is a third party's package written into the test's folder (``gain_plugin``: a model
 with an option ``gain``, default 0.5, and a measure with an option ``scale``, both declaring
@@ -8,13 +9,14 @@ a new release is the package's version moved on (``_package_version``, as in
 test_store_code.py), so the code check accepts the edited code as "another release, the same
 numerics".  Before issue 44 the store keyed options by their difference from the current
 defaults: a study relying on the default reused 3 runs made with gain = 0.5 for gain = 1.0.
+A store holds the runs of one model class at any option values, each run under its model part
+(column ``runs.model``, table ``models``).
 """
 
 from __future__ import annotations
 
 import importlib
 import json
-import re
 import sqlite3
 import sys
 from types import ModuleType
@@ -115,12 +117,24 @@ def _problem(plugin: ModuleType, measure: dict | None = None, **options) -> fbia
 
 
 def _evaluate(path, problem, **bind):
-    """(indices reused, runs in the store, distances) of the three POINTS."""
+    """(indices reused, runs of this model in the store, distances) of the three POINTS."""
     with StudyStore(path) as store:
         store.bind(problem, **bind)
         with fbia.SerialEvaluator(store=store) as ev:
             records = ev.evaluate(problem, POINTS)
             return set(ev.reused), len(store), [r.distance for r in records]
+
+
+def _per_model(path) -> list[int]:
+    """The number of runs of each model part in the store, in the order first bound."""
+    with sqlite3.connect(path) as db:
+        rows = db.execute(
+            "SELECT count(r.id) FROM models m LEFT JOIN runs r ON r.model = m.key "
+            "GROUP BY m.key ORDER BY m.rowid"
+        ).fetchall()
+        orphans = db.execute("SELECT count(*) FROM runs WHERE model IS NULL").fetchone()[0]
+    assert orphans == 0
+    return [n for (n,) in rows]
 
 
 def _meta(path, key):
@@ -129,12 +143,8 @@ def _meta(path, key):
     return None if row is None else row[0]
 
 
-CHANGED = "model options (gain: 0.5 (default then) -> 1.0 (default now))"
-PIN = "set gain = 0.5 in the model's options to reuse them, run with --fresh"
-
-
 @pytest.mark.parametrize("reuse_changed_code", [False, True])
-def test_a_changed_default_is_another_model_and_pinning_the_old_value_reuses_the_runs(
+def test_a_changed_default_reruns_the_runs_and_pinning_the_old_value_reuses_them(
     tmp_path, release, reuse_changed_code
 ):
     path = tmp_path / "s.sqlite"
@@ -142,40 +152,43 @@ def test_a_changed_default_is_another_model_and_pinning_the_old_value_reuses_the
     reused, n, made = _evaluate(path, _problem(first))
     assert (reused, n) == (set(), 3)
     second = release("1.1.0", gain="1.0")  # same numerics_version, another default
-    for study in (_problem(second), _problem(second, gain=1.0)):  # relying on it, or set
-        assert plugin_options(study.model, exclude_defaults=True) == {}
-        with pytest.raises(fbia.ConfigError) as info:
-            _evaluate(path, study, reuse_changed_code=reuse_changed_code)
-        message = str(info.value)
-        assert message.startswith(f"{path}: the store holds 3 runs of a different model ")
-        assert f"(changed: {CHANGED}); they cannot be reused: {PIN}" in message
-        assert "\n" not in message
-    # the new default gives other numbers: a fresh store runs them
-    reused, n, fresh = _evaluate(tmp_path / "fresh.sqlite", _problem(second))
-    assert (reused, n) == (set(), 3) and fresh != made
+    relying = _problem(second)
+    assert plugin_options(relying.model, exclude_defaults=True) == {}
+    # relying on the new default: every run again, with the new default's numbers
+    reused, n, now = _evaluate(path, relying, reuse_changed_code=reuse_changed_code)
+    assert (reused, n) == (set(), 3) and now != made
+    assert _evaluate(tmp_path / "fresh.sqlite", _problem(second))[2] == now
+    assert _per_model(path) == [3, 3]
+    # the new value set: the same model part as relying on it
+    assert _evaluate(path, _problem(second, gain=1.0)) == ({0, 1, 2}, 3, now)
     # the runs' value pinned: every run reused, with its numbers, and nothing added
     assert _evaluate(path, _problem(second, gain=0.5)) == ({0, 1, 2}, 3, made)
+    assert _per_model(path) == [3, 3]
+    with StudyStore(path) as store:
+        store.bind(_problem(second, gain=0.5))
+        assert (len(store), store.counts(), store.total()) == (3, {"ok": 3}, 6)
+        assert store.other_models() == [("gain = 1.0", 3)]
+        assert [r.record.distance for r in store.runs()] == made
 
 
-def test_the_new_value_set_explicitly_after_an_edit_is_refused_with_reuse_changed_code(
-    tmp_path, release
-):
-    """An edit without a release: --reuse-changed-code waives the code check, never the
-    options' values."""
+def test_a_changed_value_after_an_edit_needs_reuse_changed_code_and_runs_anew(tmp_path, release):
+    """An edit without a release: --reuse-changed-code waives the code check; the options'
+    values still choose the runs."""
     path = tmp_path / "s.sqlite"
-    assert _evaluate(path, _problem(release("1.0.0")))[:2] == (set(), 3)
+    _, _, made = _evaluate(path, _problem(release("1.0.0")))
     edited = release("1.0.0", gain="1.0")
-    with pytest.raises(fbia.ConfigError, match=r"made by other code of the model plugin"):
-        _evaluate(path, _problem(edited, gain=0.5))  # the code check stands
-    with pytest.raises(fbia.ConfigError, match=re.escape(CHANGED)):
-        _evaluate(path, _problem(edited, gain=1.0), reuse_changed_code=True)
-    reused, n, _ = _evaluate(path, _problem(edited, gain=0.5), reuse_changed_code=True)
-    assert (reused, n) == ({0, 1, 2}, 3)
+    for study in (_problem(edited, gain=0.5), _problem(edited)):
+        with pytest.raises(fbia.ConfigError, match=r"made by other code of the model plugin"):
+            _evaluate(path, study)  # the code check stands, and the store is left as it was
+    assert _per_model(path) == [3]
+    reused, n, now = _evaluate(path, _problem(edited), reuse_changed_code=True)
+    assert (reused, n) == (set(), 3) and now != made
+    reused, n, again = _evaluate(path, _problem(edited, gain=0.5), reuse_changed_code=True)
+    assert (reused, n, again) == ({0, 1, 2}, 3, made)
+    assert _per_model(path) == [3, 3]
 
 
-def test_a_new_option_with_a_default_keeps_every_run_and_another_value_is_refused(
-    tmp_path, release
-):
+def test_a_new_option_with_a_default_keeps_every_run_and_another_value_runs_anew(tmp_path, release):
     path = tmp_path / "s.sqlite"
     _, _, made = _evaluate(path, _problem(release("1.0.0")))
     grown = release(
@@ -183,10 +196,24 @@ def test_a_new_option_with_a_default_keeps_every_run_and_another_value_is_refuse
     )
     assert _evaluate(path, _problem(grown)) == ({0, 1, 2}, 3, made)
     assert json.loads(_meta(path, "model"))["model"]["options"]["offset"] == 0.0
-    with pytest.raises(
-        fbia.ConfigError, match=r"model options \(offset: 0.0 \(default then\) -> 0.5\)\)"
-    ):
-        _evaluate(path, _problem(grown, offset=0.5))
+    assert _evaluate(path, _problem(grown, offset=0.5))[:2] == (set(), 3)
+    assert _per_model(path) == [3, 3]
+    assert _evaluate(path, _problem(grown)) == ({0, 1, 2}, 3, made)
+
+
+def test_a_new_option_keeps_the_runs_of_every_model_part(tmp_path, release):
+    """Each part of a store holding two is re-keyed when it is bound again."""
+    path = tmp_path / "s.sqlite"
+    first = release("1.0.0")
+    _, _, half = _evaluate(path, _problem(first))
+    _, _, whole = _evaluate(path, _problem(first, gain=1.0))
+    grown = release(
+        "1.1.0", options='        offset: float = Field(0.0, description="a new option [-]")'
+    )
+    assert _evaluate(path, _problem(grown, gain=1.0)) == ({0, 1, 2}, 3, whole)
+    assert _evaluate(path, _problem(grown)) == ({0, 1, 2}, 3, half)
+    assert _evaluate(path, _problem(grown, gain=1.0)) == ({0, 1, 2}, 3, whole)
+    assert sorted(_per_model(path)) == [3, 3]
 
 
 def test_a_removed_option_keeps_the_runs_made_at_its_default_only(tmp_path, release):
@@ -196,8 +223,40 @@ def test_a_removed_option_keeps_the_runs_made_at_its_default_only(tmp_path, rele
     _evaluate(set_, _problem(release("1.0.0", options=offset), offset=0.5))
     shrunk = release("1.1.0")
     assert _evaluate(at_default, _problem(shrunk)) == ({0, 1, 2}, 3, made)
-    with pytest.raises(fbia.ConfigError, match=r"\(offset: 0.5 -> \(no such option now\)\)"):
-        _evaluate(set_, _problem(shrunk))
+    assert _evaluate(set_, _problem(shrunk)) == (set(), 3, made)  # not reused: made anew
+    with StudyStore(set_) as store:
+        store.bind(_problem(shrunk))
+        assert store.other_models() == [("offset = 0.5", 3)]
+
+
+def _as_the_second_format(path) -> None:
+    """Rewrite the store at ``path`` as fbia wrote it before runs recorded their model part
+    (format 2: no column ``runs.model``, no table ``models``)."""
+    db = sqlite3.connect(path, isolation_level=None)
+    db.execute("DROP INDEX runs_model")
+    db.execute("ALTER TABLE runs DROP COLUMN model")
+    db.execute("DROP TABLE models")
+    db.execute("UPDATE meta SET value = 'fbia-store-2' WHERE key = 'format'")
+    db.close()
+
+
+def test_a_store_of_the_second_format_is_migrated_and_its_runs_kept(tmp_path, release):
+    path = tmp_path / "s.sqlite"
+    first = release("1.0.0")
+    _, _, made = _evaluate(path, _problem(first))
+    _as_the_second_format(path)
+    key = _meta(path, "model_key")
+    second = release("1.1.0", gain="1.0")
+    reused, n, now = _evaluate(path, _problem(second))  # migrated, then the new default
+    assert (reused, n) == (set(), 3) and now != made
+    assert _meta(path, "format") == "fbia-store-3"
+    assert _per_model(path) == [3, 3]
+    with sqlite3.connect(path) as db:
+        assert db.execute("SELECT key FROM models ORDER BY rowid").fetchone() == (key,)
+    with sqlite3.connect(tmp_path / "s.v2.sqlite") as backup:  # the original, as it was
+        assert backup.execute("SELECT count(*) FROM runs").fetchone() == (3,)
+        assert "model" not in {r[1] for r in backup.execute("PRAGMA table_info(runs)")}
+    assert _evaluate(path, _problem(second, gain=0.5)) == ({0, 1, 2}, 3, made)
 
 
 def test_a_changed_measure_default_compares_the_stored_runs_anew(tmp_path, release):
@@ -268,8 +327,8 @@ def test_a_store_of_an_earlier_fbia_is_refused_once_the_code_changed(
         assert "--fresh" in message and "\n" not in message
     # with the code that made them, the store is re-keyed; then the release is checked as usual
     assert _evaluate(path, _problem(release("1.0.0")))[:2] == ({0, 1, 2}, 3)
-    with pytest.raises(fbia.ConfigError, match=re.escape(CHANGED)):
-        _evaluate(path, _problem(release("1.1.0", gain="1.0")))
+    assert _evaluate(path, _problem(release("1.1.0", gain="1.0")))[:2] == (set(), 3)
+    assert _evaluate(path, _problem(release("1.1.0", gain="1.0"), gain=0.5))[:2] == ({0, 1, 2}, 3)
 
 
 STUDY = """\
@@ -300,12 +359,13 @@ kind = "serial"
 """
 
 
-def test_fbia_run_refuses_a_changed_default_and_resumes_with_the_old_value_pinned(
+def test_fbia_run_reruns_a_changed_default_and_resumes_with_the_old_value_pinned(
     tmp_path, release, monkeypatch, capsys
 ):
     """The hostile tester's case from the command line: after the release, the study file
-    setting the new value (or relying on it) is refused in one line, with or without
-    --reuse-changed-code, and is never told that "its model did not" change."""
+    relying on the new default runs every point again, saying in one line that the store's
+    runs are of the old value, and is never told that "its model did not" change; setting the
+    new value reuses those, pinning the old one the first ones."""
     monkeypatch.chdir(tmp_path)
 
     def registered(plugin: ModuleType) -> None:
@@ -323,18 +383,26 @@ def test_fbia_run_refuses_a_changed_default_and_resumes_with_the_old_value_pinne
         out, err = capsys.readouterr()
         return status, out, err
 
+    store = tmp_path / "output" / "store.sqlite"
     registered(release("1.0.0"))
-    assert run("")[0] in (0, 3)
-    with sqlite3.connect(tmp_path / "output" / "store.sqlite") as db:
-        n = db.execute("SELECT count(*) FROM runs").fetchone()[0]
-    assert n == 9
+    assert run("")[0] == 0
+    assert _per_model(store) == [9]
     registered(release("1.1.0", gain="1.0"))
-    for options, flags in (("", ()), ("gain = 1.0", ("--reuse-changed-code",))):
-        status, out, err = run(options, *flags)
-        assert status == 2 and "its model did not" not in out
-        assert err.startswith("fbia: error: output/store.sqlite: the store holds 9 runs of a ")
-        assert CHANGED in err and err.count("\n") == 1
+    status, out, err = run("")
+    assert status == 0 and err == "" and "its model did not" not in out
+    announced = [line for line in out.splitlines() if "output/store.sqlite holds" in line]
+    assert announced == [
+        "store: output/store.sqlite holds 0 forward runs of this model and 9 of the same model "
+        "class with other option values (gain = 0.5), which are not reused"
+    ]
+    assert "9 run now (0 failed), 0 taken from the store" in out
+    assert _per_model(store) == [9, 9]
+    also = "it also holds 9 of the same model class with other option values"
+    status, out, _ = run("gain = 1.0")
+    assert status == 0 and "9 taken from the store" in out
+    assert f"(0 failed); each is reused, not run again; {also} (gain = 0.5)" in out
     status, out, _ = run("gain = 0.5")
-    assert status in (0, 3)
+    assert status == 0 and "9 taken from the store" in out
     assert "resuming: output/store.sqlite holds 9 forward runs of this model" in out
-    assert "9 taken from the store" in out
+    assert f"{also} (gain = 1.0), which are not reused" in out
+    assert _per_model(store) == [9, 9]

@@ -76,7 +76,12 @@ def test_the_first_format_is_migrated_with_a_copy_of_the_original(store_path):
     db = sqlite3.connect(store_path)
     assert db.execute("SELECT value FROM meta WHERE key = 'format'").fetchone() == (STORE_FORMAT,)
     tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-    assert {"runs", "comparisons", "sessions", "meta"} <= tables and "evaluations" not in tables
+    assert {"runs", "comparisons", "sessions", "meta", "models"} <= tables
+    assert "evaluations" not in tables
+    # every run under the store's model part (format 3)
+    (key,) = db.execute("SELECT value FROM meta WHERE key = 'model_key'").fetchone()
+    assert db.execute("SELECT model, count(*) FROM runs GROUP BY model").fetchall() == [(key, 5)]
+    assert db.execute("SELECT key FROM models").fetchall() == [(key,)]
     db.close()
     backup = sqlite3.connect(store_path.with_name("store.v1.sqlite"))
     assert backup.execute("SELECT count(*) FROM evaluations").fetchone() == (5,)
