@@ -33,7 +33,9 @@ import contextlib
 import csv
 import io
 import math
+import os
 import re
+import stat
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -224,6 +226,38 @@ def _layouts_text(layouts: Sequence[Sequence[str]]) -> str:
 def _or(widths: Sequence[int]) -> str:
     words = [str(w) for w in widths]
     return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
+
+
+def regular_file_bytes(path: str | Path, limit: int, where: str, what: str = "") -> bytes:
+    """The bytes of the regular file ``path``, at most ``limit`` of them, else a ConfigError at
+    ``where`` (``what``: the kind of file, for the size message); FileNotFoundError where there
+    is none.  Opened without blocking, so a FIFO is refused, never waited on; a device, a
+    folder or a socket is refused unread."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise ConfigError(f"cannot be read ({exc.strerror})", where) from None
+    too_large = f"larger than {limit} bytes" + (f": not {what}" if what else "")
+    try:
+        found = os.fstat(fd)
+        if not stat.S_ISREG(found.st_mode):
+            raise ConfigError(f"not a regular file ({_file_kind(found.st_mode)}): not read", where)
+        if found.st_size > limit:
+            raise ConfigError(too_large, where)
+        with os.fdopen(os.dup(fd), "rb") as file:
+            raw = file.read(limit + 1)
+    finally:
+        os.close(fd)
+    if len(raw) > limit:  # grown since
+        raise ConfigError(too_large, where)
+    return raw
+
+
+def _file_kind(mode: int) -> str:
+    kinds = [(stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket")]
+    return next((name for test, name in kinds if test(mode)), "a device")
 
 
 def read_meshio(path: Path, what: str = "mesh") -> Any:

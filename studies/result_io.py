@@ -52,9 +52,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import re
-import stat
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -63,6 +61,7 @@ from typing import Any, Literal, Union
 
 import numpy as np
 
+from ..core.data_files import regular_file_bytes
 from ..core.errors import ConfigError
 from ..core.problem import Result
 from ..core.version import __version__
@@ -131,24 +130,7 @@ def read_json(path: Path, limit: int | None = None) -> dict[str, Any]:
     is no file."""
     where = str(path)
     limit = MAX_RESULT_BYTES if limit is None else limit
-    try:  # without O_NONBLOCK opening a FIFO waits for a writer; it is refused below
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except FileNotFoundError:
-        raise
-    except OSError as exc:
-        raise ConfigError(f"cannot be read ({exc.strerror})", where) from None
-    try:
-        found = os.fstat(fd)
-        if not stat.S_ISREG(found.st_mode):
-            raise ConfigError(f"not a regular file ({_file_kind(found.st_mode)}): not read", where)
-        if found.st_size > limit:
-            raise ConfigError(f"larger than {limit} bytes: not a file fbia writes", where)
-        with os.fdopen(os.dup(fd), "rb") as file:
-            raw = file.read(limit + 1)
-    finally:
-        os.close(fd)
-    if len(raw) > limit:  # grown since
-        raise ConfigError(f"larger than {limit} bytes: not a file fbia writes", where)
+    raw = regular_file_bytes(path, limit, where, "a file fbia writes")
     try:
         data = json.loads(raw.decode("utf-8"), parse_constant=float)
     except UnicodeDecodeError as exc:
@@ -162,11 +144,6 @@ def read_json(path: Path, limit: int | None = None) -> dict[str, Any]:
     if not _plain(data):
         raise ConfigError(_one_line(_located_problem(data)), where)
     return data
-
-
-def _file_kind(mode: int) -> str:
-    kinds = [(stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket")]
-    return next((name for test, name in kinds if test(mode)), "a device")
 
 
 def _plain(data: Any) -> bool:

@@ -14,8 +14,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import os
-import stat
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict
@@ -24,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ...core.data_files import regular_file_bytes
 from ...core.errors import ConfigError
 from ...core.parameters import Parameter, Prior
 from ...core.problem import jsonable
@@ -292,30 +291,15 @@ def load_posterior(folder: str | Path) -> dict[str, Any]:
     return out
 
 
-def _regular_bytes(path: Path) -> bytes:
-    """The bytes of the regular file ``path``; never reads a FIFO (opening one does not wait
-    for a writer) or a device."""
+def _file_bytes(path: Path) -> bytes:
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise ConfigError(f"cannot be read ({exc.strerror})", str(path)) from None
-    try:
-        found = os.fstat(fd)
-        if not stat.S_ISREG(found.st_mode):
-            raise ConfigError("not a regular file: not read", str(path))
-        raw = b""
-        if found.st_size <= MAX_POSTERIOR_BYTES:
-            with os.fdopen(os.dup(fd), "rb") as file:
-                raw = file.read(MAX_POSTERIOR_BYTES + 1)
-    finally:
-        os.close(fd)
-    if found.st_size > MAX_POSTERIOR_BYTES or len(raw) > MAX_POSTERIOR_BYTES:
-        raise ConfigError(f"larger than {MAX_POSTERIOR_BYTES} bytes", str(path))
-    return raw
+        return regular_file_bytes(path, MAX_POSTERIOR_BYTES, str(path))
+    except FileNotFoundError:
+        raise ConfigError("cannot be read (no such file)", str(path)) from None
 
 
 def _read_npz(path: Path) -> dict[str, Any]:
-    raw = _regular_bytes(path)
+    raw = _file_bytes(path)
     try:
         with zipfile.ZipFile(io.BytesIO(raw)) as archive:
             unpacked = sum(member.file_size for member in archive.infolist())
@@ -364,7 +348,10 @@ def _read_meta(path: Path) -> dict[str, Any]:
         raise ValueError(f"{name} is not JSON as fbia writes it")
 
     try:
-        meta = json.loads(_regular_bytes(path).decode("utf-8"), parse_constant=constant)
+        meta = json.loads(
+            _file_bytes(path).decode("utf-8"),
+            parse_constant=constant,
+        )
     except UnicodeDecodeError as exc:
         raise ConfigError(f"not UTF-8 text (byte {exc.start})", str(path)) from None
     except RecursionError:

@@ -21,12 +21,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import stat
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from ...core.data_files import regular_file_bytes
 from ...core.errors import ConfigError
 from ...core.problem import Result
 from ..gp_smc.result import GpSmcResult
@@ -121,22 +120,10 @@ def _shown(value: Any) -> str:
 
 def _read_json(path: Path, where: str) -> Any:
     """The JSON in the regular file ``path`` (see the module docstring)."""
-    try:  # without O_NONBLOCK opening a FIFO waits for a writer; it is refused below
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise ConfigError(f"cannot read the result ({exc.strerror})", where) from None
     try:
-        found = os.fstat(fd)
-        if not stat.S_ISREG(found.st_mode):
-            raise ConfigError("not a regular file (a FIFO, a device or a folder): not read", where)
-        if found.st_size > MAX_BYTES:
-            raise ConfigError(f"larger than {MAX_BYTES} bytes: not a result.json", where)
-        with os.fdopen(os.dup(fd), "rb") as file:
-            raw = file.read(MAX_BYTES + 1)
-    finally:
-        os.close(fd)
-    if len(raw) > MAX_BYTES:  # grown since
-        raise ConfigError(f"larger than {MAX_BYTES} bytes: not a result.json", where)
+        raw = regular_file_bytes(path, MAX_BYTES, where, "a result.json")
+    except FileNotFoundError:
+        raise ConfigError("cannot read the result (no such file)", where) from None
     try:
         data = json.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
