@@ -1,7 +1,7 @@
 """fbia.imaging: images in and figures out.
 
-``oct_reader`` reads an OCT volume (an array, ``.npy``, TIFF stack, NRRD), ``oct`` segments the
-biofilm in it (``segment_oct``) and makes an observation of it (``observation_from_oct``);
-``figures`` holds the matplotlib helpers every figure of fbia uses (``pyplot``, ``legend``).
-It imports the kernel only.
+``oct_reader`` reads an OCT volume (an array, ``.npy``, TIFF stack, NRRD, Thorlabs ``.oct``),
+``oct`` segments the biofilm in it (``segment_oct``) and makes an observation of it
+(``observation_from_oct``); ``figures`` holds the matplotlib helpers every figure of fbia
+uses (``pyplot``, ``legend``).  It imports the kernel only.
 """

@@ -90,6 +90,16 @@ from ..core.interface import Interface
 from ..core.observation import Coordinate, Observation
 from ..core.options import PluginOptions
 from .oct_reader import read_oct_volume
+from .oct_reflections import Reflection, place_floor
+from .oct_structure import OctQuality, OctStructure, quality, structure
+from .oct_surface import (
+    height_map,
+    height_surface,
+    keep_attached,
+    marching_cubes_surface,
+    outer_boundary,
+    overhang_share,
+)
 
 __all__ = [
     "HeightAxis",
@@ -174,7 +184,33 @@ class OctOptions(PluginOptions):
         description="smallest biofilm part kept (connected voxels on the substratum; 27 = 3^3)",
     )
     substratum_depth: float | None = Field(
-        None, ge=0, description="depth of the substratum below the first row [mm]; None: detect"
+        None,
+        ge=0,
+        description="depth of the substratum below the first row [mm]; None: detect its "
+        "reflection (refused when there is none, e.g. on a membrane)",
+    )
+    substratum_tilt: tuple[float, float] = Field(
+        (0.0, 0.0),
+        description="with substratum_depth: the substratum's slope, depth per lateral "
+        "distance along y and along x [mm/mm] (substratum_depth is its depth at the field's "
+        "centre); a found substratum's tilt is measured",
+    )
+    window: Literal["auto", "none"] = Field(
+        "auto",
+        description="'auto': a flat reflection with the biofilm under it (the flow cell's "
+        "window) is found and everything down to it taken for fluid; 'none': not sought",
+    )
+    resolution: tuple[float, float] | None = Field(
+        None,
+        description="the scanner's (axial, lateral) resolution, FWHM [mm]; None: 2 voxels "
+        "each way. Fluid reaching the bulk through openings narrower than it is biofilm "
+        "(speckle voids, unresolved pores)",
+    )
+    surface: Literal["height_map", "outer"] = Field(
+        "height_map",
+        description="'height_map': where each A-scan first meets the biofilm (the probe sees "
+        "the top first; overhangs are covered); 'outer': marching cubes on the biofilm's "
+        "outer boundary (overhangs kept, and what lies under the top reported)",
     )
 
     @model_validator(mode="after")
@@ -214,6 +250,20 @@ class OctOptions(PluginOptions):
                 raise ValueError(f"each [start, stop) must have 0 <= start < stop, got {pair}")
         return value
 
+    @field_validator("substratum_tilt")
+    @classmethod
+    def _check_tilt(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if not all(math.isfinite(v) and abs(v) <= 1.0 for v in value):
+            raise ValueError(f"must be two slopes between -1 and 1 [mm/mm], got {value}")
+        return value
+
+    @field_validator("resolution")
+    @classmethod
+    def _check_resolution(cls, value: tuple[float, float] | None) -> tuple[float, float] | None:
+        if value is not None and not all(math.isfinite(v) and v > 0 for v in value):
+            raise ValueError(f"must be two positive numbers (axial, lateral) in mm, got {value}")
+        return value
+
     @field_validator("threshold")
     @classmethod
     def _check_threshold(cls, value: float | None) -> float | None:
@@ -248,8 +298,25 @@ class OctSegmentation:
     bscan
         That B-scan of the cropped input, shape (crop depth, crop nx), in double precision.
     field
-        The same B-scan processed (denoised, compensated, cleaned), rows down to
-        ``substratum_row``, in the scan's units (those of ``threshold``).
+        The same B-scan processed (window filled, untilted, denoised, compensated, cleaned),
+        rows down to ``substratum_row``, in the scan's units (those of ``threshold``).
+    surface_kind
+        "height_map" or "outer" (option ``surface``).
+    reflections
+        The flat reflections found (:mod:`fbia.imaging.oct_reflections`), rows of the crop.
+    tilt
+        The substratum plane's slope taken out, rows per A-scan along y and x.
+    window_row
+        Row (full volume) of the window's reflection at the field's centre, if found.
+    bscan_lines
+        Along ``bscan``, in rows of the full volume: "substratum" (its surface), "window"
+        (or None) and "interface" (the top of the segmented interface; NaN where bare).
+    quality
+        Whether the interface is one surface, and the share of the A-scans with fluid under
+        their top (:class:`~fbia.imaging.oct_structure.OctQuality`).
+    structure
+        Thickness, biovolume, coverage, roughness, porosity
+        (:class:`~fbia.imaging.oct_structure.OctStructure`).
     """
 
     interface: Interface
@@ -262,6 +329,13 @@ class OctSegmentation:
     bscan_row: int
     bscan: NDArray[np.float64]
     field: NDArray[np.float64]
+    surface_kind: Literal["height_map", "outer"]
+    reflections: tuple[Reflection, ...]
+    tilt: tuple[float, float]
+    window_row: float | None
+    bscan_lines: Mapping[str, NDArray[np.float64] | None]
+    quality: OctQuality
+    structure: OctStructure
 
     @property
     def substratum_depth(self) -> float:
@@ -315,10 +389,23 @@ def segment_oct(
     # 0. intensities of order 1 whatever the scan's scale, offset and dtype
     volume, least, span = normalise_intensities(scan, where)
     dz = spacing[0]
+    axial, lateral = _resolution(opts, spacing)
     if opts.substratum_depth is None:
         _check_depth_axis(volume, opts.depth_axis, where)
-    # 1. substratum: first row under its surface, in the cropped volume
-    ks = _substratum_row(volume, origin[0], opts.substratum_depth, dz, where)
+    # 1. window and substratum: the window filled with fluid, the scan untilted, the rows
+    #    from the substratum's reflection down dropped
+    floor, volume = place_floor(
+        volume,
+        origin,
+        opts.substratum_depth,
+        opts.substratum_tilt,
+        opts.window == "auto",
+        spacing,
+        axial,
+        lateral,
+        where,
+    )
+    ks = floor.ks
     # 2. denoise the rows above the substratum (its bright reflection would bleed upwards)
     #    into the field marching cubes reads, with one more row for the floor
     field = np.empty((ks + 1, *volume.shape[1:]), dtype=np.float32)
@@ -357,6 +444,9 @@ def segment_oct(
     else:
         t = _otsu(above, lo, hi, where)
     mask = above > t
+    if floor.tail:
+        # the rows the substratum's reflection bleeds into take the biofilm of the row above
+        mask[ks - floor.tail : ks] = mask[ks - floor.tail - 1]
     if not mask.any():
         raise ConfigError(
             f"no biofilm found: no voxel above the threshold {in_scan_units(t):.4g}", where
@@ -371,20 +461,33 @@ def segment_oct(
             "if there is biofilm",
             where,
         )
-    # 5. keep what hangs on the substratum, fill closed fluid pockets
-    solid = _clean(mask, opts.min_voxels)
+    # 5. keep what hangs on the substratum, fill closed fluid pockets, then the outer
+    #    boundary: fluid that reaches the bulk only through openings narrower than the
+    #    resolution (speckle voids, unresolved pores) is biofilm
+    solid = keep_attached(mask, opts.min_voxels)
     if not solid.any():
         raise ConfigError(
             f"no biofilm found: no part of at least {opts.min_voxels} voxels above the threshold "
             f"{in_scan_units(t):.4g} touches the substratum (row {ks + origin[0]})",
             where,
         )
-    above[mask & ~solid] = min(low, t)
-    above[~mask & solid] = max(high, t)
+    outer = outer_boundary(
+        solid, (max(1.0, 0.5 * axial), max(1.0, 0.5 * lateral[0]), max(1.0, 0.5 * lateral[1]))
+    )
+    above[mask & ~outer] = min(low, t)
+    above[~mask & outer] = max(high, t)
     # the substratum row mirrors the fluid above it about t: the floor crosses t half-way
     under = above[-1]
     field[ks] = np.where(under > t, under, 2.0 * t - under)
-    surface = _surface(field, t, solid, ks, origin, spacing, where)
+    # 6. the surface: the height map, or marching cubes on the outer boundary
+    top_row = np.where(outer.any(axis=0), np.argmax(outer, axis=0), ks)
+    overhangs = overhang_share(outer, top_row, max(1, math.ceil(axial)))
+    kind = opts.surface
+    thickness = height_map(field, t, top_row, ks, dz)
+    if kind == "height_map":
+        surface = height_surface(thickness, origin, spacing, where)
+    else:
+        surface = marching_cubes_surface(field, t, outer, ks, origin, spacing, where)
     # 7. a surface that cannot be the biofilm's interface ends here, not in a calibration
     fov = (field.shape[1] * spacing[1], field.shape[2] * spacing[2])
     cause = surface_degeneracy(surface, fov)
@@ -398,7 +501,14 @@ def segment_oct(
             f"{opts.denoise_size:g}",
             where,
         )
+    # 8. what the segmentation says: structure parameters, and whether it is one surface
+    check = quality(surface, axial * dz, overhangs, kind)
+    parameters = structure(thickness, mask, outer, spacing)
     j = field.shape[1] // 2
+    lines = floor.lines_in_scan(j, field.shape[2])
+    interface_rows = np.where(top_row[j] < ks, ks - 0.5 - thickness[j] / dz, np.nan) + floor.shift(
+        j, field.shape[2]
+    )
     return OctSegmentation(
         interface=surface,
         voxel_size=spacing,
@@ -406,10 +516,17 @@ def segment_oct(
         substratum_row=ks + origin[0],
         threshold=in_scan_units(t),
         attenuation=float(mu),
-        biofilm_voxels=int(np.count_nonzero(solid)),
+        biofilm_voxels=int(np.count_nonzero(outer & mask)),
         bscan_row=j + origin[1],
         bscan=scan[:, j, :].astype(np.float64),
         field=float(least) + span * field[:, j, :].astype(np.float64),
+        surface_kind=kind,
+        reflections=floor.reflections,
+        tilt=floor.tilt,
+        window_row=None if floor.window is None else floor.window.row + origin[0],
+        bscan_lines={**lines, "interface": interface_rows},
+        quality=check,
+        structure=parameters,
     )
 
 
@@ -654,23 +771,6 @@ def _check_depth_axis(volume: NDArray[np.float32], depth_axis: int, where: str) 
         )
 
 
-def _substratum_row(
-    volume: NDArray[np.float32], z0: int, depth: float | None, dz: float, where: str
-) -> int:
-    """First row (of the crop) under the substratum surface."""
-    if depth is None:
-        ks = int(np.argmax(_plane_contrast(volume)))
-    else:
-        ks = int(math.floor(depth / dz + 1.0)) - z0  # the surface lies at the row's top edge
-    if not 2 <= ks < volume.shape[0]:
-        raise ConfigError(
-            f"substratum at row {ks + z0} leaves no biofilm rows above it in the volume (rows "
-            f"{z0} to {z0 + volume.shape[0] - 1}); check depth_axis, crop or substratum_depth",
-            where,
-        )
-    return ks
-
-
 def _denoise(volume: NDArray[np.float32], out: NDArray[np.float32], kind: str, size: float) -> None:
     """``volume`` filtered into ``out`` (of its shape)."""
     from scipy import ndimage
@@ -742,62 +842,11 @@ def _estimate_attenuation(
     return max(0.0, -float(slope))
 
 
-def _clean(mask: NDArray[np.bool_], min_voxels: int) -> NDArray[np.bool_]:
-    """The biofilm: the connected parts of ``mask`` that touch the substratum (under its last
-    row) with at least ``min_voxels`` voxels, with the fluid pockets not connected to the top
-    row or the side walls filled."""
-    from scipy import ndimage
-
-    labels, _ = ndimage.label(mask)
-    keep = np.bincount(labels.ravel()) >= min_voxels
-    on_floor = np.zeros_like(keep)
-    on_floor[labels[-1]] = True
-    keep &= on_floor
-    keep[0] = False  # the fluid
-    solid = keep[labels]
-    del labels
-    rows = np.flatnonzero(solid.any(axis=(1, 2)))
-    if len(rows) == 0:
-        return solid
-    top = int(rows[0])  # the rows above are fluid, all connected to the top
-    labels, n = ndimage.label(~solid[top:])
-    faces = [labels[0], labels[:, 0], labels[:, -1], labels[:, :, 0], labels[:, :, -1]]
-    is_open = np.zeros(n + 1, dtype=bool)
-    for face in faces:
-        is_open[face] = True
-    solid[top:] |= ~is_open[labels]  # label 0 is the solid itself
-    return solid
-
-
-def _surface(
-    field: NDArray[np.float32],
-    t: float,
-    solid: NDArray[np.bool_],
-    ks: int,
-    origin: tuple[int, int, int],
-    spacing: tuple[float, float, float],
-    where: str,
-) -> Interface:
-    from skimage.measure import marching_cubes
-
-    rows = np.flatnonzero(solid.any(axis=(1, 2)))
-    top = max(int(rows[0]) - 1, 0)
-    verts, faces, _, _ = marching_cubes(field[top:], level=t, method="lewiner")
-    k = verts[:, 0] + top
-    dz, dy, dx = spacing
-    z = (ks - 0.5 - k) * dz
-    verts = verts.astype(np.float64)
-    xyz = np.c_[(verts[:, 2] + origin[2]) * dx, (verts[:, 1] + origin[1]) * dy, z]
-    on_floor = np.abs(ks - 0.5 - k) < 1e-3
-    faces = faces[~np.all(on_floor[faces], axis=1)]
-    # scikit-image's triangles turn their right-hand normals towards the higher values (the
-    # biofilm) in index space, and (k, j, i) -> (x, y, z) = (i, j, -k) keeps the orientation
-    # (a swap and a reflection): reverse them so that the normals point into the fluid
-    faces = faces[:, ::-1]
-    p = xyz[faces]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    faces = faces[area > 1e-9 * dx * dy]
-    if len(faces) == 0:
-        raise ConfigError("no biofilm found: the biofilm left no surface above the floor", where)
-    used, inverse = np.unique(faces, return_inverse=True)
-    return Interface.surface(xyz[used], inverse.reshape(faces.shape))
+def _resolution(
+    opts: OctOptions, spacing: tuple[float, float, float]
+) -> tuple[float, tuple[float, float]]:
+    """The resolution (FWHM) in voxels: axial rows, lateral (y, x); 2 voxels when not given."""
+    if opts.resolution is None:
+        return 2.0, (2.0, 2.0)
+    axial, lateral = opts.resolution
+    return axial / spacing[0], (lateral / spacing[1], lateral / spacing[2])

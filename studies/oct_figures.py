@@ -7,9 +7,11 @@
 >>> [p.name for p in paths]
 ['oct_bscan.png', 'oct_surface.png']
 
-``oct_bscan.png`` is the middle B-scan of the (cropped) input with the segmented contour (the
-threshold level of the processed intensity, where marching cubes cuts that B-scan) and the
-substratum line; ``oct_surface.png`` a 3-D view of the extracted surface (matplotlib, Agg).
+``oct_bscan.png`` is the middle B-scan of the (cropped) input as scanned (before the window is
+filled and the scan untilted) with the segmented interface (the top of the height map in
+every A-scan, or marching cubes' cut where the surface keeps overhangs), the substratum's
+surface as found (tilted with the scan) and the window's line when one was found;
+``oct_surface.png`` a 3-D view of the extracted surface (matplotlib, Agg).
 """
 
 from __future__ import annotations
@@ -46,15 +48,26 @@ def write_segmentation_figures(
     vmax = float(np.percentile(image, 99.5))
     ax.imshow(image, cmap="gray", extent=extent, aspect="auto", vmin=0.0, vmax=vmax)
     xs = (x0 + np.arange(result.field.shape[1])) * dx
-    ds = (z0 + np.arange(result.field.shape[0])) * dz
-    ax.contour(xs, ds, result.field, levels=[result.threshold], colors="red", linewidths=1)
-    ax.axhline(result.substratum_depth, color="cyan", ls="--", lw=1, label="substratum")
-    ax.plot([], [], color="red", lw=1, label="segmented interface")
+    lines = result.bscan_lines
+    if result.surface_kind == "outer" and not any(result.tilt):
+        # marching cubes' cut through this B-scan (overhangs and all): the threshold level
+        ds = (z0 + np.arange(result.field.shape[0])) * dz
+        ax.contour(xs, ds, result.field, levels=[result.threshold], colors="red", linewidths=1)
+        ax.plot([], [], color="red", lw=1, label="segmented interface")
+    elif lines.get("interface") is not None:
+        top = np.asarray(lines["interface"])
+        ax.plot(xs, top * dz, color="red", lw=1, label="segmented interface (top)")
+    substratum = lines.get("substratum")
+    if substratum is not None:
+        ax.plot(xs, np.asarray(substratum) * dz, color="cyan", ls="--", lw=1, label="substratum")
+    window = lines.get("window")
+    if window is not None:
+        ax.plot(xs, np.asarray(window) * dz, color="yellow", ls=":", lw=1.2, label="window")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("depth [mm]")
     ax.set_title(
         f"B-scan y index {result.bscan_row}; threshold {result.threshold:.3g}, "
-        f"mu {result.attenuation:.3g} 1/mm",
+        f"mu {result.attenuation:.3g} 1/mm; {result.surface_kind.replace('_', ' ')}",
         fontsize=9,
     )
     legend(ax, fontsize=8, loc="upper right")

@@ -244,7 +244,11 @@ def _write_oct_records(study: Study, out: Path, echo: Echo) -> None:
     none of the files of the run that holds it."""
     for record in study.oct_records:
         record.write(out)
-        echo(f"OCT scan of [[observations]] #{record.observation}: {out / record.folder}")
+        quality = record.scan.segmentation.quality
+        echo(
+            f"OCT scan of [[observations]] #{record.observation}: {out / record.folder} "
+            f"({record.scan.segmentation.surface_kind}; {quality.note()})"
+        )
 
 
 @dataclass
@@ -443,7 +447,20 @@ def _checked(study: Study, result: Any) -> Result:
         raise TypeError(
             f"iterator {study.iterator_name!r} returned {type(result).__name__}, not fbia.Result"
         )
-    return result
+    return _oct_verdict(study, result)
+
+
+def _oct_verdict(study: Study, result: Result) -> Result:
+    """``unreliable`` when an observation's OCT segmentation is not one surface (a calibration
+    on it matches model vertices to pores: :class:`fbia.imaging.oct_structure.OctQuality`)."""
+    notes = [
+        f"OCT scan of [[observations]] #{r.observation}: {r.scan.segmentation.quality.note()}"
+        for r in study.oct_records
+        if not r.scan.segmentation.quality.one_surface
+    ]
+    if not notes:
+        return result
+    return replace(result, status="unreliable", message=f"{result.message}; {'; '.join(notes)}")
 
 
 def _extras(session: _Session, result: Result, log: EvaluationLog, outputs: RunOutputs) -> None:

@@ -20,7 +20,8 @@ fbia.core.errors.ConfigError: study.toml: [[observations]] #1 oct: option 'voxel
 
 Until now a user segmented a scan in Python (:func:`fbia.imaging.oct.segment_oct`) and wrote a
 surface file for ``interface = ...``; ``oct`` does both steps from the study file (issue 18).
-Its value is a scan file (``.npy``, ``.npz``, TIFF, NRRD; :mod:`fbia.imaging.oct_reader`),
+Its value is a scan file (``.npy``, ``.npz``, TIFF, NRRD, Thorlabs ``.oct``;
+:mod:`fbia.imaging.oct_reader`),
 relative to the study file, or a table of the scan and its options (:class:`OctScanOptions`):
 ``file``; ``voxel_size`` (dz, dy, dx) [mm]; ``height_axis``, the forward model's axis along
 the height above the substratum (``"z"``, fbia's frame, or ``"y"`` for ``ale_fsi``'s 3-D
@@ -37,7 +38,10 @@ uses (``--output``), once it holds that folder's lock, so a run refused because 
 is running there changes none of its files (issue 44 item 3).  A record is the figures of
 :func:`fbia.studies.oct_figures.write_segmentation_figures`, the surface in the model's axes
 (``segmented.vtu``) and ``segmentation.json`` (the scan's SHA-256, the options, threshold,
-attenuation, substratum row, and the SHA-256 of the surface), in
+attenuation, substratum row and tilt, the window and the other flat reflections found, the
+kind of surface, whether it is one surface (:class:`fbia.imaging.oct_structure.OctQuality`),
+the structure parameters (:class:`fbia.imaging.oct_structure.OctStructure`) and the SHA-256
+of the surface), in
 ``<output>/oct/observation_<k>/``.  Resume: a study's
 fingerprint holds the SHA-256 of every observed interface (:mod:`fbia.storage.fingerprints`), so
 a new scan or an option that changes the segmented surface makes ``fbia run`` compare its
@@ -72,7 +76,8 @@ class OctScanOptions(OctOptions):
     """``[[observations]] oct``: the scan, its voxels and axes, and how to segment it."""
 
     file: str = Field(
-        min_length=1, description="the scan (.npy, .npz, .tif, .nrrd), relative to the study file"
+        min_length=1,
+        description="the scan (.npy, .npz, .tif, .nrrd, Thorlabs .oct), relative to the study file",
     )
     voxel_size: tuple[float, float, float] | None = Field(
         None,
@@ -213,6 +218,21 @@ def write_oct_record(scan: OctScan, folder: Path) -> list[Path]:
         "threshold": seg.threshold,
         "attenuation_per_mm": seg.attenuation,
         "substratum_row": seg.substratum_row,
+        "substratum_tilt_rows_per_ascan": list(seg.tilt),
+        "window_row": seg.window_row,
+        "reflections": [
+            {
+                "row": r.row + seg.origin[0],
+                "slope": list(r.slope),
+                "support": r.support,
+                "contrast": r.contrast,
+                "kind": r.kind,
+            }
+            for r in seg.reflections
+        ],
+        "surface_kind": seg.surface_kind,
+        "quality": seg.quality.to_dict(),
+        "structure_mm": seg.structure.to_dict(),
         "biofilm_voxels": seg.biofilm_voxels,
         "surface": {
             "file": surface.name,

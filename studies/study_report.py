@@ -7,7 +7,9 @@ writes into the output folder
 * ``report.md``: the result's status and message (its causes first when it is not to be
   trusted), the measured times, the result as printed at the end of the run (the iterator's
   summary, the ground truth of synthetic data, the discrepancy at the result's ``x``: the text of
-  ``report.txt``), the warnings of the session, the settings, the comparison with the paper
+  ``report.txt``), the warnings of the session, the segmentation of every OCT scan (kind of
+  surface, one surface or not, structure parameters, its B-scan), the settings, the
+  comparison with the paper
   when the study has one, the figures (inline) and the other files;
 * ``report.html``: the same page rendered by Python-Markdown, self-contained so that a
   colleague can open it from an e-mail: the figures embedded as ``data:`` URIs, the style
@@ -112,6 +114,7 @@ def _markdown(
     warnings = list(result.provenance.get("warnings", []) or [])
     if warnings:
         lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
+    lines += _oct_lines(study, out)
     lines += ["## Settings", "", *settings_lines(study), ""]
     shown = _figures(figures, out)
     if shown:
@@ -122,6 +125,41 @@ def _markdown(
     if files:
         lines += ["## Files", "", *(f"- `{f}`" for f in files), ""]
     return "\n".join(lines)
+
+
+def _oct_lines(study: Study, out: Path) -> list[str]:
+    """The segmentation of every OCT scan of the study: the kind of surface, whether it is
+    one surface, the structure parameters, and its B-scan figure (window, substratum and
+    interface drawn on the scan)."""
+    if not study.oct_records:
+        return []
+    lines = ["## OCT segmentation", ""]
+    for record in study.oct_records:
+        seg = record.scan.segmentation
+        st = seg.structure
+        window = "none found" if seg.window_row is None else f"row {seg.window_row:.1f}"
+        lines += [
+            f"### [[observations]] #{record.observation}: `{record.scan.file.name}`",
+            "",
+            f"Surface: {seg.surface_kind.replace('_', ' ')}; {seg.quality.note()}. Substratum row "
+            f"{seg.substratum_row}, tilt {seg.tilt[0]:.3g} / {seg.tilt[1]:.3g} rows per "
+            f"A-scan (y / x); window {window}; threshold {seg.threshold:.4g}.",
+            "",
+            "| thickness mean (field / covered) | max | std | biovolume per area | coverage "
+            "| Ra | Rq | Ra* | porosity |",
+            "|---|---|---|---|---|---|---|---|---|",
+            f"| {1000 * st.mean_thickness:.1f} / {1000 * st.mean_thickness_covered:.1f} um "
+            f"| {1000 * st.max_thickness:.1f} um | {1000 * st.std_thickness:.1f} um "
+            f"| {1000 * st.biovolume_per_area:.2f} um^3/um^2 | {100 * st.coverage:.0f} % "
+            f"| {1000 * st.ra:.1f} um | {1000 * st.rq:.1f} um | {st.roughness_coefficient:.2f} "
+            f"| {100 * st.porosity:.1f} % |",
+            "",
+        ]
+        bscan = out / record.folder / "oct_bscan.png"
+        if bscan.is_file():
+            rel = Path(os.path.relpath(bscan, out)).as_posix()
+            lines += [f"![{rel}]({rel})", "", f"*{rel}*", ""]
+    return lines
 
 
 def _figures(figures: Sequence[str | Path], out: Path) -> list[str]:

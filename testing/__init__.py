@@ -24,7 +24,9 @@ orientation fbia uses: normals point from the solid into the fluid.
 
 :mod:`fbia.testing.oct` makes synthetic OCT-like volumes (a dome on a flat substratum with
 speckle, depth attenuation and a noise floor) with their known surface, for the OCT reader
-:mod:`fbia.imaging.oct` and its tests and benchmark.
+:mod:`fbia.imaging.oct` and its tests and benchmark, and realistic scans of porous biofilms
+(``realistic_oct_scan``, ``scan_family``: correlated speckle, pores, shadowing, a window
+reflection, a tilted glass or membrane substratum).
 
 Iterators are checked on a problem, e.g. ``check_iterator(lambda: MyIterator(seed=0),
 tiny_problem())``.  Fixtures: ``fbia_registry`` (the default registry), ``fbia_installer``

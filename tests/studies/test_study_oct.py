@@ -289,7 +289,7 @@ def test_a_scan_that_segments_into_a_degenerate_surface_is_refused(
     line = one_error_line(capsys)
     assert line.startswith(
         "study.toml: [[observations]] #1 oct: data/phantom.npy: the segmented surface is "
-        "degenerate: 755 triangles covering 3.1 % of the scan's field of view (0.96 x 0.96 mm); "
+        "degenerate: 88 triangles covering 1.9 % of the scan's field of view (0.96 x 0.96 mm); "
         "a biofilm interface has at least 20 triangles over at least 5 % of it; the substratum "
         "or the threshold may be wrong, or a biofilm this small needs crop_mm around it; "
         "segmentation: intensities "

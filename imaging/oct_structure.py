@@ -1,0 +1,179 @@
+"""What a segmented OCT scan says about the biofilm: structure parameters and the check that
+the interface is one surface (issue 45 item 4).
+
+The structure parameters are those OCT and confocal biofilm studies compare across
+experiments (COMSTAT, Heydorn et al. 2000; the OCT flow-cell analyses of Wagner & Horn 2017),
+computed from the segmentation's voxels and its thickness map T (the height of the biofilm's
+outer boundary above the substratum at every A-scan, 0 where bare):
+
+* thickness: the mean of T over the field and over the covered A-scans, its maximum and
+  standard deviation;
+* biovolume: the biofilm's voxels (inside its outer boundary, pores left out) times the
+  voxel volume [mm^3], and per substratum area [mm^3/mm^2 = mm];
+* substratum coverage: the share of the A-scans whose lowest row above the substratum is
+  biofilm;
+* roughness: Ra = mean |T - mean T|, Rq = sqrt(mean (T - mean T)^2) [mm], and COMSTAT's
+  roughness coefficient Ra* = Ra / mean T [-];
+* porosity: the share of the volume inside the outer boundary that is not biofilm (pores and
+  voids the resolution cannot open to the fluid).
+
+The check (:class:`OctQuality`): the share of the interface's area (and of its vertices)
+more than one axial resolution cell under the top of its A-scan (where a ray along depth
+from the probe first meets the surface).  A height map has none by construction; marching
+cubes around speckle voids inside the biofilm puts most of a surface there (issue 45: 78 %
+of the vertices of a real B-scan's surface lay more than 20 um under the top), and the cpp
+measure would then match model vertices to pores: a surface with more than
+:data:`MAX_DEEP_SHARE` of its area there is not one surface, and a study on it is
+``unreliable``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.interface import Interface
+
+__all__ = [
+    "MAX_DEEP_SHARE",
+    "MAX_OVERHANG_SHARE",
+    "OctQuality",
+    "OctStructure",
+    "quality",
+    "structure",
+]
+
+#: the largest share of an interface's area under the top of its A-scans (by more than one
+#: axial resolution cell) for it to count as one surface
+MAX_DEEP_SHARE = 0.05
+#: the share of the covered A-scans with bulk fluid under their top (overhangs, or biofilm
+#: shadowed under dense clusters) above which the quality note says so
+MAX_OVERHANG_SHARE = 0.05
+
+
+@dataclass(frozen=True)
+class OctStructure:
+    """Structure parameters of a segmented biofilm (module docstring); lengths in mm."""
+
+    mean_thickness: float
+    mean_thickness_covered: float
+    max_thickness: float
+    std_thickness: float
+    biovolume: float  # mm^3
+    biovolume_per_area: float  # mm^3 / mm^2
+    coverage: float  # [-]
+    ra: float
+    rq: float
+    roughness_coefficient: float  # [-]
+    porosity: float  # [-]
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+
+@dataclass(frozen=True)
+class OctQuality:
+    """Whether a segmented interface is one surface (module docstring)."""
+
+    deep_area_share: float  # of the area, more than one resolution cell under the top
+    deep_vertex_share: float  # of the vertices, the same
+    depth_limit: float  # that cell [mm]
+    overhang_share: float  # of the covered A-scans, with bulk fluid under their top
+    surface_kind: str  # "height_map" or "outer"
+
+    @property
+    def one_surface(self) -> bool:
+        return self.deep_area_share <= MAX_DEEP_SHARE
+
+    def note(self) -> str:
+        """One line for a warning or a report."""
+        share = f"{100 * self.deep_area_share:.1f} %"
+        if self.one_surface:
+            covered = ""
+            if self.overhang_share > MAX_OVERHANG_SHARE and self.surface_kind == "height_map":
+                covered = (
+                    f"; {100 * self.overhang_share:.0f} % of the covered A-scans have fluid "
+                    "under their top that reaches the bulk (overhangs, or biofilm shadowed "
+                    "under dense clusters: attenuation), which the height map covers"
+                )
+            return f"one surface: {share} of its area under the top of its A-scans{covered}"
+        return (
+            f"not one surface: {share} of the interface's area (more than "
+            f"{100 * MAX_DEEP_SHARE:g} %) lies more than {1000 * self.depth_limit:.3g} um "
+            "under the top of its A-scan (speckle voids or pores wrapped by the surface): "
+            "surface = 'height_map', a larger resolution or denoise_size"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "one_surface": self.one_surface}
+
+
+def structure(
+    thickness: NDArray[np.float64],
+    biofilm: NDArray[np.bool_],
+    outer: NDArray[np.bool_],
+    spacing: tuple[float, float, float],
+) -> OctStructure:
+    """The parameters of the module docstring from the thickness map (ny, nx) [mm], the
+    biofilm's voxels and its outer boundary's (nz, ny, nx; the last row the one right above
+    the substratum)."""
+    dz, dy, dx = spacing
+    t = np.asarray(thickness, dtype=np.float64)
+    covered = t > 0
+    mean = float(t.mean())
+    ra = float(np.mean(np.abs(t - mean)))
+    inside = int(np.count_nonzero(outer))
+    voxels = int(np.count_nonzero(biofilm & outer))
+    area = t.size * dy * dx
+    return OctStructure(
+        mean_thickness=mean,
+        mean_thickness_covered=float(t[covered].mean()) if covered.any() else 0.0,
+        max_thickness=float(t.max()),
+        std_thickness=float(t.std()),
+        biovolume=voxels * dz * dy * dx,
+        biovolume_per_area=voxels * dz * dy * dx / area,
+        coverage=float(np.mean(biofilm[-1])) if len(biofilm) else 0.0,
+        ra=ra,
+        rq=float(np.sqrt(np.mean((t - mean) ** 2))),
+        roughness_coefficient=ra / mean if mean > 0 else 0.0,
+        porosity=1.0 - voxels / inside if inside else 0.0,
+    )
+
+
+def quality(
+    surface: Interface, depth_limit: float, overhang_share: float, surface_kind: str
+) -> OctQuality:
+    """How much of ``surface`` (x, y, z = height; normals into the fluid) lies more than
+    ``depth_limit`` [mm] under the top of its A-scan: the first crossing of the surface by a
+    ray cast down along depth at the same lateral position (trimesh's ray test, one ray per
+    triangle centroid and one per vertex).  A height field is its own top everywhere; a
+    wall or flank is too (the ray at its centroid meets it first); a pore or speckle void
+    that the surface wraps lies under the surface above it."""
+    import trimesh
+
+    v = surface.vertices
+    mesh = trimesh.Trimesh(v, surface.cells, process=False)
+    centroids = v[surface.cells].mean(axis=1)
+    area = np.linalg.norm(surface.area_vectors, axis=1)
+
+    def under(points: NDArray[np.float64]) -> NDArray[np.float64]:
+        high = float(v[:, 2].max()) + 1.0
+        origins = np.c_[points[:, :2], np.full(len(points), high)]
+        down = np.tile([0.0, 0.0, -1.0], (len(points), 1))
+        hits, rays, _ = mesh.ray.intersects_location(origins, down, multiple_hits=False)
+        top = points[:, 2].copy()  # a ray that misses (at an edge): its own point
+        top[rays] = hits[:, 2]
+        return np.maximum(top - points[:, 2], 0.0)
+
+    deep = under(centroids) > depth_limit
+    total = float(area.sum())
+    return OctQuality(
+        deep_area_share=float(area[deep].sum()) / total if total > 0 else 0.0,
+        deep_vertex_share=float(np.mean(under(v) > depth_limit)) if len(v) else 0.0,
+        depth_limit=float(depth_limit),
+        overhang_share=float(overhang_share),
+        surface_kind=surface_kind,
+    )
