@@ -206,11 +206,12 @@ class OctOptions(PluginOptions):
         "each way. Fluid reaching the bulk through openings narrower than it is biofilm "
         "(speckle voids, unresolved pores)",
     )
-    surface: Literal["height_map", "outer"] = Field(
-        "height_map",
-        description="'height_map': where each A-scan first meets the biofilm (the probe sees "
-        "the top first; overhangs are covered); 'outer': marching cubes on the biofilm's "
-        "outer boundary (overhangs kept, and what lies under the top reported)",
+    surface: Literal["auto", "height_map", "outer"] = Field(
+        "auto",
+        description="'outer': marching cubes on the biofilm's outer boundary (overhangs "
+        "kept); 'height_map': where each A-scan first meets the biofilm (overhangs covered); "
+        "'auto': the outer boundary when it is one surface (no more than 5 % of its area "
+        "hidden from the probe), else the height map",
     )
 
     @model_validator(mode="after")
@@ -444,9 +445,6 @@ def segment_oct(
     else:
         t = _otsu(above, lo, hi, where)
     mask = above > t
-    if floor.tail:
-        # the rows the substratum's reflection bleeds into take the biofilm of the row above
-        mask[ks - floor.tail : ks] = mask[ks - floor.tail - 1]
     if not mask.any():
         raise ConfigError(
             f"no biofilm found: no voxel above the threshold {in_scan_units(t):.4g}", where
@@ -482,12 +480,19 @@ def segment_oct(
     # 6. the surface: the height map, or marching cubes on the outer boundary
     top_row = np.where(outer.any(axis=0), np.argmax(outer, axis=0), ks)
     overhangs = overhang_share(outer, top_row, max(1, math.ceil(axial)))
-    kind = opts.surface
     thickness = height_map(field, t, top_row, ks, dz)
+    kind: Literal["height_map", "outer"] = "height_map" if opts.surface == "height_map" else "outer"
+    rejected: OctQuality | None = None
+    if kind == "outer":
+        surface = marching_cubes_surface(field, t, outer, ks, origin, spacing, where)
+        check = quality(surface, axial * dz, overhangs, "outer")
+        if opts.surface == "auto" and not check.one_surface:
+            # marching cubes wrapped what the probe does not see: the height map instead
+            rejected = check
+            kind = "height_map"
     if kind == "height_map":
         surface = height_surface(thickness, origin, spacing, where)
-    else:
-        surface = marching_cubes_surface(field, t, outer, ks, origin, spacing, where)
+        check = quality(surface, axial * dz, overhangs, "height_map", rejected)
     # 7. a surface that cannot be the biofilm's interface ends here, not in a calibration
     fov = (field.shape[1] * spacing[1], field.shape[2] * spacing[2])
     cause = surface_degeneracy(surface, fov)
@@ -502,7 +507,6 @@ def segment_oct(
             where,
         )
     # 8. what the segmentation says: structure parameters, and whether it is one surface
-    check = quality(surface, axial * dz, overhangs, kind)
     parameters = structure(thickness, mask, outer, spacing)
     j = field.shape[1] // 2
     lines = floor.lines_in_scan(j, field.shape[2])

@@ -35,7 +35,9 @@ every A-scan is shifted along depth so that the substratum's plane lies along on
 (linear interpolation); the substratum's surface is the upper half-maximum edge of its line
 in the median depth profile (a sharp reflection's surface; half the line's spread above its
 centre for one blurred by the axial resolution), and the rows the line still brightens above
-it take the biofilm of the row above them.
+it (as far above its peak as it brightens the substratum's rows below it, and one row where
+the scan was untilted: interpolation spreads a thin line over two rows) take the intensities
+of the row above them.
 """
 
 from __future__ import annotations
@@ -74,6 +76,8 @@ MIN_SUPPORT = 0.3
 MAX_SLOPE = 0.3
 #: planes sought at most
 MAX_PLANES = 4
+#: A-scans a plane is sought on at most (every s-th along y and x beyond)
+MAX_ASCANS = 128 * 128
 
 
 @dataclass(frozen=True)
@@ -155,9 +159,10 @@ def line_scores(
         volume, sigma=(0.0, lateral, lateral), mode="nearest", truncate=3.0
     )
     floor = max(float(smooth.max()) * 1e-6, float(np.finfo(np.float32).tiny))
-    log = np.log(np.maximum(smooth, floor)).astype(np.float64)
+    log = np.log(np.maximum(smooth, np.float32(floor)))
+    del smooth
     nz = log.shape[0]
-    cum = np.concatenate([np.zeros((1, *log.shape[1:])), np.cumsum(log, axis=0)])
+    cum = np.concatenate([np.zeros((1, *log.shape[1:])), np.cumsum(log, axis=0, dtype=np.float64)])
     k = np.arange(nz)
     a_hi = np.clip(k - gap, 0, nz)
     a_lo = np.clip(k - gap - width, 0, nz)
@@ -356,13 +361,19 @@ def place_floor(
     dz = spacing[0]
     gap = max(1, math.ceil(axial))
     width = max(4, 2 * gap)
-    sigma = max(1.0, min(lateral))
-    found = find_reflections(volume, spacing, gap, width, sigma)
+    # planes are found on every s-th A-scan (at most MAX_ASCANS of them), then put back on
+    # the full grid: a plane needs no more, and the line scores cost 5 floats per voxel
+    s = max(1, math.ceil(math.sqrt(ny * nx / MAX_ASCANS)))
+    view = volume[:, ::s, ::s]
+    sigma = max(1.0, min(lateral) / s)
+    sub_spacing = (dz, spacing[1] * s, spacing[2] * s)
+    found = find_reflections(view, sub_spacing, gap, width, sigma)
     given = None
     if substratum_depth is not None:
         given = int(math.floor(substratum_depth / dz + 1.0)) - origin[0]
         check_floor_row(given, origin[0], nz, where)
-    planes = classify(volume, found, gap, sigma, None if given is None else float(given))
+    planes = classify(view, found, gap, sigma, None if given is None else float(given))
+    planes = [_on_full_grid(p, s, view.shape[1:], (ny, nx)) for p in planes]
     windows = [p for p in planes if p.kind == "window"] if window else []
     above = windows[-1] if windows else None
     k = np.arange(nz, dtype=np.float64)[:, None, None]
@@ -388,7 +399,9 @@ def place_floor(
         if np.ptp(sub.rows((ny, nx))) > 0.1:
             tilt = sub.slope
             volume = untilt(volume, sub)
-        row, ks, tail = line_edge(volume, sub.row, gap, width)
+        row, ks, tail = line_edge(volume[:, ::s, ::s], sub.row, gap, width)
+        if any(tilt):  # untilting spread the line over one more row in part of the A-scans
+            tail = max(tail, 1)
     else:
         # the user's plane: its depth at the field's centre, its slopes in mm per mm
         slope = (substratum_tilt[0] * spacing[1] / dz, substratum_tilt[1] * spacing[2] / dz)
@@ -398,10 +411,26 @@ def place_floor(
             volume = untilt(volume, plane)
         row, ks, tail = float(given) - 0.5, given, 0
     check_floor_row(ks, origin[0], nz, where)
-    floor = Floor(
-        ks, min(tail, max(ks - 2, 0)), row, tilt, above, tuple(planes), origin[0], (ny, nx)
-    )
+    tail = min(tail, max(ks - 2, 0))
+    if tail:
+        # the rows the reflection still brightens take the row above them: within a
+        # resolution cell of a bright line nothing is resolved, and the denoising filter
+        # would carry the line up into the biofilm's rows
+        volume[ks - tail : ks] = volume[ks - tail - 1]
+    floor = Floor(ks, tail, row, tilt, above, tuple(planes), origin[0], (ny, nx))
     return floor, volume
+
+
+def _on_full_grid(p: Reflection, s: int, sub: tuple[int, ...], full: tuple[int, int]) -> Reflection:
+    """A plane found on every ``s``-th A-scan (a grid of ``sub``) on the ``full`` grid."""
+    if s == 1:
+        return p
+    by, bx = p.slope[0] / s, p.slope[1] / s
+    # the full grid's centre in the sub-grid's indices, relative to the sub-grid's centre
+    oy = 0.5 * (full[0] - 1) / s - 0.5 * (sub[0] - 1)
+    ox = 0.5 * (full[1] - 1) / s - 0.5 * (sub[1] - 1)
+    row = p.row + p.slope[0] * oy + p.slope[1] * ox
+    return Reflection(row, (by, bx), p.support, p.contrast, p.bright_above, p.kind)
 
 
 def _in_full(text: str, z0: int) -> str:
@@ -439,7 +468,9 @@ def line_edge(
     """The substratum's surface: the upper half-maximum edge of its reflection in the median
     depth profile of the untilted scan (the surface of a sharp reflection, and half the
     line's spread above its centre for a blurred one); returns that row, the first row
-    under it and the rows above it the reflection still brightens by a quarter."""
+    under it and the rows above it the reflection still brightens: as many above the peak as
+    it brightens below it by a quarter over the level deeper down (a biofilm above it, which
+    brightens the rows above whatever the line does, does not count)."""
     profile = np.median(volume.reshape(len(volume), -1), axis=1).astype(np.float64)
     nz = len(profile)
     lo, hi = max(0, int(round(row)) - gap), min(nz, int(round(row)) + gap + 1)
@@ -456,7 +487,14 @@ def line_edge(
         below, up = profile[k], profile[k - 1]
         edge = (k - 1) + (half - up) / (below - up) if below > up else float(k)
     ks = int(round(edge + 0.5))
-    tail = 0
-    while ks - tail - 1 > 0 and tail < gap and profile[ks - tail - 1] > 1.25 * side:
-        tail += 1
+    # the bleed: a reflection spreads up as far as down, and under it lies only the
+    # substratum, so its spread is measured below the peak (rows brighter than a quarter
+    # above the level deeper down) and taken off above it, from the peak up
+    deep = profile[peak + gap + 1 : peak + gap + 1 + width]
+    spread = 0
+    if len(deep):
+        level = float(np.median(deep))
+        while peak + spread + 1 < nz and spread < gap and profile[peak + spread + 1] > 1.25 * level:
+            spread += 1
+    tail = max(0, ks - (peak - spread))
     return edge, ks, tail

@@ -18,13 +18,14 @@ outer boundary above the substratum at every A-scan, 0 where bare):
   voids the resolution cannot open to the fluid).
 
 The check (:class:`OctQuality`): the share of the interface's area (and of its vertices)
-more than one axial resolution cell under the top of its A-scan (where a ray along depth
-from the probe first meets the surface).  A height map has none by construction; marching
-cubes around speckle voids inside the biofilm puts most of a surface there (issue 45: 78 %
-of the vertices of a real B-scan's surface lay more than 20 um under the top), and the cpp
-measure would then match model vertices to pores: a surface with more than
-:data:`MAX_DEEP_SHARE` of its area there is not one surface, and a study on it is
-``unreliable``.
+hidden from the probe by more than one axial resolution cell (farther than that from every
+point where a ray along depth first meets the surface).  A height map has none by
+construction; marching cubes around speckle voids inside the biofilm puts most of a surface
+there (issue 45: 78 % of the vertices of a real B-scan's surface lay more than 20 um under
+the top), and the cpp measure would then match model vertices to pores: a surface with more
+than :data:`MAX_DEEP_SHARE` of its area there is not one surface, and a study on it is
+``unreliable``.  ``surface = "auto"`` (the default of :func:`fbia.imaging.oct.segment_oct`)
+takes the height map instead of such an outer boundary.
 """
 
 from __future__ import annotations
@@ -46,12 +47,14 @@ __all__ = [
     "structure",
 ]
 
-#: the largest share of an interface's area under the top of its A-scans (by more than one
+#: the largest share of an interface's area hidden from the probe (by more than one
 #: axial resolution cell) for it to count as one surface
 MAX_DEEP_SHARE = 0.05
 #: the share of the covered A-scans with bulk fluid under their top (overhangs, or biofilm
 #: shadowed under dense clusters) above which the quality note says so
 MAX_OVERHANG_SHARE = 0.05
+#: the most rays :func:`quality` casts (per kind: triangle centroids, vertices)
+MAX_RAYS = 50_000
 
 
 @dataclass(frozen=True)
@@ -78,11 +81,13 @@ class OctStructure:
 class OctQuality:
     """Whether a segmented interface is one surface (module docstring)."""
 
-    deep_area_share: float  # of the area, more than one resolution cell under the top
+    deep_area_share: float  # of the area, hidden from the probe by more than a resolution cell
     deep_vertex_share: float  # of the vertices, the same
     depth_limit: float  # that cell [mm]
     overhang_share: float  # of the covered A-scans, with bulk fluid under their top
     surface_kind: str  # "height_map" or "outer"
+    #: the outer boundary's check when surface = "auto" rejected it for the height map
+    rejected: OctQuality | None = None
 
     @property
     def one_surface(self) -> bool:
@@ -99,12 +104,18 @@ class OctQuality:
                     "under their top that reaches the bulk (overhangs, or biofilm shadowed "
                     "under dense clusters: attenuation), which the height map covers"
                 )
-            return f"one surface: {share} of its area under the top of its A-scans{covered}"
+            if self.rejected is not None:
+                covered += (
+                    f"; the outer boundary was not one surface ("
+                    f"{100 * self.rejected.deep_area_share:.1f} % of its area hidden from the "
+                    "probe): the height map instead"
+                )
+            return f"one surface: {share} of its area hidden from the probe{covered}"
         return (
             f"not one surface: {share} of the interface's area (more than "
             f"{100 * MAX_DEEP_SHARE:g} %) lies more than {1000 * self.depth_limit:.3g} um "
-            "under the top of its A-scan (speckle voids or pores wrapped by the surface): "
-            "surface = 'height_map', a larger resolution or denoise_size"
+            "from what the probe sees first (speckle voids or pores wrapped by the surface, "
+            "or wide overhangs): surface = 'height_map', a larger resolution or denoise_size"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -144,36 +155,58 @@ def structure(
 
 
 def quality(
-    surface: Interface, depth_limit: float, overhang_share: float, surface_kind: str
+    surface: Interface,
+    depth_limit: float,
+    overhang_share: float,
+    surface_kind: str,
+    rejected: OctQuality | None = None,
 ) -> OctQuality:
-    """How much of ``surface`` (x, y, z = height; normals into the fluid) lies more than
-    ``depth_limit`` [mm] under the top of its A-scan: the first crossing of the surface by a
-    ray cast down along depth at the same lateral position (trimesh's ray test, one ray per
-    triangle centroid and one per vertex).  A height field is its own top everywhere; a
-    wall or flank is too (the ray at its centroid meets it first); a pore or speckle void
-    that the surface wraps lies under the surface above it."""
+    """How much of ``surface`` (x, y, z = height; normals into the fluid) lies hidden from
+    the probe by more than ``depth_limit`` [mm]: farther than that from every point of the
+    surface the probe sees first.  The seen points are where rays cast down along depth
+    first meet the surface (trimesh's ray test, one ray per triangle centroid and one per
+    vertex, at most :data:`MAX_RAYS` of each, evenly drawn); a point is hidden by its
+    distance to the nearest of them.  A height field (``surface_kind`` "height_map") is
+    seen everywhere, so nothing is cast; a wall, a flank or the underside of a wall that
+    leans over by less than a resolution cell lies within one cell of what is seen; a pore or
+    speckle void that the surface wraps, or the underside of a wide overhang, lies deeper.
+    (Measured against the depth under the top of the same A-scan alone: a dome bent by the
+    flow, its downstream wall leaning over, had 7 % of its marching-cubes area more than a
+    cell under the top, and no wrapped void.)"""
     import trimesh
+    from scipy.spatial import cKDTree
 
     v = surface.vertices
+    if surface_kind == "height_map":  # a height field is its own top: nothing lies under it
+        return OctQuality(
+            0.0, 0.0, float(depth_limit), float(overhang_share), surface_kind, rejected
+        )
     mesh = trimesh.Trimesh(v, surface.cells, process=False)
-    centroids = v[surface.cells].mean(axis=1)
-    area = np.linalg.norm(surface.area_vectors, axis=1)
+    cells = np.arange(len(surface.cells))
+    points = np.arange(len(v))
+    if len(cells) > MAX_RAYS:  # an even sample: the shares to about 1/sqrt(MAX_RAYS)
+        cells = np.random.default_rng(0).choice(cells, MAX_RAYS, replace=False)
+        points = np.random.default_rng(1).choice(points, min(len(v), MAX_RAYS), replace=False)
+    centroids = v[surface.cells[cells]].mean(axis=1)
+    area = np.linalg.norm(surface.area_vectors, axis=1)[cells]
 
-    def under(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    def seen(at: NDArray[np.float64]) -> NDArray[np.float64]:
         high = float(v[:, 2].max()) + 1.0
-        origins = np.c_[points[:, :2], np.full(len(points), high)]
-        down = np.tile([0.0, 0.0, -1.0], (len(points), 1))
-        hits, rays, _ = mesh.ray.intersects_location(origins, down, multiple_hits=False)
-        top = points[:, 2].copy()  # a ray that misses (at an edge): its own point
-        top[rays] = hits[:, 2]
-        return np.maximum(top - points[:, 2], 0.0)
+        origins = np.c_[at[:, :2], np.full(len(at), high)]
+        down = np.tile([0.0, 0.0, -1.0], (len(at), 1))
+        hits, _, _ = mesh.ray.intersects_location(origins, down, multiple_hits=False)
+        return np.asarray(hits, dtype=np.float64)
 
-    deep = under(centroids) > depth_limit
+    tops = np.vstack([seen(centroids), seen(v[points])])
+    tree = cKDTree(tops)
+    deep = tree.query(centroids)[0] > depth_limit
+    deep_points = tree.query(v[points])[0] > depth_limit
     total = float(area.sum())
     return OctQuality(
         deep_area_share=float(area[deep].sum()) / total if total > 0 else 0.0,
-        deep_vertex_share=float(np.mean(under(v) > depth_limit)) if len(v) else 0.0,
+        deep_vertex_share=float(np.mean(deep_points)) if len(v) else 0.0,
         depth_limit=float(depth_limit),
         overhang_share=float(overhang_share),
         surface_kind=surface_kind,
+        rejected=rejected,
     )

@@ -27,9 +27,9 @@ relative to the study file, or a table of the scan and its options (:class:`OctS
 the height above the substratum (``"z"``, fbia's frame, or ``"y"`` for ``ale_fsi``'s 3-D
 geometries: :func:`fbia.imaging.oct.in_model_axes`); and every option of
 :class:`fbia.imaging.oct.OctOptions` (``threshold``, ``attenuation`` [1/mm], ``crop_mm`` [mm],
-``denoise``, ...).  Without ``voxel_size`` it is read from ``voxel_size_mm`` of a JSON file of
-the scan's stem beside it (``data/scan.json`` for ``data/scan.npy``, as
-``examples/oct_3d/make_scan.py`` writes).
+``denoise``, ...).  Without ``voxel_size`` it is read from a Thorlabs ``.oct`` file's own
+header, or from ``voxel_size_mm`` of a JSON file of the scan's stem beside it
+(``data/scan.json`` for ``data/scan.npy``, as ``examples/oct_3d/make_scan.py`` writes).
 
 Reading a study writes nothing (``fbia validate`` leaves every folder as it was): the study
 keeps one :class:`OctRecord` per scan (:attr:`fbia.studies.study.Study.oct_records`), and the
@@ -63,6 +63,7 @@ from pydantic import Field, field_validator
 from ..core.errors import ConfigError
 from ..core.interface import Interface
 from ..imaging.oct import HeightAxis, OctOptions, OctSegmentation, in_model_axes, segment_oct
+from ..imaging.oct_reader import oct_file_voxel_size
 from ..storage.fingerprints import interface_digest
 
 __all__ = ["OctRecord", "OctScan", "OctScanOptions", "read_oct_scan", "write_oct_record"]
@@ -172,7 +173,7 @@ def read_oct_scan(value: Any, folder: Path, where: str) -> OctScan:
     path = path if path.is_absolute() else folder / path
     if not path.is_file():
         raise ConfigError(f"{options.file}: scan file not found", where)
-    voxel_size = options.voxel_size or _voxel_size_beside(path, options.file, where)
+    voxel_size = options.voxel_size or _voxel_size_of(path, options.file, where)
     try:
         seg = segment_oct(path, voxel_size, options)
     except ConfigError as err:
@@ -180,6 +181,17 @@ def read_oct_scan(value: Any, folder: Path, where: str) -> OctScan:
     sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
     surface = in_model_axes(seg.interface, options.height_axis)
     return OctScan(path, sha256, options, voxel_size, seg, surface)
+
+
+def _voxel_size_of(path: Path, name: str, where: str) -> tuple[float, float, float]:
+    """The voxel size a scan file carries (a Thorlabs ``.oct`` header's ranges), or the one
+    of the JSON file beside it."""
+    if path.suffix.lower() == ".oct":
+        try:
+            return oct_file_voxel_size(path)
+        except ConfigError as err:
+            raise err.located(where) from None
+    return _voxel_size_beside(path, name, where)
 
 
 def _voxel_size_beside(path: Path, name: str, where: str) -> tuple[float, float, float]:

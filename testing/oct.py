@@ -358,6 +358,7 @@ def realistic_oct_scan(
     dtype: str = "float32",
     heterogeneity: float = 0.3,
     seed: int = 0,
+    height: FloatArray | None = None,
 ) -> RealisticScan:
     """A realistic spectral-domain OCT scan of a rough, porous biofilm in a flow cell.
 
@@ -456,6 +457,10 @@ def realistic_oct_scan(
         Relative amplitude of the biofilm's smooth reflectivity heterogeneity [-].
     seed
         Seed (a non-negative integer) of every random draw.
+    height
+        The biofilm's outer boundary as a height map (ny, nx) above the substratum [mm]
+        instead of the random clusters (:func:`realistic_volume_from_surface`: a forward
+        model's interface); it must fit between the substratum and the window's depth.
 
     >>> scan = realistic_oct_scan(shape=(64, 16, 32), seed=0)
     >>> scan.volume.shape, scan.volume.dtype.name, scan.window_row
@@ -505,7 +510,18 @@ def realistic_oct_scan(
             f"last row at {(nz - 1) * dz:.3g} mm",
             where,
         )
-    h = _clusters(xs, ys, 0.5 * (d_s.min() - d_w) / (1.0 + ROUGHNESS), rng(0))
+    if height is None:
+        h = _clusters(xs, ys, 0.5 * (d_s.min() - d_w) / (1.0 + ROUGHNESS), rng(0))
+    else:
+        h = np.clip(np.asarray(height, dtype=np.float64), 0.0, None)
+        if h.shape != (ny, nx) or not np.all(np.isfinite(h)):
+            raise ConfigError(f"height must be a finite ({ny}, {nx}) map [mm]", where)
+        if h.max() >= d_s.min() - d_w - 2.0 * res_a:
+            raise ConfigError(
+                f"the biofilm ({h.max():.3g} mm high) does not fit under the window "
+                f"({d_s.min() - d_w:.3g} mm above the substratum's highest point): more rows",
+                where,
+            )
     depth = (np.arange(nz) * dz)[:, None, None]
     top = d_s - h
     occ_b = np.clip(
@@ -589,6 +605,31 @@ def realistic_oct_scan(
         pore_mask=pore_mask,
         channel_mask=channel_mask,
     )
+
+
+def realistic_volume_from_surface(
+    surface: Interface,
+    shape: tuple[int, int, int],
+    voxel_size: tuple[float, float, float],
+    **options: Any,
+) -> RealisticScan:
+    """A realistic scan (:func:`realistic_oct_scan`, ``options`` its keywords) of the biofilm
+    under a triangulated surface in the frame of the module docstring (x and y from voxel
+    index 0, z the height above the substratum, no overhangs; e.g. a forward model's
+    deformed interface with its axes permuted to that frame, as for
+    :func:`oct_volume_from_surface`): each A-scan's height is the surface linearly
+    interpolated over its (x, y) projection, 0 outside the convex hull of its vertices."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    if surface.dim != 3:
+        raise ConfigError("needs a 3-D surface", "realistic_volume_from_surface")
+    _, ny, nx = shape
+    _, dy, dx = voxel_size
+    v = surface.vertices
+    y, x = np.meshgrid(np.arange(ny) * dy, np.arange(nx) * dx, indexing="ij")
+    h = LinearNDInterpolator(v[:, :2], v[:, 2], fill_value=0.0)(x, y)
+    h = np.clip(np.nan_to_num(h), 0.0, None)
+    return realistic_oct_scan(shape=shape, voxel_size=voxel_size, height=h, **options)
 
 
 def scan_family() -> dict[str, dict[str, Any]]:

@@ -64,3 +64,57 @@ def test_lm_recovers_E_from_a_coarse_synthetic_oct_scan(tmp_path: Path) -> None:
     result = fbia.run_study(study, echo=[].append)
     E = result.x["E"]
     assert abs(E - make_scan.TRUTH["E"]) < 100.0, E
+
+
+@pytest.mark.slow
+def test_lm_recovers_E_within_its_standard_error_from_a_realistic_oct_scan(
+    tmp_path: Path,
+) -> None:
+    """Issue 45: the example's loaded dome imaged as a real scanner would
+    (:func:`fbia.testing.oct.realistic_volume_from_surface`: fully developed speckle over a
+    5 x 15 um resolution cell, 10 % pores with sub-resolution channels, the example's
+    attenuation inside the biofilm, the flow cell's window, a substratum tilted by 0.02) at
+    the example's voxels, read by the example's study file with the scanner's resolution
+    (the window found and removed, the substratum found and untilted), and LM recovers E
+    within its standard error (the rule written before the run).
+
+    The dome, bent by the flow, leans over downstream, which only marching cubes on the
+    outer boundary follows (3.8-4.4 um RMS from the model's interface; the height map 12-13
+    um). With the default filter (sigma 1 voxel) the fully developed speckle of a dome 80
+    rows thick leaves dark voids that open to the fluid, the outer boundary is not one
+    surface (11 % of its area hidden from the probe) and "auto" takes the height map, whose
+    residuals are 3x the noise the study states: LM says ``unreliable``, rightly.  With
+    ``denoise_size = 2``, the docs' next step for a thick speckled biofilm (4.5 % hidden),
+    it keeps the outer boundary (measured: E = 407.1 +- 39.5 Pa, converged)."""
+    from fbia.imaging.oct import in_model_axes
+    from fbia.testing.oct import realistic_volume_from_surface
+
+    make_scan = _make_scan_module()
+    loaded = make_scan.simulate(make_scan.TRUTH["E"])
+    scan = realistic_volume_from_surface(
+        in_model_axes(loaded, "y"),
+        (140, 100, 160),
+        make_scan.VOXEL_SIZE,
+        attenuation=make_scan.ATTENUATION,
+        tilt=(0.0, 0.02),
+        seed=3,
+    )
+    (tmp_path / "data").mkdir()
+    np.save(tmp_path / "data" / "scan_loaded.npy", scan.volume)
+    text = (EXAMPLE / "study_lm_scan.toml").read_text()
+    text = text.replace("{ E = 200.0 }, { E = 700.0 }", "{ E = 200.0 }")
+    text = text.replace('kind = "processes"\nworkers = 2', 'kind = "serial"')
+    text = text.replace("attenuation = 1.0 ", "resolution = [0.005, 0.015]\ndenoise_size = 2.0 ")
+    study_file = tmp_path / "study_lm_scan.toml"
+    study_file.write_text(text)
+    study = fbia.load_study(study_file)
+    (record,) = study.oct_records
+    seg = record.scan.segmentation
+    assert seg.window_row is not None and seg.tilt[1] == pytest.approx(
+        0.02 * 0.01 / 0.005, abs=0.01
+    )
+    assert seg.quality.one_surface and seg.surface_kind == "outer"
+    result = fbia.run_study(study, echo=[].append)
+    E, se = result.x["E"], result.stderr["E"]
+    assert result.status not in ("unreliable", "unchecked"), result.message
+    assert abs(E - make_scan.TRUTH["E"]) <= se, (E, se)

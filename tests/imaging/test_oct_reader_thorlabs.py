@@ -176,6 +176,20 @@ def test_segment_oct_on_a_thorlabs_file_finds_the_phantoms_substratum(tmp_path: 
         segment_oct(read_oct_decibels(path), voxel)
 
 
+def test_a_study_reads_a_thorlabs_file_with_the_voxel_size_of_its_header(tmp_path: Path) -> None:
+    """``[[observations]] oct = "scan.oct"`` needs no voxel_size: the header has it."""
+    from fbia.studies.study_oct import read_oct_scan
+
+    ph = oct_phantom(shape=(24, 20, 20), seed=0)
+    nz, ny, nx = ph.volume.shape
+    dz, dy, dx = ph.voxel_size
+    db_zyx = (10.0 * np.log10(ph.volume.astype(np.float64))).astype(np.float32)
+    write_oct(tmp_path / "scan.oct", db_zyx.transpose(1, 2, 0), ranges=(nz * dz, ny * dy, nx * dx))
+    scan = read_oct_scan("scan.oct", tmp_path, "study.toml: [[observations]] #1 oct")
+    assert scan.voxel_size == pytest.approx(ph.voxel_size)
+    assert scan.segmentation.substratum_row == 20
+
+
 # -- bad input ---------------------------------------------------------------------------------
 def one_line_error(path: Path, match: str, read=read_oct_volume, **kwargs) -> str:
     """The ConfigError that reading ``path`` raises: one line, naming the file, matching
