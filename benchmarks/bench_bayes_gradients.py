@@ -47,6 +47,11 @@ inflated, the runs and accuracies are not), gp_smc seeds 0 and 1:
   (right, ``completed``, 135 s own against 52 s), at 160 without 0.10 (right,
   ``unreliable``): about 1.6x fewer runs.
 
+* example 8 (``examples/paper_b/heterogeneous/study_adaptive.toml``, ``ale_fsi`` 6 + 1-D,
+  the RKHS distance; not a case of this script, run as the study with ``gradients =
+  "tangents"``, ``n_train = 2000``): ``unreliable`` at 2008 runs, its design further from
+  converging than without the tangents at the same runs (README.md there).
+
 So the tangents cut the runs to a right posterior by about 1.3-1.6x, and make
 the means more accurate at equal runs, at up to 2.8x fbia's own time (the emulator trains
 on d + 1 times the points); issue 42's rule for a default is >= 2x, so ``gradients`` stays

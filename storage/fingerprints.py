@@ -48,6 +48,7 @@ from ..core.problem import InverseProblem, jsonable
 
 __all__ = [
     "canonical",
+    "class_code_digest",
     "code_digest",
     "code_digest_as_stored",
     "as_keyed_now",
@@ -88,9 +89,9 @@ def _class_version(obj: Any) -> dict[str, str]:
 
 
 def _package_version(obj: Any) -> str:
-    """The version of the distribution of ``obj``'s top-level package (what stores keyed
-    before plugins declared a numerics version)."""
-    cls = type(obj)
+    """The version of the distribution of the top-level package of ``obj`` (a plugin or its
+    class): what stores keyed before plugins declared a numerics version."""
+    cls = obj if isinstance(obj, type) else type(obj)
     top = cls.__module__.split(".")[0]
     try:
         return importlib.metadata.version(top.replace("_", "-"))
@@ -251,7 +252,12 @@ def code_digest(obj: Any) -> dict[str, Any]:
     ``numerics_version`` also gets its package's version and that declaration: a new release
     of the package that declares the same numerics keeps the stores (an edit without a new
     version does not)."""
-    cls = type(obj)
+    return class_code_digest(type(obj))
+
+
+def class_code_digest(cls: type) -> dict[str, Any]:
+    """:func:`code_digest` of an instance of ``cls`` (the digest depends on the class only):
+    what ``paper.json`` records and the reproductions page checks against the code now."""
     name = f"{cls.__module__}.{cls.__qualname__}"
     source = getattr(sys.modules.get(cls.__module__), "__file__", None)
     if source is None:
@@ -259,7 +265,7 @@ def code_digest(obj: Any) -> dict[str, Any]:
     root, paths = _own_files(cls.__module__, Path(source).resolve())
     files = {Path(os.path.relpath(p, root)).as_posix(): _file_sha(p) for p in paths}
     files = dict(sorted(files.items()))
-    return {"class": name, "files": files, "sha256": _sha(canonical(files)), **_numerics(obj)}
+    return {"class": name, "files": files, "sha256": _sha(canonical(files)), **_numerics(cls)}
 
 
 def code_digest_as_stored(
@@ -271,12 +277,12 @@ def code_digest_as_stored(
     return _folder_digest(obj) if isinstance(stored.get("files"), str) else code
 
 
-def _numerics(obj: Any) -> dict[str, str]:
-    declared = getattr(type(obj), "numerics_version", None)
+def _numerics(cls: type) -> dict[str, str]:
+    declared = getattr(cls, "numerics_version", None)
     if declared is None:
         return {}
     # a release may change the code but declare the same numerics
-    return {"version": _package_version(obj), "numerics": str(declared)}
+    return {"version": _package_version(cls), "numerics": str(declared)}
 
 
 def _file_sha(path: Path) -> str:
@@ -421,7 +427,7 @@ def _folder_digest(obj: Any) -> dict[str, Any]:
             h.update(b"(unreadable)")
         h.update(b"\0")
     shown = str(root) if len(files) > 1 else str(path)
-    return {"class": name, "files": shown, "sha256": h.hexdigest(), **_numerics(obj)}
+    return {"class": name, "files": shown, "sha256": h.hexdigest(), **_numerics(type(obj))}
 
 
 # -- fingerprints --------------------------------------------------------------------------------

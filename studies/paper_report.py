@@ -20,10 +20,20 @@ section ``## Measured times`` of its README (the wall time of a fresh run, which
 that took its runs from the store cannot measure).  A ``paper.json`` written before the rules
 by kind (its rows carry their own ``rule`` and ``tolerance``) is listed as *stale*, without
 its verdicts: run its study again.
+
+So that the page cannot go stale silently (issue 46), ``paper.json`` records the git commit
+of the fbia source that made it (:func:`fbia.studies.provenance.source_commit`) and the code
+of the study's model, measure and iterator (:func:`plugin_code`: the SHA-256 of each file of
+their code, :func:`fbia.storage.fingerprints.class_code_digest`); the page gives every study
+the commit and whether that code is what runs now (:func:`code_changes`: the roles and files
+that changed since), and says so in bold where it is not, or where the record is of an fbia
+that did not record it.  ``tests/test_reproductions_page.py`` (``make test-slow``) reruns the
+studies under a minute and compares their verdicts and run counts with the page's.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
@@ -31,20 +41,24 @@ import re
 import tomllib
 import typing
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ..core.errors import ConfigError
 from ..core.problem import Result
+from ..storage.fingerprints import class_code_digest, code_digest
 from .paper import DRAWS_RULE, KINDS, Comparison, compare, verdict
+from .provenance import source_commit
 from .study import Study
 from .study_report import MARKDOWN_NAME, SessionTimes
 
 __all__ = [
     "PaperRecord",
+    "code_changes",
     "paper_section",
     "paper_title",
+    "plugin_code",
     "rules_table",
     "write_paper_report",
     "write_summary",
@@ -71,6 +85,11 @@ class PaperRecord:
     rows: tuple[Comparison, ...]
     reused: int = 0  # runs this session took from the store instead of running them
     stale: str = ""  # why the rows are not shown (set on reading a record of an older fbia)
+    #: the git commit of the fbia source that made the record (+dirty: with local changes)
+    commit: str = ""
+    #: the code of the study's model, measure and iterator (storage.fingerprints'
+    #: class_code_digest, by role): the page marks a row whose code has changed since
+    code: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         skip = ("rows", "stale")
@@ -164,10 +183,39 @@ def write_paper_report(
         finished=str(result.provenance.get("finished", "")),
         rows=rows,
         reused=reused,
+        commit=source_commit(),
+        code=plugin_code(study),
     )
     out.mkdir(parents=True, exist_ok=True)
     (out / RECORD_NAME).write_text(json.dumps(record.to_dict(), indent=1), encoding="utf-8")
     return record
+
+
+def plugin_code(study: Study) -> dict[str, Any]:
+    """The code digest of the study's model, measure and iterator (by role)."""
+    plugins = {"model": study.model, "measure": study.measure, "iterator": study.iterator}
+    return {role: code_digest(obj) for role, obj in plugins.items() if obj is not None}
+
+
+def code_changes(code: dict[str, Any]) -> list[str]:
+    """The roles whose code differs now from the recorded digests ``code`` (a class that is
+    gone counts as changed), each with the files that changed: ``["model (solver.py)"]``."""
+    changed = []
+    for role, digest in sorted(code.items()):
+        name = str(digest.get("class", ""))
+        module, _, qualname = name.rpartition(".")
+        try:
+            cls = getattr(importlib.import_module(module), qualname)
+            now = class_code_digest(cls)
+        except (ImportError, AttributeError, ValueError):
+            changed.append(f"{role} ({name} is gone)")
+            continue
+        if now.get("sha256") == digest.get("sha256"):
+            continue
+        old, new = digest.get("files", {}), now.get("files", {})
+        files = sorted(f for f in set(old) | set(new) if old.get(f) != new.get(f))
+        changed.append(f"{role} ({', '.join(files) or 'its version'})")
+    return changed
 
 
 def paper_title(study: Study, record: PaperRecord) -> str:
@@ -310,17 +358,18 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
         "## Studies",
         "",
         "| study | source | agree | status | wall time of the last session | forward runs "
-        "(their summed time) |",
-        "|---|---|---|---|---|---|",
+        "(their summed time) | made by the code of |",
+        "|---|---|---|---|---|---|---|",
     ]
     root = target.parent.resolve()
+    changes = {id(rec): code_changes(rec.code) for _, rec in records}
     for _, rec in records:
         good, judged = verdict(rec.rows)
         agree = "stale" if rec.stale else f"{good} / {judged}"
         lines.append(
             f"| [{rec.study}](#{_anchor(rec.study)}) | {rec.source} | {agree} | "
             f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
-            f"{rec.nfev} ({rec.forward_time:.0f} s) |"
+            f"{rec.nfev} ({rec.forward_time:.0f} s) | {_made_by(rec, changes[id(rec)])} |"
         )
     good_all = sum(verdict(rec.rows)[0] for _, rec in records)
     judged_all = sum(verdict(rec.rows)[1] for _, rec in records)
@@ -367,6 +416,8 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
             "",
             _times(rec),
             "",
+            _provenance_line(rec, changes[id(rec)]),
+            "",
         ]
         if rec.stale:
             lines.append(f"This `paper.json` is stale: {rec.stale}.")
@@ -377,6 +428,32 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return target, len(records)
+
+
+def _made_by(rec: PaperRecord, changed: list[str]) -> str:
+    """The Studies table's cell: the commit, and whether the code changed since."""
+    commit = f"`{rec.commit[:7]}{'+dirty' if rec.commit.endswith('+dirty') else ''}`"
+    if not rec.code:
+        return "not recorded: **rerun**"
+    if changed:
+        return f"{commit}; **changed since: {', '.join(c.split(' ')[0] for c in changed)}**"
+    return f"{commit}, unchanged"
+
+
+def _provenance_line(rec: PaperRecord, changed: list[str]) -> str:
+    """The sentence of a study's section that says which code made its rows."""
+    if not rec.code:
+        return (
+            "**Which code made these rows is not recorded** (a `paper.json` of fbia before "
+            "issue 46): they may not be what the code computes today; run the study again."
+        )
+    made = f"Made at commit `{rec.commit or 'unknown'}`"
+    if changed:
+        return (
+            f"{made}. **The code has changed since**: {'; '.join(changed)}: these rows may "
+            "not be what the code computes today; run the study again."
+        )
+    return f"{made}; the code of its model, measure and iterator is unchanged since."
 
 
 def _has_paper(study_file: Path) -> bool:

@@ -16,12 +16,42 @@ import numpy as np
 
 from ..core.registry import plugin_versions
 
-__all__ = ["now", "provenance"]
+__all__ = ["now", "provenance", "source_commit"]
 
 
 def now() -> str:
     """The current time as an ISO 8601 string in UTC (for provenance)."""
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+def source_commit() -> str:
+    """The git commit of the fbia source that runs (``git rev-parse HEAD`` in the package's
+    folder), with ``+dirty`` when tracked files differ from it; "" when fbia is not a git
+    checkout (an installed wheel) or git is not there.  What ``paper.json`` records, so that
+    the reproductions page says which code made each row."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+        if head.returncode != 0:
+            return ""
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return head.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
 
 
 # -- provenance --------------------------------------------------------------------------------

@@ -436,6 +436,41 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     )
 
 
+def test_the_summary_marks_a_row_whose_code_changed_since_it_was_made(tmp_path, monkeypatch):
+    """Issue 46 item 1: paper.json records the commit and the code of the study's model,
+    measure and iterator; the page says per study whether that code is what runs now, and
+    marks a row made by other code (here: the recorded digest of one of the model's files
+    edited, as a change of the model would leave it) or by an fbia that did not record it."""
+    monkeypatch.chdir(tmp_path)
+    write_study(tmp_path, STUDY + PAPER)
+    assert main(["run", "study.toml"]) == 0
+    path = tmp_path / "out" / "paper.json"
+    record = PaperRecord.read(path)
+    assert set(record.code) == {"model", "measure", "iterator"}
+    assert record.code["model"]["class"].startswith("fbia.plugins.analytic.")
+    assert record.code["model"]["files"] and record.code["model"]["sha256"]
+    assert main(["reproductions", "docs/summary.md", "."]) == 0
+    page = (tmp_path / "docs" / "summary.md").read_text()
+    assert (
+        "unchanged |" in page and "the code of its model, measure and iterator is unchanged" in page
+    )
+    data = json.loads(path.read_text())
+    files = data["code"]["model"]["files"]
+    first = sorted(files)[0]
+    files[first] = "0" * 64
+    data["code"]["model"]["sha256"] = "0" * 64
+    path.write_text(json.dumps(data))
+    assert main(["reproductions", "docs/summary.md", "."]) == 0
+    page = (tmp_path / "docs" / "summary.md").read_text()
+    assert "**changed since: model** |" in page
+    assert f"**The code has changed since**: model ({first})" in page
+    del data["code"]
+    path.write_text(json.dumps(data))
+    assert main(["reproductions", "docs/summary.md", "."]) == 0
+    page = (tmp_path / "docs" / "summary.md").read_text()
+    assert "| not recorded: **rerun** |" in page
+
+
 def test_a_run_that_names_an_unknown_quantity_fails_with_the_list(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     write_study(tmp_path, STUDY + PAPER.replace('quantity = "converged"', 'quantity = "pm.E"'))
