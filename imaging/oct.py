@@ -210,7 +210,7 @@ class OctOptions(PluginOptions):
         "auto",
         description="'outer': marching cubes on the biofilm's outer boundary (overhangs "
         "kept); 'height_map': where each A-scan first meets the biofilm (overhangs covered); "
-        "'auto': the outer boundary when it is one surface (no more than 5 % of its area "
+        "'auto': the outer boundary when it is one surface (no more than 2 % of its area "
         "hidden from the probe), else the height map",
     )
 
@@ -481,18 +481,21 @@ def segment_oct(
     top_row = np.where(outer.any(axis=0), np.argmax(outer, axis=0), ks)
     overhangs = overhang_share(outer, top_row, max(1, math.ceil(axial)))
     thickness = height_map(field, t, top_row, ks, dz)
+    yx = (origin[1], origin[2])
     kind: Literal["height_map", "outer"] = "height_map" if opts.surface == "height_map" else "outer"
     rejected: OctQuality | None = None
     if kind == "outer":
         surface = marching_cubes_surface(field, t, outer, ks, origin, spacing, where)
-        check = quality(surface, axial * dz, overhangs, "outer")
+        check = quality(surface, thickness, yx, spacing, axial * dz, overhangs, "outer")
         if opts.surface == "auto" and not check.one_surface:
             # marching cubes wrapped what the probe does not see: the height map instead
             rejected = check
             kind = "height_map"
     if kind == "height_map":
         surface = height_surface(thickness, origin, spacing, where)
-        check = quality(surface, axial * dz, overhangs, "height_map", rejected)
+        check = quality(
+            surface, thickness, yx, spacing, axial * dz, overhangs, "height_map", rejected
+        )
     # 7. a surface that cannot be the biofilm's interface ends here, not in a calibration
     fov = (field.shape[1] * spacing[1], field.shape[2] * spacing[2])
     cause = surface_degeneracy(surface, fov)

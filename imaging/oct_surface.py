@@ -97,8 +97,8 @@ def overhang_share(outer: NDArray[np.bool_], top_row: NDArray[np.int_], gap: int
     has = top_row < len(outer)
     if not has.any():
         return 0.0
-    under_top = np.cumsum(outer, axis=0) > 0
-    gaps = np.count_nonzero(under_top & ~outer, axis=0)
+    # the rows from the top down, less the outer boundary's (all of them lie there)
+    gaps = (len(outer) - top_row) - np.count_nonzero(outer, axis=0)
     return float(np.mean(gaps[has] >= gap))
 
 

@@ -82,9 +82,9 @@ def test_lm_recovers_E_within_its_standard_error_from_a_realistic_oct_scan(
     outer boundary follows (3.8-4.4 um RMS from the model's interface; the height map 12-13
     um). With the default filter (sigma 1 voxel) the fully developed speckle of a dome 80
     rows thick leaves dark voids that open to the fluid, the outer boundary is not one
-    surface (11 % of its area hidden from the probe) and "auto" takes the height map, whose
+    surface (5.4 % of its area hidden from the probe) and "auto" takes the height map, whose
     residuals are 3x the noise the study states: LM says ``unreliable``, rightly.  With
-    ``denoise_size = 2``, the docs' next step for a thick speckled biofilm (4.5 % hidden),
+    ``denoise_size = 2``, the docs' next step for a thick speckled biofilm (1.5 % hidden),
     it keeps the outer boundary (measured: E = 407.1 +- 39.5 Pa, converged)."""
     from fbia.imaging.oct import in_model_axes
     from fbia.testing.oct import realistic_volume_from_surface
