@@ -45,12 +45,8 @@ def distances(seg: OctSegmentation, sc: RealisticScan) -> np.ndarray:
 
 
 def errors(seg: OctSegmentation, sc: RealisticScan) -> np.ndarray:
-    _, dy, dx = sc.voxel_size
-    v = seg.interface.vertices
-    ny, nx = sc.height.shape
-    j = np.clip(np.rint(v[:, 1] / dy).astype(int), 0, ny - 1)
-    i = np.clip(np.rint(v[:, 0] / dx).astype(int), 0, nx - 1)
-    return np.asarray(v[:, 2] - sc.height[j, i])
+    """Segmented minus true height at every vertex [mm] (the truth at its A-scan)."""
+    return sc.height_errors(seg.interface)
 
 
 def main() -> None:

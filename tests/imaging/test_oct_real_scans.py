@@ -36,12 +36,7 @@ def segmented(sc: RealisticScan, **options) -> OctSegmentation:
 
 def height_errors(seg: OctSegmentation, sc: RealisticScan) -> np.ndarray:
     """Segmented minus true height at every vertex (the truth at the vertex's A-scan) [mm]."""
-    _, dy, dx = sc.voxel_size
-    v = seg.interface.vertices
-    ny, nx = sc.height.shape
-    j = np.clip(np.rint(v[:, 1] / dy).astype(int), 0, ny - 1)
-    i = np.clip(np.rint(v[:, 0] / dx).astype(int), 0, nx - 1)
-    return np.asarray(v[:, 2] - sc.height[j, i])
+    return sc.height_errors(seg.interface)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
