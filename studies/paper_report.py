@@ -59,6 +59,7 @@ __all__ = [
     "paper_section",
     "paper_title",
     "plugin_code",
+    "published_numbers",
     "rules_table",
     "write_paper_report",
     "write_summary",
@@ -371,26 +372,35 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
             f"{rec.status} | {rec.wall_time:.0f} s{' (resumed)' if rec.reused else ''} | "
             f"{rec.nfev} ({rec.forward_time:.0f} s) | {_made_by(rec, changes[id(rec)])} |"
         )
-    good_all = sum(verdict(rec.rows)[0] for _, rec in records)
-    judged_all = sum(verdict(rec.rows)[1] for _, rec in records)
+    numbers = published_numbers([rec for _, rec in records])
+    judged_all = len(numbers)
+    good_all = sum(all(v) for v in numbers.values())
+    judgements = sum(len(v) for v in numbers.values())
     if judged_all:
         by_paper: dict[str, list[int]] = {}
-        for _, rec in records:  # "Paper A, Table 2, ..." -> "Paper A"
-            paper = rec.source.split(",")[0].strip() or "other"
-            good, judged = verdict(rec.rows)
-            tally = by_paper.setdefault(paper, [0, 0])
-            tally[0] += good
-            tally[1] += judged
+        for key, agrees in numbers.items():
+            tally = by_paper.setdefault(key[0], [0, 0])
+            tally[0] += all(agrees)
+            tally[1] += 1
         parts = [
             f"{paper}: {g} of {j} ({100 * g / j:.0f} %)"
             for paper, (g, j) in sorted(by_paper.items())
             if j
         ]
+        once = (
+            ""
+            if judgements == judged_all
+            else f" Each published number is counted once ({judgements} judgements over "
+            "the studies): a number that several studies judge (a Table 2 row over one "
+            "draw and over many, Table 6 with one and four growth steps a day) agrees when "
+            "it agrees in every one of them."
+        )
         lines += [
             "",
             f"In all: {good_all} of {judged_all} judged published numbers agree "
             f"({100 * good_all / judged_all:.0f} %)"
-            + (f"; {'; '.join(parts)}." if len(parts) > 1 else "."),
+            + (f"; {'; '.join(parts)}." if len(parts) > 1 else ".")
+            + once,
         ]
     if not_run:
         lines += ["", "Studies with a `[paper]` table that have no `paper.json` (not run yet):", ""]
@@ -428,6 +438,24 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return target, len(records)
+
+
+def published_numbers(
+    records: Sequence[PaperRecord],
+) -> dict[tuple[str, str, float | None, str | None, str | None], list[bool]]:
+    """Every published number the records judge, once: by its paper (the source's first
+    part, "Paper A"), quantity, published value and ordering, with the verdict of each
+    study that judges it."""
+    numbers: dict[tuple[str, str, float | None, str | None, str | None], list[bool]] = {}
+    for rec in records:
+        paper = rec.source.split(",")[0].strip() or "other"
+        for row in rec.rows:
+            if row.agrees is None:
+                continue
+            v = row.value
+            key = (paper, v.quantity, v.paper, v.above, v.below)
+            numbers.setdefault(key, []).append(bool(row.agrees))
+    return numbers
 
 
 def _made_by(rec: PaperRecord, changed: list[str]) -> str:

@@ -615,3 +615,35 @@ def test_the_summary_counts_all_rows_and_lists_studies_not_run_and_records_left_
     assert "In all: 1 of 2 judged published numbers agree (50 %)." in text
     assert "have no `paper.json` (not run yet):\n\n- `study_c.toml`" in text
     assert "has no `[paper]` table (any more):\n\n- `out_b/paper.json`" in text
+
+
+def test_the_summary_counts_each_published_number_once(tmp_path):
+    """Issue 46 item 3: a published number two studies judge (a Table 2 row over one draw
+    and over many draws) is one number in the totals, and agrees only where it agrees in
+    both; the per-study verdicts stay as they are."""
+    spec = read_paper(
+        {
+            "source": "Paper A, Table 2",
+            "values": [
+                {"quantity": "mean.E", "kind": "modulus", "paper": 408.0},
+                {"quantity": "mean.nu", "kind": "ratio", "paper": 0.378},
+            ],
+        },
+        "a.toml",
+    )
+    one = tuple(compare(spec, {"mean.E": 409.0, "mean.nu": 0.30}))  # E agrees, nu not
+    many = tuple(compare(spec, {"mean.E": 430.0, "mean.nu": 0.38}))  # E not, nu agrees
+    for name, rows in (("one", one), ("many", many)):
+        (tmp_path / f"{name}.toml").write_text('[paper]\nsource = "Paper A, Table 2"\n')
+        rec = PaperRecord(
+            name, str(tmp_path / f"{name}.toml"), "Paper A, Table 2", "", "converged_gradient",
+            1.0, 1.0, 3, "now", rows,
+        )  # fmt: skip
+        (tmp_path / f"out_{name}").mkdir()
+        (tmp_path / f"out_{name}" / "paper.json").write_text(json.dumps(rec.to_dict()))
+    page, n = write_summary(tmp_path / "s.md", [tmp_path])
+    text = page.read_text()
+    assert n == 2 and "| [one](#one) | Paper A, Table 2 | 1 / 2 |" in text
+    assert "| [many](#many) | Paper A, Table 2 | 1 / 2 |" in text
+    assert "In all: 0 of 2 judged published numbers agree (0 %). Each published number is " in text
+    assert "counted once (4 judgements over the studies)" in text
