@@ -31,12 +31,14 @@ Steps of :func:`segment_oct`:
    2^35 to 2^42, into the bit-identical surface; quantised to uint16 or uint8, within a
    voxel of it with the Gaussian filter, 2.1 voxels with the median one on uint8).
    Thresholds, reported or given, stay in the scan's units;
-1. substratum (and a check of ``depth_axis``: a reflection that stands out three times more
-   across another axis of the scan is an error naming that axis): the upper edge of the
-   bright flat reflection of the substratum, the depth
-   row whose log mean intensity stands out most above the mean of its two neighbours' (a
-   second difference, which an exponential decay with depth leaves unchanged), or
-   ``substratum_depth`` given by the user; the rows under it are dropped;
+1. window and substratum (:mod:`fbia.imaging.oct_reflections`; and a check of
+   ``depth_axis``: a reflection that stands out three times more across another axis of the
+   scan is an error naming that axis): the flat thin bright lines across the A-scans as
+   planes, the window (the biofilm under it) filled with the fluid under it, the scan
+   untilted along the substratum's plane (the biofilm above it), its surface at the upper
+   half-maximum edge of its line, the rows the line bleeds into cleared; or
+   ``substratum_depth`` (and ``substratum_tilt``) given by the user, as on a membrane, which
+   shows no line and is refused without them; the rows under the surface are dropped;
 2. denoising: a Gaussian filter (default) or a median filter;
 3. depth-attenuation compensation: the intensity's excess over the scan's least one times
    ``exp(mu d)`` at depth d below the first row, the inverse of a Beer–Lambert decay
@@ -47,27 +49,33 @@ Steps of :func:`segment_oct`:
 4. threshold: Otsu's (Otsu 1979) between biofilm and fluid, or a user value, of the
    processed intensity in the scan's units: the least intensity plus the denoised,
    compensated excess over it (with ``attenuation = 0``, the denoised intensity itself);
-5. cleanup: only the biofilm connected to the substratum is kept, in parts of at least
-   ``min_voxels`` voxels (speckle specks on it go); fluid pockets closed off from the top and
-   the side walls are filled (both by connected-component labelling);
+5. cleanup (:mod:`fbia.imaging.oct_surface`): only the biofilm connected to the substratum
+   is kept, in parts of at least ``min_voxels`` voxels (speckle specks on it go); fluid
+   pockets closed off from the top and the side walls are filled; then the outer boundary:
+   fluid that reaches the bulk only through openings narrower than the ``resolution``
+   (speckle voids, unresolved pores) is biofilm;
 6. surface: marching cubes (Lorensen & Cline 1987; scikit-image's Lewiner variant) on the
-   denoised intensity at the threshold level, so vertices lie between voxel centres where
-   the intensity crosses it; the faces on the substratum plane are dropped, and none is made
-   on the crop box's walls;
+   processed intensity at the threshold level over the outer boundary, so vertices lie
+   between voxel centres where the intensity crosses it (the faces on the substratum plane
+   dropped, none on the crop box's walls), kept where it is one surface
+   (:func:`fbia.imaging.oct_structure.quality`), else the height map (where each A-scan
+   first meets the outer boundary): ``surface = "auto"``, or either by name;
 7. check (:func:`surface_degeneracy`): a surface of fewer than :data:`MIN_TRIANGLES`
    triangles, or whose footprint on the substratum covers less than :data:`MIN_FOOTPRINT`
    of the scan's lateral field of view, cannot be the biofilm's interface (a wrong substratum
    or threshold, a biofilm too small for the field) and is refused, so that no calibration
-   starts from it.
+   starts from it;
+8. what it says (:mod:`fbia.imaging.oct_structure`): the one-surface check and the
+   structure parameters (thickness, biovolume, coverage, roughness, porosity).
 
 Every refusal is one :class:`~fbia.core.errors.ConfigError` line, and the warnings of the
 libraries called (NumPy, scikit-image) are either avoided (Otsu's histogram in double
 precision) or that line, so nothing is printed before it.
 
 :mod:`fbia.imaging.oct_reader` reads the volume;
-:func:`fbia.studies.oct_figures.write_segmentation_figures` draws a B-scan with the segmented
-contour and the substratum line, and a 3-D view of the surface, so that a user sees what was
-segmented.
+:func:`fbia.studies.oct_figures.write_segmentation_figures` draws the B-scan as read with the
+window, the substratum and the interface, and a 3-D view of the surface, so that a user sees
+what was segmented; ``docs/oct_segmentation.md`` goes through the options for real scans.
 """
 
 from __future__ import annotations
