@@ -2,6 +2,8 @@
 
 ``oct_reader`` reads an OCT volume (an array, ``.npy``, TIFF stack, NRRD, Thorlabs ``.oct``),
 ``oct`` segments the biofilm in it (``segment_oct``) and makes an observation of it
-(``observation_from_oct``); ``figures`` holds the matplotlib helpers every figure of fbia
+(``observation_from_oct``) with the steps of ``oct_reflections`` (window, substratum, tilt),
+``oct_surface`` (outer boundary, height map, marching cubes) and ``oct_structure`` (the
+one-surface check, structure parameters); ``figures`` holds the matplotlib helpers every figure of fbia
 uses (``pyplot``, ``legend``).  It imports the kernel only.
 """
