@@ -4,6 +4,6 @@
 ``oct`` segments the biofilm in it (``segment_oct``) and makes an observation of it
 (``observation_from_oct``) with the steps of ``oct_reflections`` (window, substratum, tilt),
 ``oct_surface`` (outer boundary, height map, marching cubes) and ``oct_structure`` (the
-one-surface check, structure parameters); ``figures`` holds the matplotlib helpers every figure of fbia
-uses (``pyplot``, ``legend``).  It imports the kernel only.
+one-surface check, structure parameters); ``figures`` holds the matplotlib helpers every
+figure of fbia uses (``pyplot``, ``legend``).  It imports the kernel only.
 """
