@@ -15,7 +15,10 @@ Two modes share the finite-difference Jacobian (eq. 21-23) and the error measure
     eq. 27 holds (the new μ applies from the next step on, as in QUEENS, where the paper's
     algorithm was implemented); a step that leaves the bounds (eq. 28) is declined and μ
     doubled, and the iteration that follows a declined step keeps the doubled μ (QUEENS
-    evaluates the errors at the same point again, so eq. 27 does not hold there); the run
+    evaluates the errors at the same point again, so eq. 27 does not hold there), or with
+    ``declined_mu = "restored"`` starts from the μ before the doubling (the text doubles
+    μ^k for the new proposal and says nothing of μ^(k+1); Table 3's orange start converges
+    under this reading only, ``examples/paper_a/heterogeneous/README.md``); the run
     ends without result when μ > μ0·1e6 or when a forward run fails, and with the iterate of
     lowest err_res on eq. 29a-c.  One deliberate difference from QUEENS:
     after a declined step the new step is computed from the same J, where QUEENS re-ran the
@@ -66,6 +69,7 @@ class LMSettings:
     beta: float  # relative part of the perturbation (eq. 21)
     mu0: float
     mu_limit: float  # stop when mu > mu0 * mu_limit
+    declined_mu: str  # "kept" | "restored": mu after a declined step (paper mode)
     eps_grad: float  # eq. 29a
     eps_res: float  # eq. 29b
     max_iter: int  # eq. 29c
@@ -86,6 +90,7 @@ class LMSettings:
             "beta": 1e-3,
             "mu0": 1.0,
             "mu_limit": 1e6,
+            "declined_mu": "kept",
             "eps_grad": 0.0,
             "eps_res": 0.0,
             "max_iter": 100,
@@ -337,6 +342,7 @@ class PaperChain(LMChain):
             # eq. 18 with the bounds check of eq. 28: a step out of bounds is declined, μ doubled
             A = J.T @ J
             declined = False
+            mu_before = self.mu
             while True:
                 try:
                     step = np.linalg.solve(A + self.mu * np.diag(np.diag(A)), -(J.T @ r))
@@ -372,6 +378,8 @@ class PaperChain(LMChain):
                 and self.err_res < prev[1]
             ):
                 self.mu *= self.err_grad / prev[0]
+            if declined and s.declined_mu == "restored":
+                self.mu = mu_before  # the doubling served the proposal only
             prev = (self.err_grad, self.err_res)
             x = xt
             self.iterations += 1

@@ -70,6 +70,13 @@ class LMOptions(PluginOptions):
         description="paper mode: damping limit factor, the run ends without result when "
         "μ > μ0·mu_limit (Paper A: 1e6) [-]; the robust mode ends on xtol instead",
     )
+    declined_mu: Literal["kept", "restored"] = Field(
+        "kept",
+        description="paper mode: μ after a step declined at the bounds (eq. 28). 'kept': "
+        "the doubled μ goes on into the next iteration (QUEENS); 'restored': the doubling "
+        "serves the proposal only, and the next iteration starts from the μ before it (the "
+        "text doubles μ^k 'and a new step is proposed', and says nothing of μ^(k+1)) [-]",
+    )
     eps_grad: float = Field(
         1e-8,
         ge=0.0,
@@ -188,6 +195,11 @@ class LMOptions(PluginOptions):
             raise ValueError(
                 "option mu_limit applies to mode='paper' only; the robust mode ends when "
                 "the steps fall below xtol"
+            )
+        elif "declined_mu" in self.model_fields_set:
+            raise ValueError(
+                "option declined_mu applies to mode='paper' only (the damping after a step "
+                "declined at the bounds, Paper A eq. 28)"
             )
         if self.mode == "paper" and self.jacobian not in ("auto", "forward"):
             raise ValueError(

@@ -117,6 +117,31 @@ def test_paper_mode_keeps_the_doubled_mu_after_a_declined_step_as_queens():
         assert h["mu"] == pytest.approx(mu, rel=1e-12)
 
 
+def test_paper_mode_can_restore_mu_after_a_declined_step():
+    """declined_mu = "restored" (issue 46, Table 3): the doubling of eq. 28 serves the new
+    proposal only; the next iteration starts from the mu before it, so mu on arrival never
+    grows (eq. 26 only lowers it), where the default keeps it doubled (on the run of the
+    test above: 1 -> 262144 over 10 points, against 1 throughout; this run creeps along the
+    bound either way: Table 3's orange start is where the reading matters)."""
+    lower, upper = np.array([-2.0, -1.0]), np.array([2.0, 1.15])
+    kw = dict(mode="paper", alpha=1e-5, beta=1e-3, max_iter=30, eps_grad=0)
+    result = fbia.least_squares(
+        rosenbrock, [-1.2, 1.0], (lower, upper), declined_mu="restored", **kw
+    )
+    reached = [h for h in result.history if h["accepted"]]
+    mus = [h["mu"] for h in reached]
+    assert sum(not h["accepted"] for h in result.history) > 0  # steps were declined
+    assert all(b <= a * (1 + 1e-12) for a, b in zip(mus, mus[1:], strict=False))
+    kept = fbia.least_squares(rosenbrock, [-1.2, 1.0], (lower, upper), **kw)
+    kept_mus = [h["mu"] for h in kept.history if h["accepted"]]
+    assert kept.status == "damping_limit" and kept_mus[-1] > 1e4  # the default, as QUEENS
+
+
+def test_declined_mu_is_paper_mode_only():
+    with pytest.raises(fbia.ConfigError, match="option declined_mu applies to mode='paper' only"):
+        fbia.least_squares(rosenbrock, [-1.2, 1.0], mode="robust", declined_mu="restored")
+
+
 def test_paper_mode_perturbs_each_parameter_by_alpha_plus_beta_x_in_one_batch():
     ev = RecordingEvaluator()
     fbia.least_squares(
