@@ -315,13 +315,10 @@ class Floor:
     """Where the biofilm's rows end and what was taken out above and along them (step 1).
 
     ``ks`` is the first row of the (cropped, untilted) scan under the substratum's surface,
-    ``tail`` the rows above it that its reflection bleeds into, ``tilt`` (rows per A-scan
-    along y and x) and ``row`` (the plane's row at the field's centre) the substratum plane
-    taken out, ``window`` the window's plane when one was found."""
+    ``tilt`` (rows per A-scan along y and x) the substratum plane's slope taken out,
+    ``window`` the window's plane when one was found."""
 
     ks: int
-    tail: int
-    row: float
     tilt: tuple[float, float]
     window: Reflection | None
     reflections: tuple[Reflection, ...]
@@ -399,7 +396,7 @@ def place_floor(
         if np.ptp(sub.rows((ny, nx))) > 0.1:
             tilt = sub.slope
             volume = untilt(volume, sub)
-        row, ks, tail = line_edge(volume[:, ::s, ::s], sub.row, gap, width)
+        ks, tail = line_edge(volume[:, ::s, ::s], sub.row, gap, width)
         if any(tilt):  # untilting spread the line over one more row in part of the A-scans
             tail = max(tail, 1)
     else:
@@ -409,7 +406,7 @@ def place_floor(
         if np.ptp(plane.rows((ny, nx))) > 0.1:
             tilt = slope
             volume = untilt(volume, plane)
-        row, ks, tail = float(given) - 0.5, given, 0
+        ks, tail = given, 0
     check_floor_row(ks, origin[0], nz, where)
     tail = min(tail, max(ks - 2, 0))
     if tail:
@@ -417,7 +414,7 @@ def place_floor(
         # resolution cell of a bright line nothing is resolved, and the denoising filter
         # would carry the line up into the biofilm's rows
         volume[ks - tail : ks] = volume[ks - tail - 1]
-    floor = Floor(ks, tail, row, tilt, above, tuple(planes), origin[0], (ny, nx))
+    floor = Floor(ks, tilt, above, tuple(planes), origin[0], (ny, nx))
     return floor, volume
 
 
@@ -462,13 +459,11 @@ def untilt(volume: NDArray[np.float32], plane: Reflection) -> NDArray[np.float32
     return out
 
 
-def line_edge(
-    volume: NDArray[np.float32], row: float, gap: int, width: int
-) -> tuple[float, int, int]:
+def line_edge(volume: NDArray[np.float32], row: float, gap: int, width: int) -> tuple[int, int]:
     """The substratum's surface: the upper half-maximum edge of its reflection in the median
     depth profile of the untilted scan (the surface of a sharp reflection, and half the
-    line's spread above its centre for a blurred one); returns that row, the first row
-    under it and the rows above it the reflection still brightens: as many above the peak as
+    line's spread above its centre for a blurred one); returns the first row under it and
+    the rows above it the reflection still brightens: as many above the peak as
     it brightens below it by a quarter over the level deeper down (a biofilm above it, which
     brightens the rows above whatever the line does, does not count)."""
     profile = np.median(volume.reshape(len(volume), -1), axis=1).astype(np.float64)
@@ -497,4 +492,4 @@ def line_edge(
         while peak + spread + 1 < nz and spread < gap and profile[peak + spread + 1] > 1.25 * level:
             spread += 1
     tail = max(0, ks - (peak - spread))
-    return edge, ks, tail
+    return ks, tail
