@@ -11,7 +11,7 @@ The stages (``fbia.iterator("sobol_indices", ...)``):
 
 1. **Design**: ``n_train`` (+ ``n_test`` held-out) points of a scrambled Sobol sequence mapped
    through the input distributions, run through the evaluator (one batch);
-2. **Surrogate**: the GP of :mod:`.gp_surrogate` (Paper B eq. 26-29) on the log-likelihood L
+2. **Surrogate**: the GP of :mod:`.surrogates.gp` (Paper B eq. 26-29) on the log-likelihood L
    (Paper B eq. 5) or on the discrepancy D of the measure (``quantity``); failed runs are left
    out; the held-out points measure its error, and a surrogate whose error is not small
    against the quantity's spread makes the status ``unreliable``;

@@ -10,7 +10,7 @@ Fig. 12.  This iterator does that study in one go:
    :func:`~fbia.iterators.surrogates.design.sobol_design` (the same points, seed for seed, as
    ``gp_smc`` with ``design = "sobol"``, so a study store shares the runs), one evaluator
    batch; the last ``n_test`` are held out.
-2. **Per n_train**: the GP of :mod:`.gp_surrogate` (eq. 26-29) on the successful runs among
+2. **Per n_train**: the GP of :mod:`.surrogates.gp` (eq. 26-29) on the successful runs among
    the first n_train points; its maximum-likelihood point (the maximum of the GP mean over the
    inputs' box: the best of ``n_candidates`` Sobol candidates, polished by L-BFGS-B), the GP
    mean there, and its error at the held-out runs (RMSE, largest error, relative L2).

@@ -632,7 +632,7 @@ class GpSmcIterator(IteratorBase):
         folder: str | Path,
         figures: Sequence[str] | None = None,
     ) -> list[Path]:
-        """Paper B's figures of a gp_smc result into ``folder`` (see :mod:`.smc_plots`)."""
+        """Paper B's figures of a gp_smc result into ``folder`` (see :mod:`.plots`)."""
         from .plots import plot_gp_smc_result
 
         assert isinstance(result, GpSmcResult)

@@ -49,7 +49,8 @@ class GpSmcOptions(PluginOptions):
     surrogate: Literal["auto", "residuals", "log_likelihood"] = Field(
         "auto",
         description="what the GP models: 'residuals': the measure's residual vectors "
-        "(principal components, one GP each; L from the emulated residuals, gp_residuals), "
+        "(principal components, one GP each; L from the emulated residuals, "
+        "surrogates/residuals.py), "
         "'log_likelihood': L itself (Paper B); 'auto': residuals where the measure's "
         "distance is the norm of residual vectors of one length and every observation has "
         "the same sigma_N, else L [-]",
@@ -65,7 +66,7 @@ class GpSmcOptions(PluginOptions):
         "adaptive",
         description="'adaptive': a small Sobol start, then rounds of SMC on the surrogate and "
         "batches of runs where the posterior is uncertain, until it converges "
-        "(gp_adaptive); 'sobol': all n_train points of one Sobol design (Paper B) [-]",
+        "(gp_smc/adaptive_loop.py); 'sobol': all n_train points of one Sobol design (Paper B) [-]",
     )
     design_space: Literal["box", "prior"] = Field(
         "box",
@@ -105,7 +106,7 @@ class GpSmcOptions(PluginOptions):
         "with respect to every input (x and theta) from the model's tangents (ale_fsi in "
         "quasi-static mode), and the residual emulator trains on one pseudo-run per input "
         "and run from it, r(z + h e_j) = r(z) + h J e_j (indirect gradient enhancement, "
-        "gp_residuals); needs the residual emulator [-]",
+        "surrogates/residuals.py); needs the residual emulator [-]",
     )
     seed: int = Field(0, description="seed of the Sobol scrambling and of SMC [-]")
     gp_seed: int | None = Field(
@@ -195,7 +196,8 @@ class GpSmcOptions(PluginOptions):
     uncertainty_check: bool = Field(
         True,
         description="compare the posterior with its average over the GP's sample paths "
-        "(gp_uncertainty): if the GP's own uncertainty moves a mean by more than 0.3 std or "
+        "(surrogates/uncertainty.py): if the GP's own uncertainty moves a mean by more than "
+        "0.3 std or "
         "a std by more than a factor 1.5, runs at draws of the averaged posterior join the "
         "design (check_repairs, adaptive design) and, if it still does, the status is "
         "'unreliable' (surrogate mode, known sigma_N; a few seconds) [-]",
@@ -204,5 +206,5 @@ class GpSmcOptions(PluginOptions):
         "none",
         description="'expected_posterior': the posterior averaged over joint sample paths of "
         "the GP (each normalised), so that credible intervals include what the surrogate "
-        "does not know (gp_uncertainty); 'none': SMC on the GP mean (Paper B) [-]",
+        "does not know (surrogates/uncertainty.py); 'none': SMC on the GP mean (Paper B) [-]",
     )

@@ -1,5 +1,5 @@
-"""The extrapolation guard of a surrogate of L (both :class:`~.gp_surrogate.GpSurrogate` and
-:class:`~.gp_residuals.ResidualSurrogate`).
+"""The extrapolation guard of a surrogate of L (both :class:`~.gp.GpSurrogate` and
+:class:`~.residuals.ResidualSurrogate`).
 
 L far above the best training run is an artefact of the surrogate, not evidence: inside SMC
 the mean is capped at the largest training value + a margin (by default chi2_d(0.999) / 2,

@@ -63,14 +63,11 @@ class AleFsiSolver(AleFsiProblem):
             blocks=blocks,
         )
         if mesh.dim == 3 and blocks is None:
-            # with the direct solver a fresh Jacobian costs ~70 chord steps in 3-D (order 3:
-            # assembly 1.7 s, factorisation 5.7 s, chord step 0.1 s; the dome's LM 158 -> 75 s
-            # with forward differences, 85 -> 66 s with tangents), ~10 in 2-D, where the rule
-            # gained nothing (Table 1's eleven starts: 20.4 against 20.6 s, 16.7 s both with
-            # tangents): 2-D keeps the default rule and its results bit for bit.  A chord step
-            # of block_gmres is a GMRes solve, not a back-substitution: there the rule made 6
-            # warm dome runs (order 3, duct 0.3 mm) take 115 s instead of 70 s (direct: 7.5
-            # instead of 14.2 s), so block_gmres keeps the default rule too.
+            # with the direct solver a fresh Jacobian costs tens of chord steps in 3-D and a
+            # few in 2-D, where the rule gained nothing: 2-D keeps the default rule and its
+            # results bit for bit; a chord step of block_gmres is a GMRes solve, not a
+            # back-substitution, so it keeps the default rule too (the timings:
+            # benchmarks/bench_lm_tangents.py and the CHANGELOG)
             self._newton.chord = ChordRule.costly_jacobian()
         self._continuation = ArclengthContinuation(
             self, self._newton, self.newton, settings.continuation_min_fraction, unit="mm^2/s"

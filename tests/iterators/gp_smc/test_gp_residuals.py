@@ -1,6 +1,6 @@
-"""The residual emulator of gp_smc (iterators/gp_residuals): L from emulated residuals, its
-variance, persistence, when it cannot stand in for L, and the 2-D + inflow target of issue 16
-against quadrature."""
+"""The residual emulator of gp_smc (iterators/surrogates/residuals.py): L from emulated
+residuals, its variance, persistence, when it cannot stand in for L, and the 2-D + inflow
+target of issue 16 against quadrature."""
 
 import math
 import sys

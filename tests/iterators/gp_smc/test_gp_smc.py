@@ -429,8 +429,9 @@ def test_the_rkhs_residual_vector_does_not_change_the_likelihood():
 
 
 def test_surrogate_uncertainty_option_widens_a_starved_posterior():
-    """The expected posterior (gp_uncertainty) from the iterator: a 10-run Sobol design whose
-    GP does not know L well gives wider intervals than SMC on the GP mean, and says so."""
+    """The expected posterior (surrogates/uncertainty.py) from the iterator: a 10-run Sobol
+    design whose GP does not know L well gives wider intervals than SMC on the GP mean, and
+    says so."""
     problem = _problem()
     opts = {**FAST, "n_train": 10, "n_check": 0, "laplace": False}
     mean_only = fbia.iterator("gp_smc", **opts).run(problem)
