@@ -24,7 +24,7 @@ Printed per start and in total: forward runs, wall time, the optimum, and fbia /
 ratios; the optima's difference in fbia's standard errors (the same optimum: below 0.1).
 Issue 47's target: fbia's wall time <= scipy's, with fewer runs and the same optima.
 
-Measured 2026-11-29 at d2447d0 (2 cores, one of them busy with a serial study; the wall times
+Measured 2026-11-29 at d2447d0 (2 cores, otherwise idle; the wall times
 vary by ~20 % between runs of the same code): fbia 100 runs, 13.70 s; scipy 296 runs, 10.67 s;
 0.34x the runs, **1.28x the wall time (not met)**, the same optimum from every start (E 398.09
 Pa, nu 0.28803; 0.001 standard errors apart at most).  Per start fbia took 0.74-2.89x scipy's
