@@ -49,26 +49,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench_ale_fsi import TABLE_1  # next to this file: Paper A Table 1 (E^0 [Pa], nu^0)
 from scipy.optimize import least_squares
 
 import fbia
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "examples/flow_cell/study_fsi.toml"
-#: Paper A Table 1 (E^0 [Pa], nu^0)
-TABLE_1 = {
-    "blue": (200.0, 0.4),
-    "orange": (200.0, 0.0),
-    "green": (400.0, 0.45),
-    "red": (400.0, 0.0),
-    "purple": (600.0, 0.4),
-    "brown": (600.0, 0.0),
-    "pink": (400.0, -0.3),
-    "gray": (400.0, -0.6),
-    "olive": (400.0, -0.9),
-    "cyan": (1000.0, 0.0),
-    "black": (1000.0, 0.4),
-}
 #: residual of a failed run for scipy (mm per entry: far worse than any solved interface)
 FAILED_RESIDUAL = 1.0
 
