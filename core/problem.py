@@ -414,6 +414,22 @@ def jsonable(value: Any, lenient: bool = False) -> Any:
     return repr(value) if lenient else value
 
 
+class PosteriorEstimate(Protocol):
+    """The point estimates of a posterior that another iterator may start from (Levenberg-
+    Marquardt's ``x0`` from a Bayesian result: :mod:`fbia.iterators.lm.handoff`): the inputs'
+    ``names`` (the first ``n_x`` are the calibration parameters, the rest uncertain inputs)
+    and the posterior's ``map`` and ``mean`` of those ``n_x``."""
+
+    @property
+    def names(self) -> Sequence[str]: ...
+    @property
+    def n_x(self) -> int: ...
+    @property
+    def map(self) -> NDArray[np.float64]: ...
+    @property
+    def mean(self) -> NDArray[np.float64]: ...
+
+
 @dataclass
 class Result:
     """What an iterator returns: why it stopped, what it found, and every evaluation.
@@ -457,6 +473,11 @@ class Result:
         out = {k: getattr(self, k) for k in plain}
         out.update({k: jsonable(getattr(self, k)) for k in ("history", "info", "provenance")})
         return {**out, "evaluations": [e.to_dict() for e in self.evaluations]}
+
+    def posterior_estimate(self) -> PosteriorEstimate | None:
+        """The posterior's point estimates, for a result that has a posterior (a Bayesian
+        iterator's result overrides this); None here."""
+        return None
 
     def save(self, path: str | Path) -> Path:
         """Write the result as JSON."""

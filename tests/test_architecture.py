@@ -158,13 +158,12 @@ def test_plugins_do_not_import_each_other_except_the_shared_fem():
 
 def test_the_kernel_is_thin_and_light():
     modules = sorted((ROOT / "core").glob("*.py"))
-    lines = sum(len(p.read_text(encoding="utf-8").splitlines()) for p in modules)
-    # 3000 lines until the likelihood's chi-square test of a fit joined eq. 5 (issue 43: one
-    # test for Levenberg-Marquardt's verdict and gp_smc's model check); 3050 until Result's
-    # notebook view and tables (issue 43 item 8: every result gets them, so the base has them);
-    # 3120 until the bounded reader of regular files (data_files.regular_file_bytes), which
-    # result_io, the posterior's reader and LM's x0_from had written three times
-    assert len(modules) <= 16 and lines <= 3160, (len(modules), lines)
+    # lines of code, not docstrings or comments (issue 48: a budget must not push against the
+    # kernel's documentation, which the contracts live in): 1987 when it was counted so (3173
+    # lines in all, once the typed posterior hand-off, PosteriorEstimate, joined Result); until
+    # then 3160 lines in all, raised four times for what the kernel had to hold
+    lines = sum(code_lines(p.read_text(encoding="utf-8")) for p in modules)
+    assert len(modules) <= 16 and lines <= 2050, (len(modules), lines)
     code = (
         "import sys, fbia.core\n"
         "heavy = ('sqlite3', 'dask', 'distributed', 'GPy', 'ngsolve', 'netgen', 'matplotlib')\n"

@@ -481,6 +481,11 @@ class GpSmcResult(Result):
                 )
         return "\n".join(lines)
 
+    def posterior_estimate(self) -> ParticlePosterior | None:
+        """The posterior (its names, n_x, MAP and mean: :class:`fbia.core.problem.
+        PosteriorEstimate`), None when the run produced none."""
+        return self.posterior
+
     def quantities(self) -> dict[str, float]:
         """Besides :meth:`Result.quantities` (``x.<name>`` is the MAP): per input of the
         posterior (x, theta, an inferred sigma_N) ``map.<name>`` (x only), ``pm.<name>``

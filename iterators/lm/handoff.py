@@ -2,9 +2,11 @@
 
 A Bayesian calibration (``gp_smc``) finds where the posterior mass is; Levenberg-Marquardt
 then sharpens the point estimate with real forward runs and gives its local covariance.
-:func:`posterior_starts` turns a ``gp_smc`` result -- the :class:`GpSmcResult` object, or
-its ``result.json`` as written by ``fbia run`` -- into two initial guesses, the posterior
-MAP and the posterior mean of the calibration parameters.
+:func:`posterior_starts` turns a ``gp_smc`` result -- the result object (its
+:meth:`~fbia.core.problem.Result.posterior_estimate`, the contract
+:class:`~fbia.core.problem.PosteriorEstimate`), or its ``result.json`` as written by
+``fbia run`` -- into two initial guesses, the posterior MAP and the posterior mean of the
+calibration parameters.
 
 >>> # bayes = fbia.iterator("gp_smc", n_train=200).run(problem)
 >>> # lm = fbia.iterator("levenberg_marquardt", x0=bayes)         # starts: MAP, mean
@@ -28,7 +30,6 @@ from typing import Any
 from ...core.data_files import regular_file_bytes
 from ...core.errors import ConfigError
 from ...core.problem import Result
-from ..gp_smc.result import GpSmcResult
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "POSTERIOR_LABELS", "posterior_starts"]
 
@@ -50,18 +51,16 @@ def posterior_starts(
     if isinstance(source, (str, Path)):
         where = f"{where} {source}"
         source = _read_json(Path(source), where)
-    if isinstance(source, Result) and not isinstance(source, GpSmcResult):
-        raise ConfigError(
-            f"x0 is a {source.iterator or 'non-Bayesian'} result: only a gp_smc result has a "
-            "posterior to start from",
-            where,
-        )
-    if isinstance(source, GpSmcResult):
-        post = source.posterior
+    if isinstance(source, Result):
+        post = source.posterior_estimate()
         if post is None:
-            raise ConfigError(f"the gp_smc result has no posterior ({source.status})", where)
+            raise ConfigError(
+                f"x0 is a {source.iterator or 'given'} result without a posterior "
+                f"({source.status}): only a Bayesian result (gp_smc) has one to start from",
+                where,
+            )
         n_x, names = post.n_x, list(post.names)
-        map_x, mean_x = post.map.tolist(), post.mean.tolist()
+        map_x, mean_x = list(map(float, post.map)), list(map(float, post.mean))
         key = "posterior"
     else:
         info = source.get("info", {}) if isinstance(source, Mapping) else {}

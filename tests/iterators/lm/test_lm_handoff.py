@@ -52,7 +52,7 @@ def test_lm_starts_from_the_posterior_map_and_mean_and_labels_them():
 def test_a_result_without_a_posterior_is_refused():
     problem = _problem()
     lm_result = fbia.iterator("levenberg_marquardt", x0={"E": 350.0, "nu": 0.2}).run(problem)
-    with pytest.raises(fbia.ConfigError, match="only a gp_smc result has a posterior"):
+    with pytest.raises(fbia.ConfigError, match="without a posterior .*only a Bayesian result"):
         fbia.iterator("levenberg_marquardt", x0=lm_result)
     with pytest.raises(fbia.ConfigError, match="not the result of a Bayesian calibration"):
         fbia.iterator("levenberg_marquardt", x0=lm_result.to_dict())
