@@ -31,7 +31,7 @@ lint: $(STAMP)
 # what mypy and the API reference read.
 package-tree:
 	@rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/fbia
-	@for d in core execution storage imaging studies plugins measures iterators testing; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
+	@for d in core execution storage figures imaging studies plugins measures iterators testing; do ln -s ../../../$$d $(TYPECHECK)/fbia/$$d; done
 	@ln -s ../../../__init__.py $(TYPECHECK)/fbia/__init__.py
 	@for f in pytest_plugin.py; do ln -s ../../../$$f $(TYPECHECK)/fbia/$$f; done
 

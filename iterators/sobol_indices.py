@@ -50,7 +50,7 @@ from ..core.likelihood import gaussian_log_likelihood, measurement_count, noise_
 from ..core.options import PluginOptions
 from ..core.parameters import Parameter
 from ..core.problem import InverseProblem, Result, html_table, jsonable
-from ..imaging.figures import legend, pyplot
+from ..figures import legend, pyplot
 from .surrogates.design import unit_to_inputs
 from .surrogates.gp import GpSurrogate
 

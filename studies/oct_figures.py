@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.figures import legend, pyplot
+from ..figures import legend, pyplot
 from ..imaging.oct import OctSegmentation
 
 __all__ = ["write_segmentation_figures"]

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.observation import Solution
 from ..core.problem import Evaluation, InverseProblem, Result
-from ..imaging.figures import legend, pyplot
+from ..figures import legend, pyplot
 
 __all__ = ["plot_evaluations", "plot_interfaces"]
 

@@ -24,6 +24,7 @@ PACKAGES = (
     "core",
     "execution",
     "storage",
+    "figures",
     "imaging",
     "studies",
     "plugins",
@@ -107,13 +108,14 @@ def test_the_import_graph_reads_from_the_files_and_has_no_cycle():
 #: and wires), ``pytest_plugin`` the conformance kit's fixtures.
 LAYERS: dict[str, set[str]] = {
     "core": set(),
+    "figures": set(),
     "imaging": {"core"},
     "storage": {"core"},
     "execution": {"core", "storage"},
     "measures": {"core"},
     "plugins": {"core", "imaging"},
-    "iterators": {"core", "execution", "imaging"},
-    "studies": {"core", "execution", "storage", "imaging"},
+    "iterators": {"core", "execution", "figures"},
+    "studies": {"core", "execution", "storage", "imaging", "figures"},
     "testing": {"core", "execution", "storage", "studies", "imaging"},
     "pytest_plugin": {"core", "testing"},
 }

@@ -17,7 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ...core.parameters import Parameter
-from ...imaging.figures import legend
+from ...figures import legend
 from ..surrogates.design import search_box
 from .result import SurrogateConvergenceResult
 

@@ -40,7 +40,7 @@ from ...core.errors import ConfigError
 from ...core.likelihood import noise_parameter
 from ...core.parameters import Parameter
 from ...core.problem import InverseProblem
-from ...imaging.figures import legend
+from ...figures import legend
 from ..smc.sampler import systematic_resample
 from ..surrogates.gp import GpSurrogate
 from .result import DesignRuns, GpSmcResult, ParticlePosterior, SurrogateFit

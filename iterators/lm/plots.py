@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ...imaging.figures import legend
+from ...figures import legend
 from .result import LMResult
 
 FloatArray = NDArray[np.float64]

@@ -35,7 +35,7 @@ def test_a_plot_without_labelled_artists_gets_no_legend_and_no_warning(recwarn):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fbia.imaging.figures import legend
+    from fbia.figures import legend
 
     fig, ax = plt.subplots()
     ax.plot([0, 1], [0, 1])  # no label

@@ -1,6 +1,8 @@
-"""What every figure of fbia shares: matplotlib with the Agg back end, and legends only where
-something has a label.  The study's figures (``fbia.studies.plots``), the iterators' and the
-OCT segmentation's use them."""
+"""fbia.figures: what every figure of fbia shares, matplotlib with the Agg back end and
+legends only where something has a label.  The study's figures (``fbia.studies.plots``), the
+iterators' and the OCT segmentation's use them; it imports nothing of fbia, so every layer
+that draws can (it left ``fbia.imaging``, issue 48: the iterators drew through the imaging
+package without reading an image)."""
 
 from __future__ import annotations
 
