@@ -37,10 +37,8 @@ import contextlib
 import copy
 import os
 import pickle
-import select
 import signal
 import socket
-import struct
 import subprocess
 import sys
 import threading
@@ -54,6 +52,7 @@ from ..core.interface import Interface
 from ..core.observation import CoordinateKey
 from ..core.parameters import Parameter
 from ..core.problem import Evaluable, Evaluation
+from .isolation_wire import recv, send
 
 __all__ = [
     "IsolatedRunner",
@@ -65,7 +64,6 @@ __all__ = [
     "worker_label",
 ]
 
-_HEADER = struct.Struct("<Q")
 _KILL_WAIT = 10.0  # s to wait for the helper to confirm a killed run before replacing it
 
 
@@ -187,52 +185,6 @@ def run_view(problem: Evaluable) -> Evaluable:
     return view
 
 
-# -- messages: length-prefixed pickles on raw pipes ----------------------------------------------
-def _send(fd: int, message: Any) -> None:
-    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-    view = memoryview(_HEADER.pack(len(data)) + data)
-    while view:
-        view = view[os.write(fd, view) :]
-
-
-def _read_exactly(fd: int, n: int, deadline: float | None) -> bytes | None:
-    """``n`` bytes; None at end of file; TimeoutError once ``deadline`` (monotonic) passes."""
-    chunks: list[bytes] = []
-    got = 0
-    while got < n:
-        wait = None if deadline is None else deadline - time.monotonic()
-        if wait is not None and wait <= 0:
-            raise TimeoutError
-        ready, _, _ = select.select([fd], [], [], wait)
-        if not ready:
-            raise TimeoutError
-        chunk = os.read(fd, min(n - got, 1 << 20))
-        if not chunk:
-            return None
-        chunks.append(chunk)
-        got += len(chunk)
-    return b"".join(chunks)
-
-
-def _recv(fd: int, deadline: float | None = None) -> Any:
-    """One message; None at end of file (the other side is gone)."""
-    header = _read_exactly(fd, _HEADER.size, deadline)
-    if header is None:
-        return None
-    data = _read_exactly(fd, _HEADER.unpack(header)[0], deadline)
-    return None if data is None else pickle.loads(data)
-
-
-def _exit_text(status: int) -> str:
-    """``exit status 3`` or ``killed by SIGSEGV`` from a ``waitpid`` status."""
-    if os.WIFSIGNALED(status):
-        sig = os.WTERMSIG(status)
-        with contextlib.suppress(ValueError):
-            return f"killed by {signal.Signals(sig).name}"
-        return f"killed by signal {sig}"
-    return f"exit status {os.waitstatus_to_exitcode(status)}"
-
-
 # -- the caller's side ---------------------------------------------------------------------------
 class IsolatedRunner:
     """Runs evaluations one at a time, each in a forked child of a helper process, and kills
@@ -270,7 +222,7 @@ class IsolatedRunner:
             os.close(res_w)
         self._jobs, self._answers = job_w, res_r
         self._problem = None
-        _send(job_w, ("init", list(sys.path)))
+        send(job_w, ("init", list(sys.path)))
 
     def _load(self, problem: Evaluable) -> str | None:
         """Start the helper if none runs and give it ``problem`` unless it has it; returns the
@@ -283,8 +235,8 @@ class IsolatedRunner:
                 self._start()
             assert self._jobs is not None and self._answers is not None
             try:
-                _send(self._jobs, ("problem", blob))
-                answer = _recv(self._answers)
+                send(self._jobs, ("problem", blob))
+                answer = recv(self._answers)
             except BrokenPipeError:
                 answer = None
             if answer is not None:
@@ -331,18 +283,18 @@ class IsolatedRunner:
         assert self._jobs is not None and self._answers is not None
         t0 = time.perf_counter()
         with contextlib.suppress(BrokenPipeError):  # a dead helper: its silence says so below
-            _send(self._jobs, ("run", x, workdir, index))
-        started = _recv(self._answers)
+            send(self._jobs, ("run", x, workdir, index))
+        started = recv(self._answers)
         if started is None or started[0] != "started":
             return self._lost(x, workdir, index, t0, "the helper process for isolated runs died")
         deadline = None if timeout is None else time.monotonic() + timeout
         try:
-            answer = _recv(self._answers, deadline)
+            answer = recv(self._answers, deadline)
         except TimeoutError:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(started[1], signal.SIGKILL)
             try:  # the helper reaps the child and says so; a silent helper is replaced
-                _recv(self._answers, time.monotonic() + _KILL_WAIT)
+                recv(self._answers, time.monotonic() + _KILL_WAIT)
             except TimeoutError:
                 self.stop()
             message = (

@@ -26,7 +26,8 @@ import sys
 from typing import Any
 
 from ..core.problem import Evaluable
-from .isolation import _HEADER, _exit_text, _recv, _send, evaluate_here
+from .isolation import evaluate_here
+from .isolation_wire import HEADER, exit_text, recv, send
 
 __all__ = ["helper_main"]
 
@@ -69,14 +70,14 @@ class _RunProcess:
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(self.pid, signal.SIGKILL)
         _, status = os.waitpid(self.pid, 0)
-        return _exit_text(status)
+        return exit_text(status)
 
 
 def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no cover - helper
     problem: Evaluable | None = None
     proc: _RunProcess | None = None
     while True:
-        message = _recv(jobs)
+        message = recv(jobs)
         if message is None:  # the caller closed the pipe or died
             return
         kind = message[0]
@@ -90,29 +91,29 @@ def _serve(jobs: int, answers: int, running: list[int]) -> None:  # pragma: no c
             try:
                 problem = pickle.loads(message[1])
             except Exception as exc:  # e.g. a model class this process cannot import
-                _send(answers, ("problem", f"the problem could not be loaded: {exc!r}"))
+                send(answers, ("problem", f"the problem could not be loaded: {exc!r}"))
                 return  # the caller starts a new helper for the next problem
             _prepare(problem)
-            _send(answers, ("problem", None))
+            send(answers, ("problem", None))
         elif kind == "run":
             assert problem is not None
             if proc is None:
                 proc = _RunProcess(problem, (jobs, answers))
                 running[:] = [proc.pid]
             try:
-                _send(proc.requests, message[1:])
+                send(proc.requests, message[1:])
             except BrokenPipeError:
                 pass  # it died between runs: its silence below says so
-            _send(answers, ("started", proc.pid))
+            send(answers, ("started", proc.pid))
             data = _collect(jobs, proc.results, proc.pid)
             if data is None:
-                _send(answers, ("died", proc.close()))
+                send(answers, ("died", proc.close()))
                 proc = None
                 running.clear()
                 continue
             data, warm = pickle.loads(data)
             _adopt(problem, warm)
-            _send(answers, ("done", data))
+            send(answers, ("done", data))
 
 
 def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
@@ -120,11 +121,11 @@ def _collect(jobs: int, pipe: int, pid: int) -> bytes | None:
     caller goes away meanwhile, kill the run process and exit."""
     buffer = b""
     while True:
-        want = _HEADER.size if len(buffer) < _HEADER.size else None
+        want = HEADER.size if len(buffer) < HEADER.size else None
         if want is None:
-            total = _HEADER.size + _HEADER.unpack(buffer[: _HEADER.size])[0]
+            total = HEADER.size + HEADER.unpack(buffer[: HEADER.size])[0]
             if len(buffer) >= total:
-                return buffer[_HEADER.size : total]
+                return buffer[HEADER.size : total]
         ready, _, _ = select.select([pipe, jobs], [], [])
         if jobs in ready:  # the caller closed its end (or died): nothing waits for this run
             with contextlib.suppress(ProcessLookupError):
@@ -152,7 +153,7 @@ def _run_process(problem: Evaluable, requests: int, results: int) -> None:
         _die_with_parent()
         signal.signal(signal.SIGINT, signal.SIG_DFL)
         while True:
-            request = _recv(requests)
+            request = recv(requests)
             if request is None:
                 code = 0
                 break
@@ -165,7 +166,7 @@ def _run_process(problem: Evaluable, requests: int, results: int) -> None:
                 ev.status, ev.message = "error", f"the record could not be sent back: {exc}"
                 ev.diagnostics = {}
                 data = pickle.dumps(outcome, protocol=pickle.HIGHEST_PROTOCOL)
-            _send(results, (data, _warm_state(problem)))
+            send(results, (data, _warm_state(problem)))
     finally:
         os._exit(code)
 

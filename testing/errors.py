@@ -9,6 +9,7 @@ class ConformanceError(AssertionError):
     """A plugin breaks a rule of its protocol; the message names the plugin and the rule."""
 
 
-def _fail(obj: Any, rule: str) -> ConformanceError:
+def fail(obj: Any, rule: str) -> ConformanceError:
+    """The error for ``obj`` (a plugin or its class) breaking ``rule``, naming both."""
     cls = obj if isinstance(obj, type) else type(obj)
     return ConformanceError(f"{cls.__module__}.{cls.__qualname__}: {rule}")

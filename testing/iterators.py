@@ -20,7 +20,7 @@ from ..core.registry import forward_model
 from ..core.registry import measure as make_measure
 from ..core.synthetic import synthetic_observations
 from ..execution.local_executors import SerialEvaluator
-from .errors import _fail
+from .errors import fail
 
 
 class CountingEvaluator:
@@ -89,13 +89,13 @@ def check_iterator(
     it = iterator_factory()
     lacking = missing_methods("iterator", it)
     if lacking:
-        raise _fail(it, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
+        raise fail(it, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     ev = CountingEvaluator()
     book = RunBook(ev)
     try:
         gen = it.steps(problem, book)
         if not inspect.isgenerator(gen):
-            raise _fail(it, f"steps() must be a generator, got {type(gen).__name__}")
+            raise fail(it, f"steps() must be a generator, got {type(gen).__name__}")
         yields = 0
         while True:
             try:
@@ -105,44 +105,42 @@ def check_iterator(
                 break
             yields += 1
         if yields == 0:
-            raise _fail(it, "steps() returned without yielding a state")
+            raise fail(it, "steps() returned without yielding a state")
     finally:
         ev.close()
     if not isinstance(result, Result):
-        raise _fail(it, f"steps() must return fbia.Result, got {type(result).__name__}")
+        raise fail(it, f"steps() must return fbia.Result, got {type(result).__name__}")
     stamp(result, it, book)
     for attr in ("status", "message", "iterator"):
         value = getattr(result, attr)
         if not (isinstance(value, str) and value.strip()):
-            raise _fail(it, f"Result.{attr} must be a non-empty string, got {value!r}")
+            raise fail(it, f"Result.{attr} must be a non-empty string, got {value!r}")
     if not isinstance(result.success, (bool, np.bool_)):
-        raise _fail(it, f"Result.success must be a bool, got {result.success!r}")
+        raise fail(it, f"Result.success must be a bool, got {result.success!r}")
     if result.nfev != ev.points:
-        raise _fail(
+        raise fail(
             it, f"Result.nfev = {result.nfev} but the evaluator was given {ev.points} points"
         )
     if result.n_failed != ev.failed:
-        raise _fail(it, f"Result.n_failed = {result.n_failed} but {ev.failed} runs failed")
+        raise fail(it, f"Result.n_failed = {result.n_failed} but {ev.failed} runs failed")
     if result.x is not None:
         shown = {k: float(v) for k, v in result.x.items()}
         if set(result.x) != set(problem.names):
-            raise _fail(
-                it, f"Result.x has keys {sorted(result.x)}, the problem has {problem.names}"
-            )
+            raise fail(it, f"Result.x has keys {sorted(result.x)}, the problem has {problem.names}")
         x = problem.vector(result.x)
         span = problem.upper - problem.lower
         if not np.all(np.isfinite(x)):
-            raise _fail(it, f"Result.x is not finite: {shown}")
+            raise fail(it, f"Result.x is not finite: {shown}")
         if np.any(x < problem.lower - 1e-9 * span) or np.any(x > problem.upper + 1e-9 * span):
-            raise _fail(it, f"Result.x = {shown} lies outside the bounds")
+            raise fail(it, f"Result.x = {shown} lies outside the bounds")
     try:
         as_dict = json.loads(json.dumps(result.to_dict(), allow_nan=False))
     except (TypeError, ValueError) as exc:
-        raise _fail(it, f"Result.to_dict() is not plain JSON: {exc}") from exc
+        raise fail(it, f"Result.to_dict() is not plain JSON: {exc}") from exc
     with tempfile.TemporaryDirectory(dir=tmp_path) as tmp:
         saved = json.loads(result.save(Path(tmp) / "result.json").read_text())
     if saved != as_dict:
-        raise _fail(it, "Result.save() writes something other than Result.to_dict()")
+        raise fail(it, "Result.save() writes something other than Result.to_dict()")
 
     ev2 = CountingEvaluator()
     try:
@@ -150,7 +148,7 @@ def check_iterator(
     finally:
         ev2.close()
     if not isinstance(rerun, Result):
-        raise _fail(it, f"run() must return fbia.Result, got {type(rerun).__name__}")
+        raise fail(it, f"run() must return fbia.Result, got {type(rerun).__name__}")
     same_x = (rerun.x is None and result.x is None) or (
         rerun.x is not None
         and result.x is not None
@@ -158,14 +156,14 @@ def check_iterator(
         and all(math.isclose(rerun.x[k], result.x[k], rel_tol=1e-10) for k in result.x)
     )
     if rerun.status != result.status or rerun.nfev != result.nfev or not same_x:
-        raise _fail(
+        raise fail(
             it,
             "two runs with equal options differ: "
             f"({result.status}, nfev {result.nfev}, x {result.x}) vs "
             f"({rerun.status}, nfev {rerun.nfev}, x {rerun.x}); fix the seed in the options",
         )
     if _global_rng_state() != global_state:
-        raise _fail(it, "the run used numpy's global random state; take a Generator or a seed")
+        raise fail(it, "the run used numpy's global random state; take a Generator or a seed")
     return result
 
 

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from ..core.interface import Interface
 from ..core.observation import Observation
 from ..core.protocols import missing_methods
-from .errors import _fail
+from .errors import fail
 from .samples import circle_2d, mound_2d, sphere_3d, square_3d, straight_line_2d
 
 
@@ -120,17 +120,17 @@ def _measure_values(
         r = measure.residuals(gamma, obs)
         d = measure.distance(gamma, obs)
     except Exception as exc:
-        raise _fail(measure, f"{where} interface: {type(exc).__name__}: {exc}") from exc
+        raise fail(measure, f"{where} interface: {type(exc).__name__}: {exc}") from exc
     if not isinstance(r, np.ndarray) or r.ndim != 1:
-        raise _fail(
+        raise fail(
             measure,
             f"{where}: residuals must be a 1-D numpy array, got "
             f"{type(r).__name__} of shape {np.shape(r)}",
         )
     if not np.all(np.isfinite(r)):
-        raise _fail(measure, f"{where}: residuals are not all finite")
+        raise fail(measure, f"{where}: residuals are not all finite")
     if not isinstance(d, (float, np.floating)) or not math.isfinite(d) or d < 0:
-        raise _fail(measure, f"{where}: distance must be a finite float >= 0, got {d!r}")
+        raise fail(measure, f"{where}: distance must be a finite float >= 0, got {d!r}")
     return r.astype(float, copy=False), float(d)
 
 
@@ -175,7 +175,7 @@ def check_measure(
 
     lacking = missing_methods("measure", measure)
     if lacking:
-        raise _fail(measure, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
+        raise fail(measure, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     if dims is None:
         dims = tuple(getattr(measure, "dims", (2, 3)))
     if mesh_dependent is None:
@@ -194,45 +194,45 @@ def check_measure(
         )
         r2, d2 = _measure_values(measure, case.farther, obs, f"{where}, farther")
         if d1 <= 0.0:
-            raise _fail(measure, f"{where}: distance 0 between different interfaces")
+            raise fail(measure, f"{where}: distance 0 between different interfaces")
         if not (d0 <= zero_tol * d1 and np.linalg.norm(r0) <= zero_tol * np.linalg.norm(r1)):
-            raise _fail(
+            raise fail(
                 measure,
                 f"{where}: an interface is not at distance zero from itself: D = {d0:.3g}, "
                 f"|r| = {np.linalg.norm(r0):.3g} (vs D = {d1:.3g} for a different one)",
             )
         if not d2 > d1:
-            raise _fail(
+            raise fail(
                 measure,
                 f"{where}: a larger deviation gives no larger distance ({d2:.6g} <= {d1:.6g})",
             )
         if d1b != d1 or not np.array_equal(r1b, r1):
-            raise _fail(measure, f"{where}: repeated calls give different values")
+            raise fail(measure, f"{where}: repeated calls give different values")
         if not mesh_dependent:
             shapes = {r0.shape, r1.shape, rr.shape, r2.shape}
             if len(shapes) != 1:
-                raise _fail(
+                raise fail(
                     measure,
                     f"{where}: the residual length depends on the simulated mesh: "
                     f"{r0.shape[0]} (identical), {r1.shape[0]} (simulated), {rr.shape[0]} "
                     f"(refined), {r2.shape[0]} (farther)",
                 )
             if abs(dr - d1) > rtol * d1:
-                raise _fail(
+                raise fail(
                     measure,
                     f"{where}: re-meshing the same geometry changes the distance from {d1:.6g} to "
                     f"{dr:.6g} (relative {abs(dr - d1) / d1:.2g} > {rtol:g})",
                 )
             n1, nr = float(np.linalg.norm(r1)), float(np.linalg.norm(rr))
             if abs(nr - n1) > rtol * n1:
-                raise _fail(
+                raise fail(
                     measure,
                     f"{where}: re-meshing the same geometry changes the residual norm from "
                     f"{n1:.6g} to {nr:.6g} (relative {abs(nr - n1) / n1:.2g} > {rtol:g})",
                 )
             change = float(np.linalg.norm(rr - r1))
             if change > residual_rtol * n1:
-                raise _fail(
+                raise fail(
                     measure,
                     f"{where}: re-meshing the same geometry changes the residual vector by "
                     f"{change:.3g} (> {residual_rtol:g} x its norm {n1:.3g})",

@@ -15,7 +15,7 @@ from ..core.errors import ForwardModelError
 from ..core.interface import Interface
 from ..core.observation import Solution, coordinate_key
 from ..core.protocols import missing_methods
-from .errors import ConformanceError, _fail
+from .errors import ConformanceError, fail
 
 
 def check_forward_model(
@@ -54,15 +54,15 @@ def check_forward_model(
     tmp_path = Path(tmp_path)
     lacking = missing_methods("forward_model", model)
     if lacking:
-        raise _fail(model, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
+        raise fail(model, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     names = model.parameter_names()
     if isinstance(names, str) or not all(isinstance(n, str) for n in names):
-        raise _fail(model, f"parameter_names() must be a sequence of str, got {names!r}")
+        raise fail(model, f"parameter_names() must be a sequence of str, got {names!r}")
     if len(set(names)) != len(list(names)):
-        raise _fail(model, f"parameter_names() repeats a name: {list(names)}")
+        raise fail(model, f"parameter_names() repeats a name: {list(names)}")
     unknown = [k for k in parameters if k not in names]
     if unknown:
-        raise _fail(
+        raise fail(
             model,
             f"the test parameters {unknown} are not in parameter_names() = {list(names)}",
         )
@@ -81,30 +81,30 @@ def check_forward_model(
         finally:
             if os.getcwd() != cwd:
                 os.chdir(cwd)
-                raise _fail(model, f"solve() changed the current directory (run {run!r})")
+                raise fail(model, f"solve() changed the current directory (run {run!r})")
             if dict(params) != params_before or list(coords) != coords_before:
-                raise _fail(model, "solve() modified the parameters or coordinates it was given")
+                raise fail(model, "solve() modified the parameters or coordinates it was given")
 
     try:
         first = solve(parameters, coordinates, "run_a")
     except ConformanceError:
         raise
     except ForwardModelError as exc:
-        raise _fail(model, f"the example run at {dict(parameters)} failed: {exc}") from exc
+        raise fail(model, f"the example run at {dict(parameters)} failed: {exc}") from exc
     except Exception as exc:
-        raise _fail(
+        raise fail(
             model,
             f"the run at {dict(parameters)} raised {type(exc).__name__}: {exc} (a failed run "
             "must raise fbia.ForwardModelError)",
         ) from exc
     if not isinstance(first, Solution):
-        raise _fail(model, f"solve() must return fbia.Solution, got {type(first).__name__}")
+        raise fail(model, f"solve() must return fbia.Solution, got {type(first).__name__}")
     dims = set()
     for c in coordinates:
         key = coordinate_key(c)
         gamma = first.interfaces.get(key)
         if not isinstance(gamma, Interface):
-            raise _fail(
+            raise fail(
                 model,
                 f"solve() returned {type(gamma).__name__} instead of an Interface for the "
                 f"requested coordinate {dict(c)}",
@@ -113,12 +113,12 @@ def check_forward_model(
             np.all(np.isfinite(gamma.normals))
             and np.allclose(np.linalg.norm(gamma.normals, axis=1), 1.0)
         ):
-            raise _fail(model, f"the interface at {dict(c)} has non-finite or non-unit normals")
+            raise fail(model, f"the interface at {dict(c)} has non-finite or non-unit normals")
         dims.add(gamma.dim)
     if len(dims) != 1:
-        raise _fail(model, f"solve() mixes interface dimensions {sorted(dims)}")
+        raise fail(model, f"solve() mixes interface dimensions {sorted(dims)}")
     if not isinstance(first.diagnostics, Mapping):
-        raise _fail(model, "Solution.diagnostics must be a mapping")
+        raise fail(model, "Solution.diagnostics must be a mapping")
 
     again = solve(copy.deepcopy(dict(parameters)), list(reversed(coordinates)), "run_b")
     for c in coordinates:
@@ -126,11 +126,11 @@ def check_forward_model(
         try:
             b = again.interface(c)
         except KeyError:
-            raise _fail(
+            raise fail(
                 model, f"with the coordinates reversed, no interface for {dict(c)}"
             ) from None
         if a.dim != b.dim or a.cells.shape != b.cells.shape or not np.array_equal(a.cells, b.cells):
-            raise _fail(
+            raise fail(
                 model,
                 f"two runs with equal inputs give different meshes at {dict(c)} "
                 f"({a!r} vs {b!r}); coordinates in reversed order in the second run",
@@ -139,7 +139,7 @@ def check_forward_model(
         scale = float(np.max(hi - lo)) or 1.0
         dev = float(np.max(np.abs(a.vertices - b.vertices)))
         if dev > rtol * scale:
-            raise _fail(
+            raise fail(
                 model,
                 f"two runs with equal inputs differ at {dict(c)} by {dev:.3g} mm "
                 f"(> {rtol:g} x size {scale:.3g} mm); coordinates in reversed order in the "
@@ -153,17 +153,17 @@ def check_forward_model(
             solve(failing_parameters, coordinates, "run_fail")
         except ForwardModelError as exc:
             if not str(exc).strip():
-                raise _fail(model, "ForwardModelError without a message") from exc
+                raise fail(model, "ForwardModelError without a message") from exc
         except ConformanceError:
             raise
         except Exception as exc:
-            raise _fail(
+            raise fail(
                 model,
                 f"a failing run raised {type(exc).__name__}: {exc} instead of "
                 "fbia.ForwardModelError",
             ) from exc
         else:
-            raise _fail(
+            raise fail(
                 model, f"the run at {dict(failing_parameters)} was expected to fail but did not"
             )
     return first
@@ -194,7 +194,7 @@ def _check_tangents(
             gamma = got.interface(c)
             tangent = np.asarray(gamma.tangents.get(name, np.nan), dtype=float)
             if tangent.shape != gamma.vertices.shape or not np.all(np.isfinite(tangent)):
-                raise _fail(
+                raise fail(
                     model,
                     f"solve(..., tangents=[{name!r}]) gave no finite tangent of the vertices' "
                     f"shape {gamma.vertices.shape} at {dict(c)}",
@@ -203,7 +203,7 @@ def _check_tangents(
             scale = max(float(np.abs(fd).max()), float(np.abs(tangent).max()), 1e-300)
             dev = float(np.abs(tangent - fd).max())
             if dev > 1e-3 * scale:
-                raise _fail(
+                raise fail(
                     model,
                     f"the tangent of {name} at {dict(c)} differs from a central difference of "
                     f"the model by {dev / scale:.2g} of its size (> 1e-3)",
@@ -214,7 +214,7 @@ def example_run(cls: type) -> tuple[dict[str, float], list[dict[str, float]]]:
     """``cls.example_parameters()`` checked: (parameters, coordinates) of a cheap run."""
     hook = getattr(cls, "example_parameters", None)
     if hook is None:
-        raise _fail(
+        raise fail(
             cls,
             "provides no example_parameters(); every forward model needs a classmethod "
             "example_parameters() -> (parameters, coordinates) of a cheap successful run",
@@ -225,10 +225,10 @@ def example_run(cls: type) -> tuple[dict[str, float], list[dict[str, float]]]:
         params = {str(k): float(v) for k, v in dict(params).items()}
         coords = [{str(k): float(v) for k, v in dict(c).items()} for c in coords]
     except (TypeError, ValueError) as exc:
-        raise _fail(
+        raise fail(
             cls,
             f"example_parameters() must return (dict of floats, list of coordinate dicts): {exc}",
         ) from exc
     if not coords:
-        raise _fail(cls, "example_parameters() returns no coordinates")
+        raise fail(cls, "example_parameters() returns no coordinates")
     return params, coords

@@ -7,7 +7,7 @@ from typing import Any
 
 from ..core.errors import ConfigError
 from ..core.options import Configurable, PluginOptions
-from .errors import _fail
+from .errors import fail
 
 
 def check_options(cls: type) -> list[str]:
@@ -23,11 +23,11 @@ def check_options(cls: type) -> list[str]:
 
     options = getattr(cls, "Options", None)
     if not (isinstance(options, type) and issubclass(options, PluginOptions)):
-        raise _fail(cls, "has no Options schema (a subclass of fbia.PluginOptions)")
+        raise fail(cls, "has no Options schema (a subclass of fbia.PluginOptions)")
     names = sorted(options.model_fields)
     undocumented = [n for n, f in options.model_fields.items() if not (f.description or "").strip()]
     if undocumented:
-        raise _fail(
+        raise fail(
             cls,
             f"option(s) {', '.join(undocumented)} have no description; document each option "
             "and its unit with pydantic.Field(description=...)",
@@ -44,24 +44,24 @@ def check_options(cls: type) -> list[str]:
         except ConfigError as exc:
             message = str(exc)
             if "\n" in message:
-                raise _fail(
+                raise fail(
                     cls, f"{label}: the error for an unknown key spans lines: {message!r}"
                 ) from None
             missing = [n for n in [bad_key, *names] if n not in message]
             if missing:
-                raise _fail(
+                raise fail(
                     cls,
                     f"{label}: the error for an unknown key does not name "
                     f"{', '.join(missing)}: {message!r}",
                 ) from None
         except Exception as exc:
-            raise _fail(
+            raise fail(
                 cls,
                 f"{label}: an unknown key raised {type(exc).__name__}: {exc} "
                 "instead of fbia.ConfigError",
             ) from exc
         else:
-            raise _fail(cls, f"{label} accepts the unknown key {bad_key!r}")
+            raise fail(cls, f"{label} accepts the unknown key {bad_key!r}")
     return names
 
 
@@ -72,5 +72,5 @@ def example_options(cls: type) -> dict[str, Any]:
         return {}
     opts = hook()
     if not isinstance(opts, Mapping):
-        raise _fail(cls, f"example_options() must return a dict, got {type(opts).__name__}")
+        raise fail(cls, f"example_options() must return a dict, got {type(opts).__name__}")
     return dict(opts)

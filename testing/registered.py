@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.registry import PluginEntry
-from .errors import _fail
+from .errors import fail
 from .measures import check_measure
 from .models import check_forward_model, example_run
 from .options import check_options, example_options
@@ -28,7 +28,7 @@ def failing_run(
     if options is None or "failure_region" not in getattr(options, "model_fields", {}):
         return None
     if not parameters:
-        raise _fail(cls, "example_parameters() gives no parameter to fail on")
+        raise fail(cls, "example_parameters() gives no parameter to fail on")
     name, value = next(iter(parameters.items()))
     bad = value * 1.1 if value != 0.0 else 0.1
     half = 0.01 * abs(bad - value)
@@ -51,12 +51,12 @@ def check_registered(entry: PluginEntry, tmp_path: str | Path) -> Any:
     opts = example_options(cls)
     if entry.kind == "forward_model":
         params, coords = example_run(cls)
-        fail = failing_run(cls, params)
-        if fail is None:
+        failing = failing_run(cls, params)
+        if failing is None:
             model = cls(cls.Options.parse(opts))
             return check_forward_model(model, params, coords, tmp_path)
-        model = cls(cls.Options.parse({**opts, **fail[0]}))
-        return check_forward_model(model, params, coords, tmp_path, failing_parameters=fail[1])
+        model = cls(cls.Options.parse({**opts, **failing[0]}))
+        return check_forward_model(model, params, coords, tmp_path, failing_parameters=failing[1])
     instance = cls(cls.Options.parse(opts))
     if entry.kind == "measure":
         return check_measure(instance)

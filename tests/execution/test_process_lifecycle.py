@@ -21,7 +21,7 @@ import pytest
 from _models import _alive, toy_problem
 from _paths import TESTS
 
-from fbia.execution.isolation import _recv, _send
+from fbia.execution.isolation_wire import recv, send
 
 _POOL_DRIVER = """
 import sys
@@ -113,16 +113,16 @@ def _helper(tmp_path: Path) -> tuple[subprocess.Popen[bytes], int, int, Path]:
 def test_the_isolation_helper_exits_silently_when_its_caller_is_gone(tmp_path, gone):
     proc, jobs, answers, err = _helper(tmp_path)
     try:
-        _send(jobs, ("init", list(sys.path)))
+        send(jobs, ("init", list(sys.path)))
         problem = pickle.dumps(toy_problem(delay=30.0))
         if gone == "starting a run":
-            _send(jobs, ("problem", problem))
-            assert _recv(answers, time.monotonic() + 60.0) == ("problem", None)
+            send(jobs, ("problem", problem))
+            assert recv(answers, time.monotonic() + 60.0) == ("problem", None)
             os.close(answers)  # the caller dies: its answers pipe has no reader
-            _send(jobs, ("run", {"E": 400.0, "nu": 0.3}, str(tmp_path / "run"), 0))
+            send(jobs, ("run", {"E": 400.0, "nu": 0.3}, str(tmp_path / "run"), 0))
         else:
             os.close(answers)
-            _send(jobs, ("problem", problem))
+            send(jobs, ("problem", problem))
         assert proc.wait(timeout=20.0) == 0
     finally:
         os.close(jobs)
