@@ -212,3 +212,16 @@ def test_modules_stay_small():
         if lines > OVERSIZE.get(rel, MAX_LINES):
             too_big[rel] = lines
     assert too_big == {}, f"modules above {MAX_LINES} lines (or above their listed size)"
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name with a leading underscore stays in its module (issue 48): what two modules share
+    is public in one of them, or in a module of its own."""
+    crossing = []
+    for path in package_files():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                names = [a.name for a in node.names]
+                private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+                crossing += [f"{path.relative_to(ROOT)}: {node.module} {n}" for n in private]
+    assert crossing == []

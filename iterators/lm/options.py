@@ -1,6 +1,6 @@
 """The options of :class:`~fbia.iterators.levenberg_marquardt.LevenbergMarquardtIterator`:
 Paper A's algorithm and the robust mode, their tolerances, finite-difference steps and
-initial guesses (including a Bayesian result's posterior, :mod:`.lm_handoff`), with the
+initial guesses (including a Bayesian result's posterior, :mod:`.handoff`), with the
 rules that tie them together.
 """
 

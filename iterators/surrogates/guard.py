@@ -5,7 +5,7 @@ L far above the best training run is an artefact of the surrogate, not evidence:
 the mean is capped at the largest training value + a margin (by default chi2_d(0.999) / 2,
 :func:`~fbia.iterators.smc.diagnostics.extrapolation_margin`), the capped calls and points are
 counted, and :meth:`ExtrapolationGuard.extrapolated_mass` says how much posterior mass sat at
-the cap. :meth:`ExtrapolationGuard.feasible` adds the factor of :mod:`~.gp_feasibility` (where
+the cap. :meth:`ExtrapolationGuard.feasible` adds the factor of :mod:`~.feasibility` (where
 the forward model runs) to an SMC target when the design had failed runs.
 """
 
@@ -43,7 +43,7 @@ class ExtrapolationGuard:
     guard: GuardCounts
     x_train: NDArray[np.float64]
     y_train: NDArray[np.float64]
-    #: where the forward model runs (:mod:`~.gp_feasibility`; None: every run succeeded, or
+    #: where the forward model runs (:mod:`~.feasibility`; None: every run succeeded, or
     #: gp_smc's ``failures = "ignore"``)
     feasibility: Feasibility | None = None
 
@@ -70,7 +70,7 @@ class ExtrapolationGuard:
         return np.minimum(mean, cap) if n_capped else mean
 
     def log_feasibility(self, x: ArrayLike) -> NDArray[np.float64]:
-        """log c(x) of :mod:`~.gp_feasibility` at the rows of ``x`` (0 without a classifier);
+        """log c(x) of :mod:`~.feasibility` at the rows of ``x`` (0 without a classifier);
         columns after the classifier's inputs (a sampled sigma_N) are ignored."""
         z = np.atleast_2d(np.asarray(x, dtype=float))
         if self.feasibility is None:

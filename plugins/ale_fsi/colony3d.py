@@ -23,7 +23,7 @@ Construction (:func:`build_colony_cell`):
    extruded downwards into a solid and cut by the duct: the colony is the part above the
    floor; the fluid is the duct minus the colony; netgen meshes both (faces named as in
    :mod:`~fbia.plugins.ale_fsi.geometry3d`) and, as there, the fluid tetrahedra with all four
-   vertices on no-slip faces are split (``_split_locked_tets``; Boffi 1997).  Elements are
+   vertices on no-slip faces are split (``split_locked_tets``; Boffi 1997).  Elements are
    straight-sided.
 
 :func:`colony_from_oct` is the one step from an unloaded OCT scan to the ``colony_surface``
@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from ...core.errors import ConfigError
 from ...core.interface import Interface
 from ..fem.flow_cell import FLUID, SOLID, check_mesh
-from .geometry3d import _named, _split_locked_tets, mesh_from_arrays_3d
+from .geometry3d import connectivity_by_region, mesh_from_arrays_3d, split_locked_tets
 
 if TYPE_CHECKING:
     import ngsolve
@@ -397,12 +397,12 @@ def _with_named_regions(ngmesh: Any, where: str) -> ngsolve.Mesh:
     """The netgen mesh as an NGSolve mesh on the module's names, locked tetrahedra split."""
     pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
     e3, e2 = ngmesh.Elements3D().NumPy(), ngmesh.Elements2D().NumPy()
-    regions = _named(e3, ngmesh.GetRegionNames(dim=3), 4)
-    boundaries = _named(e2, ngmesh.GetRegionNames(dim=2), 3)
+    regions = connectivity_by_region(e3, ngmesh.GetRegionNames(dim=3), 4)
+    boundaries = connectivity_by_region(e2, ngmesh.GetRegionNames(dim=2), 3)
     if SOLID not in regions or "interface" not in boundaries:
         raise ConfigError("netgen lost the colony (no solid region): check the surface", where)
     locked = np.vstack([c for n, c in boundaries.items() if n != "outflow"])
-    pts, regions[FLUID] = _split_locked_tets(pts, regions[FLUID], locked)
+    pts, regions[FLUID] = split_locked_tets(pts, regions[FLUID], locked)
     mesh = mesh_from_arrays_3d(pts, regions, boundaries)
     check_mesh(mesh, where)
     return mesh

@@ -113,11 +113,11 @@ def build_dome_cell(
         raise ConfigError(f"netgen could not mesh the dome cell: {exc}", where) from None
     pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
     e3, e2 = ngmesh.Elements3D().NumPy(), ngmesh.Elements2D().NumPy()
-    regions = _named(e3, ngmesh.GetRegionNames(dim=3), 4)
-    boundaries = _named(e2, ngmesh.GetRegionNames(dim=2), 3)
+    regions = connectivity_by_region(e3, ngmesh.GetRegionNames(dim=3), 4)
+    boundaries = connectivity_by_region(e2, ngmesh.GetRegionNames(dim=2), 3)
     boundaries.pop("mirror")
     locked = np.vstack([c for n, c in boundaries.items() if n != "outflow"])
-    pts, regions[FLUID] = _split_locked_tets(pts, regions[FLUID], locked)
+    pts, regions[FLUID] = split_locked_tets(pts, regions[FLUID], locked)
     # mirror about z = width/2; the points on that plane are shared
     on = np.abs(pts[:, 2] - width / 2) <= 1e-9 * max(length, height, width)
     image = np.flatnonzero(on)
@@ -307,7 +307,7 @@ def mesh_from_arrays_3d(
     return ngsolve.Mesh(ngmesh)
 
 
-def _split_locked_tets(
+def split_locked_tets(
     points: NDArray[np.float64], tets: NDArray[np.int64], faces: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Split every tetrahedron whose four vertices lie on ``faces`` (boundaries where the
@@ -334,7 +334,9 @@ def _split_locked_tets(
     return points, np.vstack([tets[~bad], *split])
 
 
-def _named(elements: Any, names: list[str], nodes: int) -> dict[str, NDArray[np.int64]]:
+def connectivity_by_region(
+    elements: Any, names: list[str], nodes: int
+) -> dict[str, NDArray[np.int64]]:
     """0-based connectivities of netgen elements grouped by region name."""
     out: dict[str, NDArray[np.int64]] = {}
     for i, name in enumerate(names, start=1):

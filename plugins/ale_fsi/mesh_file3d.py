@@ -36,7 +36,7 @@ from ..fem.flow_cell import (
     read_with_meshio,
     write_named_gmsh,
 )
-from .geometry3d import _named, _split_locked_tets, mesh_from_arrays_3d
+from .geometry3d import connectivity_by_region, mesh_from_arrays_3d, split_locked_tets
 
 if TYPE_CHECKING:
     import ngsolve
@@ -64,7 +64,7 @@ def read_mesh_3d(path: str | Path) -> ngsolve.Mesh:
     points, regions, boundaries = _read(path)
     _check_names(regions, boundaries, where)
     locked = np.vstack([c for n, c in boundaries.items() if n not in ("outflow", "internal")])
-    points, regions[FLUID] = _split_locked_tets(points, regions[FLUID], locked)
+    points, regions[FLUID] = split_locked_tets(points, regions[FLUID], locked)
     mesh = mesh_from_arrays_3d(points, regions, boundaries)
     check_mesh(mesh, where)
     return mesh
@@ -83,8 +83,10 @@ def write_mesh_3d(mesh: ngsolve.Mesh, path: str | Path) -> Path:
     """Write a named 3-D mesh as gmsh 2.2 (physical groups = region/boundary names)."""
     ngmesh = mesh.ngmesh
     pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
-    regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
-    boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
+    regions = connectivity_by_region(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
+    boundaries = connectivity_by_region(
+        ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3
+    )
     return write_named_gmsh(path, pts, [("triangle", boundaries, 2), ("tetra", regions, 3)])
 
 
@@ -155,8 +157,10 @@ def _read_vol(path: Path) -> tuple[NDArray[np.float64], Cells, Cells]:
     if ngmesh.dim != 3:
         return np.zeros((0, ngmesh.dim)), {}, {}
     pts = np.array(ngmesh.Coordinates(), dtype=float, copy=True)
-    regions = _named(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
-    boundaries = _named(ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3)
+    regions = connectivity_by_region(ngmesh.Elements3D().NumPy(), ngmesh.GetRegionNames(dim=3), 4)
+    boundaries = connectivity_by_region(
+        ngmesh.Elements2D().NumPy(), ngmesh.GetRegionNames(dim=2), 3
+    )
     return pts, regions, boundaries
 
 

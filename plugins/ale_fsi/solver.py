@@ -124,7 +124,8 @@ class AleFsiSolver(AleFsiProblem):
         First (if ``direct``) Newton straight at ``rate`` from the current state (rest, a warm
         start or a lower level).  If that fails (or at once, without ``direct``) and
         ``continuation`` is set, the branch of steady states through the current state is
-        followed (:meth:`_arclength`, locally parametrised so that it can pass limit points)
+        followed (:meth:`~fbia.plugins.fem.continuation.ArclengthContinuation.follow`, locally
+        parametrised so that it can pass limit points)
         until it passes ``rate`` -- then Newton at ``rate`` from the state interpolated on the
         branch -- or turns back at a limit point below ``rate``, which is reported as
         :class:`ForwardModelError` with reason ``"limit_point"``: the steady problem has no
