@@ -33,11 +33,16 @@ R = TypeVar("R")
 @runtime_checkable
 class Evaluator(Protocol):
     """Evaluates batches of parameter points; results come back in the order of ``points``
-    (``fbia.execution``: ``SerialEvaluator``, ``ProcessPoolEvaluator``, ``DaskEvaluator``)."""
+    (``fbia.execution``: ``SerialEvaluator``, ``ProcessPoolEvaluator``, ``DaskEvaluator``).
+    ``slots`` is how many runs it makes at once (1 for a serial one): an iterator that
+    chooses its batch sizes (gp_smc's adaptive rounds) makes them multiples of it."""
 
     def evaluate(
         self, problem: Evaluable, points: Sequence[Mapping[str, float]]
     ) -> list[Evaluation]: ...
+
+    @property
+    def slots(self) -> int: ...
 
 
 #: What :meth:`IteratorBase.run` evaluates with when it is given no evaluator: a factory of

@@ -155,7 +155,9 @@ class InverseIterator(Protocol):
 
     Members, in the order the framework uses them:
 
-    * ``Options`` (required): its options, a subclass of :class:`fbia.PluginOptions`.
+    * ``Options`` (required): its options, a subclass of :class:`fbia.PluginOptions`; an
+      option ``seed`` (an integer or None) is the seed of its random numbers, which ``fbia
+      run`` records in the result's provenance beside the study's seed.
     * ``requires`` (optional, default ``()``): modules it needs beyond fbia's core.
     * ``__init__(options)`` (framework, :class:`fbia.Configurable`): ``self.options``.
     * ``pickle_options_only`` (optional, default False): pickle by options only.
@@ -163,9 +165,10 @@ class InverseIterator(Protocol):
       ``steps`` return, which :func:`fbia.load_result` reads back.
     * ``steps(problem, evaluator)`` (required): a generator; it asks
       ``evaluator.evaluate(problem, points)`` for runs (one :class:`fbia.Evaluation` per point,
-      failed runs included; :class:`fbia.core.iteration.Evaluator`), yields a state after every
-      iteration and returns an :class:`fbia.Result` with ``status``, ``success``, ``message``
-      and ``x``; it does not count its runs.
+      failed runs included; :class:`fbia.core.iteration.Evaluator`, whose ``slots`` says how
+      many it makes at once), yields a state after every iteration and returns an
+      :class:`fbia.Result` with ``status``, ``success``, ``message`` and ``x``; it does not
+      count its runs.
     * ``result.iterator, nfev, n_failed, evaluations`` (framework,
       :func:`fbia.core.iteration.drive`): the registered name, the runs the evaluator returned
       and how many failed, stamped on the result.

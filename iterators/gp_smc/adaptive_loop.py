@@ -107,10 +107,9 @@ class AdaptiveOutcome:
 
 
 def parallel_slots(evaluator: Evaluator) -> int:
-    """Runs the evaluator makes at once (1 when it does not say)."""
-    executor = getattr(evaluator, "executor", None)
-    slots = getattr(executor, "slots", None)
-    return int(slots) if isinstance(slots, int) and slots > 0 else 1
+    """Runs the evaluator makes at once (its ``slots``, :class:`fbia.core.iteration.Evaluator`),
+    at least 1."""
+    return max(1, int(evaluator.slots))
 
 
 def batch_size(opts: GpSmcOptions, n_runs: int, slots: int) -> int:
