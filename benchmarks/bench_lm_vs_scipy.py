@@ -116,7 +116,9 @@ def run_scipy(label: str) -> dict[str, Any]:
             r = np.asarray(ev.residuals, dtype=float)
             n_r[:] = [len(r)]
             return r
-        return np.full(n_r[0] if n_r else 1, FAILED_RESIDUAL)
+        if not n_r:  # scipy needs the residual's length from its first call
+            raise RuntimeError(f"scipy's first run, at the start, failed: {ev.message}")
+        return np.full(n_r[0], FAILED_RESIDUAL)
 
     x0 = np.array(list(_start(problem, label).values()))
     t0 = time.perf_counter()

@@ -56,7 +56,8 @@ def posterior_starts(
         if post is None:
             raise ConfigError(
                 f"x0 is a {source.iterator or 'given'} result without a posterior "
-                f"({source.status}): only a Bayesian result (gp_smc) has one to start from",
+                f"({source.status}): only a Bayesian result with a posterior (gp_smc's, "
+                "when it ran) can start least squares",
                 where,
             )
         n_x, names = post.n_x, list(post.names)

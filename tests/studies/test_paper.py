@@ -573,6 +573,19 @@ def test_there_are_paper_examples_to_check():
     assert len(PAPER_STUDIES) >= 27  # Paper A: 16 and growth 2, Paper B: 9
 
 
+def _ran(folder, name: str, source: str, rows: tuple, table: bool = True) -> None:
+    """A study file ``name.toml`` (with a [paper] table of ``source``, or without one) and the
+    ``out_name/paper.json`` its run wrote with ``rows``."""
+    text = f'[paper]\nsource = "{source}"\n' if table else f'[study]\nname = "{name}"\n'
+    (folder / f"{name}.toml").write_text(text)
+    rec = PaperRecord(
+        name, str(folder / f"{name}.toml"), source, "", "converged_gradient", 1.0, 1.0, 3,
+        "now", rows,
+    )  # fmt: skip
+    (folder / f"out_{name}").mkdir()
+    (folder / f"out_{name}" / "paper.json").write_text(json.dumps(rec.to_dict()))
+
+
 def test_the_summary_counts_all_rows_and_lists_studies_not_run_and_records_left_out(tmp_path):
     """The page totals the verdicts; a study file with [paper] but no paper.json is listed as
     not run; a paper.json whose study file lost its [paper] table is left out (and listed)."""
@@ -587,27 +600,8 @@ def test_the_summary_counts_all_rows_and_lists_studies_not_run_and_records_left_
         "a.toml",
     )
     rows = tuple(compare(spec, {"x.E": 401.0, "x.nu": 0.3}))
-
-    def record(name: str) -> dict:
-        rec = PaperRecord(
-            name,
-            str(tmp_path / f"{name}.toml"),
-            "S",
-            "",
-            "converged_gradient",
-            1.0,
-            1.0,
-            3,
-            "now",
-            rows,
-        )
-        return rec.to_dict()
-
     for name, table in (("a", True), ("b", False)):
-        text = '[paper]\nsource = "S"\n' if table else '[study]\nname = "b"\n'
-        (tmp_path / f"{name}.toml").write_text(text)
-        (tmp_path / f"out_{name}").mkdir()
-        (tmp_path / f"out_{name}" / "paper.json").write_text(json.dumps(record(name)))
+        _ran(tmp_path, name, "S", rows, table)
     (tmp_path / "study_c.toml").write_text('[paper]\nsource = "S"\n')  # never run
     page, n = write_summary(tmp_path / "s.md", [tmp_path])
     text = page.read_text()
@@ -634,13 +628,7 @@ def test_the_summary_counts_each_published_number_once(tmp_path):
     one = tuple(compare(spec, {"mean.E": 409.0, "mean.nu": 0.30}))  # E agrees, nu not
     many = tuple(compare(spec, {"mean.E": 430.0, "mean.nu": 0.38}))  # E not, nu agrees
     for name, rows in (("one", one), ("many", many)):
-        (tmp_path / f"{name}.toml").write_text('[paper]\nsource = "Paper A, Table 2"\n')
-        rec = PaperRecord(
-            name, str(tmp_path / f"{name}.toml"), "Paper A, Table 2", "", "converged_gradient",
-            1.0, 1.0, 3, "now", rows,
-        )  # fmt: skip
-        (tmp_path / f"out_{name}").mkdir()
-        (tmp_path / f"out_{name}" / "paper.json").write_text(json.dumps(rec.to_dict()))
+        _ran(tmp_path, name, "Paper A, Table 2", rows)
     page, n = write_summary(tmp_path / "s.md", [tmp_path])
     text = page.read_text()
     assert n == 2 and "| [one](#one) | Paper A, Table 2 | 1 / 2 |" in text

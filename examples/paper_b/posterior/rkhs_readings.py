@@ -1,7 +1,7 @@
 """The readings of Paper B's RKHS likelihood that its text leaves open, and how steep each makes
 L (issue 46 item 4; README.md, "The likelihood's scale").
 
-    python examples/paper_b/posterior/rkhs_readings.py     (three forward runs, ~5 s)
+    python examples/paper_b/posterior/rkhs_readings.py     (two forward runs, ~5 s)
 
 Paper B writes the likelihood as L = -n/2 log(2 pi sigma_N^2) - D^2 / (2 sigma_N^2) (eq. 5) with
 the surface-current distance D of eqs. 9-11 and leaves open:
@@ -18,7 +18,8 @@ the surface-current distance D of eqs. 9-11 and leaves open:
   following examples");
 * **sigma_N^2**: 0.0005 mm^2 as stated, or l_bar^2, the squared mean element length that the
   paper gives as its reason ("the rounded squared average interface element length is
-  l_bar^2 ~ 0.0005 mm^2"; fbia's flow cell: 66 elements, l_bar = 0.0262 mm).
+  l_bar^2 ~ 0.0005 mm^2"; fbia's flow cell: 66 elements, l_bar = 0.0263 mm on the observed
+  interface).
 
 Every reading is evaluated on the pair of interfaces of ``rkhs_scale.py`` (E = 450 against 400
 Pa at nu = 0.3 and 100 mm^2/s, ``ale_fsi``, SVK, the default mesh: example 7's and example 5's

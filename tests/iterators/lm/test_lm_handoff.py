@@ -58,6 +58,17 @@ def test_a_result_without_a_posterior_is_refused():
         fbia.iterator("levenberg_marquardt", x0=lm_result.to_dict())
 
 
+def test_a_bayesian_result_that_has_no_posterior_is_refused():
+    """Result.posterior_estimate() is None for a gp_smc run that produced no posterior: the
+    hand-off says so instead of starting anywhere."""
+    from fbia.iterators.gp_smc.result import GpSmcResult
+
+    failed = GpSmcResult(status="failed", success=False, message="every run failed")
+    failed.iterator = "gp_smc"
+    with pytest.raises(fbia.ConfigError, match=r"gp_smc result without a posterior \(failed\)"):
+        fbia.iterator("levenberg_marquardt", x0=failed)
+
+
 def test_a_study_file_chains_bayes_and_least_squares(study_file, tmp_path, capsys):
     study = study_file
     text = study.read_text()
