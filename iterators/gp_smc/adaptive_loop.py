@@ -51,8 +51,8 @@ from .adaptive import (
     validation_error,
 )
 from .options import GpSmcOptions
-from .result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound, DesignRuns
-from .run import GpSmcState, SmcRun, log_prior
+from .result import RELIABLE_RMSE, AdaptiveDesign, AdaptiveRound
+from .run import Design, GpSmcState, SmcRun, log_prior
 
 logger = logging.getLogger(__name__)
 
@@ -101,7 +101,7 @@ Sample = Callable[[Callable[[FloatArray], FloatArray], int], SmcResult]
 class AdaptiveOutcome:
     """What the rounds leave: every design run, the GP on all of them, the rounds."""
 
-    design: DesignRuns
+    design: Design
     gp: Surrogate | None  # None when fewer than 2 runs succeeded
     summary: AdaptiveDesign
 
@@ -137,10 +137,8 @@ def adaptive_design(
         run.record("design", design="adaptive", n_initial=n_initial, n_test=opts.n_test),
     )
     evaluations = run.evaluate(start)
-    points = start
-    loglik = run.log_likelihoods(evaluations)
     train = np.arange(len(start)) < n_initial
-    run.evaluations = list(evaluations)
+    design = Design(start, run.log_likelihoods(evaluations), train, tuple(evaluations))
     yield GpSmcState(
         "forward_runs",
         f"{len(evaluations)} forward runs, {run.n_failed} failed",
@@ -158,22 +156,23 @@ def adaptive_design(
     last: tuple[SmcResult, float] | None = None  # the last round's posterior, its check
     while True:
         t0 = time.perf_counter()
-        use = train & np.isfinite(loglik)
+        train, loglik = design.train_mask, design.log_likelihood
+        use = train & design.ok
         if use.sum() < 2:
             summary = AdaptiveDesign(n_initial, rounds, "failed", floor)
-            return AdaptiveOutcome(_design(points, loglik, run, train), None, summary)
+            return AdaptiveOutcome(design, None, summary)
         l_max = float(loglik[use].max())
         floor = l_max - floor_depth(l_max, log_z)
         # a failed design run counts as an unlikely point (at the floor): the models fail at
         # extreme parameters, and the criterion must not send batch after batch there
         y = floored(loglik, floor)
-        records = [run.evaluations[i] for i in np.flatnonzero(train)]
         n_design = int(train.sum())
         optimise = hyper is None or n_design >= REOPTIMISE_GROWTH * optimised_at
-        gp = fit_gp(points[train], y[train], hyper, records, axes, optimise)
+        points = design.points[train]
+        gp = fit_gp(points, y[train], hyper, design.training_records, axes, optimise)
         optimised_at = n_design if optimise else optimised_at
         if opts.failures == "classify":
-            gp.feasibility = fit_feasibility(points[train], np.isfinite(loglik[train]))
+            gp.feasibility = fit_feasibility(points, design.ok[train])
         target = gp.feasible(gp.predict_mean_guarded)
         change = None
         if last is not None:
@@ -221,10 +220,7 @@ def adaptive_design(
         new = run.evaluate(batch)
         new_loglik = run.log_likelihoods(new)
         check = validation_error(gp, batch[:n_draws], new_loglik[:n_draws])
-        run.evaluations.extend(new)
-        points = np.vstack([points, batch])
-        loglik = np.concatenate([loglik, new_loglik])
-        train = np.concatenate([train, np.ones(len(batch), dtype=bool)])
+        design = design.extended(batch, new_loglik, new)
         last = (post, check.centred if check.n >= 2 else math.inf)
         entry = AdaptiveRound(
             round=len(rounds) + 1,
@@ -251,7 +247,7 @@ def adaptive_design(
             axes = np.atleast_2d(post.cov)
         yield GpSmcState("round", entry.describe(), run.record("round", **entry.to_record()))
     summary = AdaptiveDesign(n_initial, rounds, reason, floor, change)
-    return AdaptiveOutcome(_design(points, loglik, run, train), gp, summary)
+    return AdaptiveOutcome(design, gp, summary)
 
 
 def _gp_unsure(
@@ -274,12 +270,3 @@ def _gp_unsure(
         },
     )
     return uncertainty.moves_posterior
-
-
-def _design(points: FloatArray, loglik: FloatArray, run: SmcRun, train: Any) -> DesignRuns:
-    return DesignRuns(
-        points=points,
-        log_likelihood=loglik,
-        status=[ev.status for ev in run.evaluations],
-        train_mask=np.asarray(train, dtype=bool),
-    )

@@ -27,20 +27,34 @@ from __future__ import annotations
 
 import math
 from collections.abc import Generator, Sequence
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ...core.problem import Evaluation
 from ..smc.sampler import SmcResult
 from ..surrogates.residuals import Surrogate
 from .adaptive import distinct_draws
-from .result import DesignRuns, PosteriorCheck
-from .run import GpSmcState, SmcRun
+from .result import PosteriorCheck
+from .run import Design, GpSmcState, SmcRun
+
+
+@dataclass(frozen=True)
+class CheckRuns:
+    """A check and its forward runs' records (one per row of ``check.x``), which join the
+    design when the check is repaired (:meth:`~.run.Design.extended`)."""
+
+    check: PosteriorCheck
+    records: tuple[Evaluation, ...]
+
+    def repaired(self, design: Design) -> Design:
+        """``design`` with the check's runs appended as training runs."""
+        return design.extended(self.check.x, self.check.log_likelihood, self.records)
 
 
 def posterior_check(
     run: SmcRun, post: SmcResult, gp: Surrogate, n_check: int, rng: np.random.Generator
-) -> Generator[GpSmcState, None, PosteriorCheck]:
+) -> Generator[GpSmcState, None, CheckRuns]:
     """Forward runs at ``n_check`` distinct posterior draws: the surrogate's error there.
 
     The held-out Sobol points measure the error over the whole box; what decides whether the
@@ -60,18 +74,17 @@ def posterior_check(
         max_abs=float(np.max(np.abs(err))) if n_ok else math.nan,
         mean_error=float(np.mean(err)) if n_ok else math.nan,
     )
-    run.evaluations = [*run.evaluations, *evs]
     yield GpSmcState(
         "check",
         f"surrogate at {check.n} posterior draws: error {check.centred_rmse:.3g} in L "
         f"(RMSE {check.rmse:.3g})",
         run.record("check", **{k: v for k, v in asdict(check).items() if k != "x"}),
     )
-    return check
+    return CheckRuns(check, tuple(evs))
 
 
 def repairable(
-    check: PosteriorCheck, design: DesignRuns | None, adaptive: bool, n_train: int, done: int,
+    check: PosteriorCheck, design: Design | None, adaptive: bool, n_train: int, done: int,
     limit: int,
 ) -> bool:  # fmt: skip
     """Whether a failed ``check`` (or the runs at draws of the posterior averaged over the
@@ -85,24 +98,13 @@ def repairable(
 
 
 def room_for_repair(
-    design: DesignRuns | None, adaptive: bool, n_train: int, n_runs: int, done: int, limit: int
+    design: Design | None, adaptive: bool, n_train: int, n_runs: int, done: int, limit: int
 ) -> bool:
     """Whether a repair of ``n_runs`` runs may be made: an adaptive design, the runs fit into
     ``n_train``, fewer than ``limit`` repairs ``done`` (before any of them is run)."""
     if design is None or not adaptive:
         return False
     return done < limit and int(design.train_mask.sum()) + n_runs <= n_train
-
-
-def with_check_runs(design: DesignRuns, check: PosteriorCheck, status: Sequence[str]) -> DesignRuns:
-    """``design`` with the check's runs appended as training runs (``status``: theirs)."""
-    return replace(
-        design,
-        points=np.vstack([design.points, check.x]),
-        log_likelihood=np.concatenate([design.log_likelihood, check.log_likelihood]),
-        status=[*design.status, *status],
-        train_mask=np.concatenate([design.train_mask, np.ones(len(check.x), dtype=bool)]),
-    )
 
 
 def repair_note(failed: Sequence[float]) -> str:

@@ -91,19 +91,18 @@ from .adaptive_loop import (
     WIDE_TEMPERATURE,
     adaptive_design,
 )
-from .check import posterior_check, repair_note, repairable, room_for_repair, with_check_runs
+from .check import posterior_check, repair_note, repairable, room_for_repair
 from .model_check import model_check
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
 from .result import (
     AdaptiveDesign,
-    DesignRuns,
     GpSmcResult,
     ParticlePosterior,
     SmcSummary,
     SurrogateFit,
 )
-from .run import GpSmcState, SmcRun, log_prior, run_status
+from .run import Design, GpSmcState, SmcRun, log_prior, run_status
 
 FloatArray = NDArray[np.float64]
 
@@ -123,10 +122,6 @@ class GpSmcIterator(IteratorBase):
     Options = GpSmcOptions
 
     options: GpSmcOptions
-    surrogate: Surrogate | None = None
-    #: why a GP of L stands in for the residual emulator (surrogate = "auto"), "" otherwise
-    surrogate_note: str = ""
-    posterior: SmcResult | None = None
 
     @classmethod
     def example_options(cls) -> dict[str, Any]:
@@ -156,7 +151,6 @@ class GpSmcIterator(IteratorBase):
         if opts.gradients == "tangents":
             problem = self._with_tangents(problem, inputs)
         run = SmcRun(problem, evaluator, inputs, time.perf_counter())
-        self.surrogate_note = ""
         if opts.surrogate_uncertainty != "none" and (opts.mode != "surrogate" or run.noise):
             raise ConfigError(
                 "needs mode = 'surrogate' and a known sigma_N (noise_std, not noise_prior)",
@@ -182,7 +176,7 @@ class GpSmcIterator(IteratorBase):
                         design.points[use],
                         design.log_likelihood[use],
                         None,
-                        [run.evaluations[i] for i in np.flatnonzero(use)],
+                        [design.records[i] for i in np.flatnonzero(use)],
                     )
                 )
                 if gp is not None and opts.failures == "classify":
@@ -198,7 +192,6 @@ class GpSmcIterator(IteratorBase):
                 design, gp, adaptive = outcome.design, outcome.gp, outcome.summary
             if gp is None:
                 return self._finish_failed(run, design)
-            self.surrogate = gp
             floor = None if adaptive is None else adaptive.floor
             fit = yield from self._surrogate_stage(run, design, gp, floor)
             log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean_guarded
@@ -206,7 +199,9 @@ class GpSmcIterator(IteratorBase):
             design, fit, gp, floor = None, None, None, None
             log_likelihood = run.forward_log_likelihood
         # the SMC target: L (or its profile over sigma_N) where the forward model runs
-        target = run.joint(log_likelihood) if gp is None else gp.feasible(run.joint(log_likelihood))
+        trained_on = () if design is None else design.records
+        target = run.joint(log_likelihood, trained_on)
+        target = target if gp is None else gp.feasible(target)
         post = yield from self._smc_stage(run, target, _trained(run, gp))
         check, failed = None, list[float]()
         wanted = opts.surrogate_uncertainty == "expected_posterior"
@@ -215,9 +210,10 @@ class GpSmcIterator(IteratorBase):
         while opts.mode == "surrogate" and opts.n_check:
             assert gp is not None and design is not None
             rng = np.random.default_rng([opts.seed, 2, *([len(failed)] if failed else [])])
-            check = yield from posterior_check(run, post, gp, opts.n_check, rng)
+            checked = yield from posterior_check(run, post, gp, opts.n_check, rng)
+            check = checked.check
             budget, limit = opts.n_train, opts.check_repairs
-            repair = check
+            repair = checked
             if check.reliable and uncertain:
                 expected, uncertainty = self._uncertainty(run, post, gp)
                 room = room_for_repair(
@@ -227,18 +223,20 @@ class GpSmcIterator(IteratorBase):
                     # the GP's sample paths put posterior mass where no run has been: runs at
                     # draws of that averaged posterior say whether it is there
                     repair = yield from posterior_check(run, expected, gp, opts.n_check, rng)
-                    repair = replace(repair, cause="uncertainty")
-            if repair is check and check.reliable:
+                    repair = replace(repair, check=replace(repair.check, cause="uncertainty"))
+            if repair is checked and check.reliable:
                 break
-            if not repairable(repair, design, adaptive is not None, budget, len(failed), limit):
+            if not repairable(
+                repair.check, design, adaptive is not None, budget, len(failed), limit
+            ):
                 break
-            failed.append(repair.centred_rmse)  # its runs join the design, train the surrogate
-            statuses = [ev.status for ev in run.evaluations[-len(repair.x) :]]
-            design = with_check_runs(design, repair, statuses)
+            # the runs join the design (their own records) and train the surrogate
+            failed.append(repair.check.centred_rmse)
+            design = repair.repaired(design)
             assert adaptive is not None  # repairable: only an adaptive design
             gp = self._refit(run, design, gp, post, adaptive.floor)
             fit = yield from self._surrogate_stage(run, design, gp, floor)
-            target = gp.feasible(run.joint(gp.predict_mean_guarded))
+            target = gp.feasible(run.joint(gp.predict_mean_guarded, design.records))
             post = yield from self._smc_stage(run, target, _trained(run, gp))
             expected, uncertainty = post, None
         if uncertain and uncertainty is None:
@@ -263,7 +261,7 @@ class GpSmcIterator(IteratorBase):
             run.inputs,
             posterior_particles.particles[:, :n_in],
             posterior_particles.weights,
-            run.evaluations,
+            [*([] if design is None else design.records[: design.reused]), *run.runs],
         )
         status = "unreliable" if model.causes and status == "completed" else status
         return GpSmcResult(
@@ -273,7 +271,7 @@ class GpSmcIterator(IteratorBase):
                 "".join(f"{cause} - " for cause in model.causes)
                 + f"posterior from {opts.n_particles} particles in {post.n_steps} tempering "
                 f"steps ({opts.mode}; {run.nfev} forward runs, {run.n_failed} failed)"
-                + (f"; {self.surrogate_note}" if self.surrogate_note else "")
+                + ("" if gp is None or not gp.note else f"; {gp.note}")
                 + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
                 + repair_note(failed)
@@ -296,7 +294,7 @@ class GpSmcIterator(IteratorBase):
             n_x=run.n_x,
             mode=opts.mode,
             priors=[p.describe() for p in run.sampled],
-            design=design,
+            design=None if design is None else design.result(),
             adaptive=adaptive,
             surrogate=fit,
             check=check,
@@ -367,7 +365,7 @@ class GpSmcIterator(IteratorBase):
                 )
         return inputs
 
-    def _design_stage(self, run: SmcRun) -> Generator[GpSmcState, None, DesignRuns]:
+    def _design_stage(self, run: SmcRun) -> Generator[GpSmcState, None, Design]:
         """Stages 1-2: the Sobol design (reusing an earlier result's runs) and its runs."""
         opts = self.options
         n_all = opts.n_train + opts.n_test
@@ -381,20 +379,14 @@ class GpSmcIterator(IteratorBase):
         )
         reused = self._reusable(points, run.names)
         new = run.evaluate(points[len(reused) :])
-        run.evaluations = reused + new
-        loglik = run.log_likelihoods(run.evaluations)
+        loglik = run.log_likelihoods([*reused, *new])
         n_failed = int((~np.isfinite(loglik[len(reused) :])).sum())
         yield GpSmcState(
             "forward_runs",
             f"{len(new)} forward runs ({len(reused)} reused), {n_failed} failed",
             run.record("forward_runs", nfev=len(new), n_failed=n_failed, reused=len(reused)),
         )
-        return DesignRuns(
-            points=points,
-            log_likelihood=loglik,
-            status=[ev.status for ev in run.evaluations],
-            train_mask=np.arange(n_all) < opts.n_train,
-        )
+        return Design(points, loglik, np.arange(n_all) < opts.n_train, (*reused, *new), len(reused))
 
     def _fit_gp(
         self,
@@ -418,16 +410,15 @@ class GpSmcIterator(IteratorBase):
         restarts = opts.gp_restarts if start is None else min(1, opts.gp_restarts)
         warm = start if start and "components" in start else None  # a residual emulator's
         rng = np.random.default_rng(opts.seed if opts.gp_seed is None else opts.gp_seed)
-        link = None
+        link, note = None, ""
         if opts.surrogate != "log_likelihood":
-            link, residuals, why = residual_link(
-                records, None if run.noise is not None else run.sigmas, run.noise_n or run.count
-            )
+            sigmas = None if run.noise is not None else run.sigmas
+            link, residuals, why = residual_link(records, sigmas, run.noise_n(records))
             if link is None and opts.surrogate == "residuals":
                 raise ConfigError(f"the residual emulator cannot give L: {why}", "surrogate")
-            self.surrogate_note = "" if link else f"GP of L (residuals not usable: {why})"
+            note = "" if link else f"GP of L (residuals not usable: {why})"
             if link is None and opts.gradients == "tangents":
-                self.surrogate_note += "; the runs' tangents unused (no residual emulator)"
+                note += "; the runs' tangents unused (no residual emulator)"
         if link is not None:
             if opts.gradients == "tangents":
                 x, residuals = tangent_runs(x, residuals, records)
@@ -440,7 +431,7 @@ class GpSmcIterator(IteratorBase):
                 polish_iters=opts.gp_polish_iters,
             ).fit(x, residuals, rng=rng, start=warm, axes=axes, optimise=optimise or not warm)
         gp_start = None if warm else start  # a residual emulator's hyperparameters fit no GP of L
-        return GpSurrogate(
+        gp = GpSurrogate(
             ard=opts.ard,
             optimizer=opts.gp_optimizer,
             restarts=restarts,
@@ -450,15 +441,17 @@ class GpSmcIterator(IteratorBase):
             polish_iters=opts.gp_polish_iters,
             trend=opts.gp_trend,
         ).fit(x, y, rng=rng, start=gp_start, axes=axes, optimise=optimise or not gp_start)
+        gp.note = note
+        return gp
 
     def _refit(
-        self, run: SmcRun, design: DesignRuns, gp: Surrogate, post: SmcResult, floor: float
+        self, run: SmcRun, design: Design, gp: Surrogate, post: SmcResult, floor: float
     ) -> Surrogate:
         """The surrogate on every training run of ``design``, from ``gp``'s hyperparameters
         (a repaired check, :mod:`.check`); its kernel along ``post``'s axes with gp_axes =
         "posterior", the feasibility classifier refitted with failures = "classify"."""
         train = design.train_mask
-        records = [run.evaluations[i] for i in np.flatnonzero(train)]
+        records = design.training_records
         axes = np.atleast_2d(post.cov) if self.options.gp_axes == "posterior" else None
         y = floored(design.log_likelihood, floor)
         # a repair adds n_check runs: the hyperparameters stay, the surrogate is conditioned
@@ -467,7 +460,6 @@ class GpSmcIterator(IteratorBase):
         )
         if self.options.failures == "classify":
             new.feasibility = fit_feasibility(design.points[train], design.ok[train])
-        self.surrogate = new
         return new
 
     def _round_smc(
@@ -491,7 +483,7 @@ class GpSmcIterator(IteratorBase):
         ).run()
 
     def _surrogate_stage(
-        self, run: SmcRun, design: DesignRuns, gp: Surrogate, floor: float | None
+        self, run: SmcRun, design: Design, gp: Surrogate, floor: float | None
     ) -> Generator[GpSmcState, None, SurrogateFit]:
         """Stage 3: the GP on the successful training runs, its LOO and held-out errors
         (against L with the adaptive design's soft ``floor``, which the GP was trained on)."""
@@ -557,11 +549,10 @@ class GpSmcIterator(IteratorBase):
                 post: SmcResult = stop.value
                 break
             yield GpSmcState("smc", str(state), run.record("smc", **state.__dict__))
-        self.posterior = post
         return post
 
-    def _finish_failed(self, run: SmcRun, design: DesignRuns) -> GpSmcResult:
-        evaluations = run.evaluations
+    def _finish_failed(self, run: SmcRun, design: Design) -> GpSmcResult:
+        evaluations = design.records
         messages = sorted({ev.message for ev in evaluations if not ev.ok})[:3]
         n_bad = sum(not ev.ok for ev in evaluations)
         return GpSmcResult(
@@ -576,7 +567,7 @@ class GpSmcIterator(IteratorBase):
             n_x=run.n_x,
             mode=self.options.mode,
             priors=[p.describe() for p in run.inputs],
-            design=design,
+            design=design.result(),
             seconds=time.perf_counter() - run.t_start,
         )
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core.iteration import Evaluator
+from ...core.iteration import Evaluator, RunBook
 from ...core.likelihood import (
     gaussian_log_likelihood,
     log_likelihood_from_profile,
@@ -23,7 +23,7 @@ from ...core.likelihood import (
 from ...core.parameters import Parameter, Prior
 from ...core.problem import Evaluation, InverseProblem
 from ..surrogates.uncertainty import SurrogateUncertainty
-from .result import PosteriorCheck
+from .result import DesignRuns, PosteriorCheck
 
 FloatArray = NDArray[np.float64]
 
@@ -40,26 +40,91 @@ class GpSmcState:
         return f"[{self.stage}] {self.message}"
 
 
-@dataclass
+@dataclass(frozen=True)
+class Design:
+    """The design's runs so far, one forward-run record per point (issue 48: one run, one
+    record): the points (x then theta), L per run (-inf where it failed, what the surrogate is
+    trained on), which rows train the surrogate (False: a held-out test point) and the runs'
+    records themselves. The stages return a new one (:meth:`extended`) instead of appending to
+    a list beside the arrays, so a row's point, L and record cannot part."""
+
+    points: FloatArray  # (n, d)
+    log_likelihood: FloatArray  # (n,)
+    train_mask: NDArray[np.bool_]  # (n,)
+    records: tuple[Evaluation, ...]  # (n,)
+    #: how many of the leading records came from an earlier result (GpSmcIterator.reuse),
+    #: not from this run's evaluator
+    reused: int = 0
+
+    def __post_init__(self) -> None:
+        n = len(self.points)
+        if not (len(self.log_likelihood) == len(self.train_mask) == len(self.records) == n):
+            raise ValueError(
+                f"a design needs one L, mask entry and record per point: {n} points, "
+                f"{len(self.log_likelihood)} L, {len(self.train_mask)} mask entries, "
+                f"{len(self.records)} records"
+            )
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return np.isfinite(self.log_likelihood)
+
+    @property
+    def training_records(self) -> list[Evaluation]:
+        """The records of the training rows, in order (what a residual emulator is fitted
+        to, beside ``points[train_mask]``)."""
+        return [self.records[i] for i in np.flatnonzero(self.train_mask)]
+
+    def extended(
+        self, points: FloatArray, log_likelihood: FloatArray, records: Sequence[Evaluation]
+    ) -> Design:
+        """This design with runs at ``points`` appended as training rows."""
+        return replace(
+            self,
+            points=np.vstack([self.points, points]),
+            log_likelihood=np.concatenate([self.log_likelihood, log_likelihood]),
+            train_mask=np.concatenate([self.train_mask, np.ones(len(points), dtype=bool)]),
+            records=(*self.records, *records),
+        )
+
+    def result(self) -> DesignRuns:
+        """What the result keeps of it (:class:`~.result.DesignRuns`: the records are the
+        result's ``evaluations``)."""
+        return DesignRuns(
+            points=self.points,
+            log_likelihood=self.log_likelihood,
+            status=[ev.status for ev in self.records],
+            train_mask=self.train_mask,
+        )
+
+
+@dataclass(frozen=True)
 class SmcRun:
     """What the stages of one :meth:`~fbia.iterators.gp_smc.iterator.GpSmcIterator.steps`
-    share: the problem, the evaluator, the inputs (x then theta) and the design's records.
-    Its run counts (``nfev``, ``n_failed``, for the stages' messages) are kept by
-    :meth:`evaluate` alone; the result's are the framework's books."""
+    share, fixed for the run: the problem, the evaluator, the inputs (x then theta) and the
+    noise model. The runs made so far are the framework's book
+    (:class:`fbia.core.iteration.RunBook`, the evaluator ``drive`` hands to ``steps``; one is
+    put around any other evaluator): :attr:`runs`, :attr:`nfev`, :attr:`n_failed` read it,
+    and :meth:`evaluate` is the one place the stages ask for runs. ``history`` is the stages'
+    log (what they yield, in order)."""
 
     problem: InverseProblem
     evaluator: Evaluator
     inputs: list[Parameter]
     t_start: float
     history: list[dict[str, Any]] = field(default_factory=list)
-    evaluations: list[Evaluation] = field(default_factory=list)
-    _runs: list[int] = field(default_factory=lambda: [0, 0], repr=False)  # done, failed
+    book: RunBook = field(init=False, repr=False)
+    count: int | None = field(init=False)
+    noise: Parameter | None = field(init=False)
+    sigmas: list[float] = field(init=False)
 
     def __post_init__(self) -> None:
-        self.count = measurement_count(self.problem)
-        self.noise = noise_parameter(self.problem)
-        self.sigmas = [] if self.noise is not None else noise_levels(self.problem)
-        self.noise_n: int | None = self.count  # n of eq. 5 when sigma_N is inferred
+        book = self.evaluator if isinstance(self.evaluator, RunBook) else RunBook(self.evaluator)
+        object.__setattr__(self, "book", book)
+        object.__setattr__(self, "count", measurement_count(self.problem))
+        noise = noise_parameter(self.problem)
+        object.__setattr__(self, "noise", noise)
+        object.__setattr__(self, "sigmas", [] if noise is not None else noise_levels(self.problem))
 
     @property
     def sampled(self) -> list[Parameter]:
@@ -74,18 +139,33 @@ class SmcRun:
     def sampled_priors(self) -> list[Prior]:
         return [p.prior for p in self.sampled if p.prior is not None]
 
+    def noise_n(self, records: Sequence[Evaluation] = ()) -> int | None:
+        """n of eq. 5 when sigma_N is inferred: the measure's count, else the residual count
+        of a successful run (of ``records``, else of the runs so far; the same for every run
+        of one measure); None before any run succeeded."""
+        if self.count is not None:
+            return self.count
+        for ev in (*records, *self.runs):
+            if ev.ok and ev.residuals is not None:
+                return squared_distance(ev)[1]
+        return None
+
     def joint(
-        self, design_l: Callable[[FloatArray], FloatArray]
+        self, design_l: Callable[[FloatArray], FloatArray], records: Sequence[Evaluation] = ()
     ) -> Callable[[FloatArray], FloatArray]:
         """L on the posterior's inputs from the design quantity (L of x and theta, or its
-        profile over sigma_N, which then is the last column)."""
+        profile over sigma_N, which then is the last column; its n from ``records``, the
+        surrogate's training runs, or from the runs ``design_l`` makes)."""
         if self.noise is None:
             return design_l
         d = len(self.inputs)
 
         def log_likelihood(z: FloatArray) -> FloatArray:
-            assert self.noise_n is not None
-            return log_likelihood_from_profile(design_l(z[:, :d]), self.noise_n, z[:, d])
+            profile = design_l(z[:, :d])
+            n = self.noise_n(records)
+            if n is None:  # no run succeeded yet: every profile is -inf
+                return np.full(len(z), -np.inf)
+            return log_likelihood_from_profile(profile, n, z[:, d])
 
         return log_likelihood
 
@@ -109,20 +189,22 @@ class SmcRun:
     def evaluate(self, x: FloatArray) -> list[Evaluation]:
         """Forward runs at the rows of ``x`` (the one place the stages ask for runs)."""
         points = [dict(zip(self.names, map(float, row), strict=True)) for row in x]
-        evs = list(self.evaluator.evaluate(self.problem, points))
-        self._runs[0] += len(evs)
-        self._runs[1] += sum(not ev.ok for ev in evs)
-        return evs
+        return list(self.book.evaluate(self.problem, points))
+
+    @property
+    def runs(self) -> list[Evaluation]:
+        """Every run this run has made, in order (the book's records)."""
+        return self.book.records
 
     @property
     def nfev(self) -> int:
         """Forward runs asked for so far."""
-        return self._runs[0]
+        return self.book.nfev
 
     @property
     def n_failed(self) -> int:
         """Of them, the failed ones."""
-        return self._runs[1]
+        return self.book.n_failed
 
     def log_likelihoods(self, evaluations: Sequence[Evaluation]) -> FloatArray:
         """What the surrogate models, per record (-inf where the run failed): Paper B eq. 5,
@@ -131,11 +213,8 @@ class SmcRun:
             return np.array(
                 [gaussian_log_likelihood(ev, self.sigmas, self.count) for ev in evaluations]
             )
-        if self.noise_n is None:  # n of the measure: the residual count of a successful run
-            ok = [ev for ev in evaluations if ev.ok and ev.residuals is not None]
-            if ok:
-                self.noise_n = squared_distance(ok[0])[1]
-        return np.array([profile_log_likelihood(ev, self.noise_n) for ev in evaluations])
+        n = self.noise_n(evaluations)
+        return np.array([profile_log_likelihood(ev, n) for ev in evaluations])
 
     def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
         """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have

@@ -46,6 +46,9 @@ class ExtrapolationGuard:
     #: where the forward model runs (:mod:`~.feasibility`; None: every run succeeded, or
     #: gp_smc's ``failures = "ignore"``)
     feasibility: Feasibility | None = None
+    #: why this surrogate stands in for the one asked for (gp_smc's ``surrogate = "auto"``
+    #: falling back to the GP of L when the residuals cannot give it), "" otherwise
+    note: str = ""
 
     def predict_mean(self, x: ArrayLike) -> NDArray[np.float64]:
         raise NotImplementedError

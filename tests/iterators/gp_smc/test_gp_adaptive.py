@@ -300,6 +300,7 @@ def test_sample_paths_that_move_the_posterior_are_repaired_with_runs(exact_2d, m
     repair (check_repairs = 0) no such runs are made at all."""
     import fbia.iterators.gp_smc.adaptive_loop as loop_module
     import fbia.iterators.gp_smc.result as result_module
+    from fbia.iterators.gp_smc.iterator import GpSmcIterator
     from fbia.iterators.surrogates.uncertainty import SurrogateUncertainty
 
     problem, _, _ = exact_2d
@@ -307,12 +308,24 @@ def test_sample_paths_that_move_the_posterior_are_repaired_with_runs(exact_2d, m
     opts["round_particles"] = 400
     plain = fbia.iterator("gp_smc", **opts).run(problem)
     assert plain.status == "completed" and not plain.uncertainty.moves_posterior
+    fit_gp, fitted = GpSmcIterator._fit_gp, []
+
+    def spy(self, run, x, y, start, records, *args):  # the points and records of every fit
+        fitted.append((np.array(x), [[ev.x[n] for n in run.names] for ev in records]))
+        return fit_gp(self, run, x, y, start, records, *args)
+
     with monkeypatch.context() as patch:
         patch.setattr(loop_module, "_gp_unsure", lambda *args: False)  # the rounds as before
         patch.setattr(SurrogateUncertainty, "moves_posterior", property(lambda self: True))
         patch.setattr(result_module, "RELIABLE_RMSE", 1e9)  # every check passes: only paths
         none = fbia.iterator("gp_smc", check_repairs=0, **opts).run(problem)
+        patch.setattr(GpSmcIterator, "_fit_gp", spy)
         repaired = fbia.iterator("gp_smc", **opts).run(problem)
+    # one run, one record (issue 48): every fit, the refits after the repairs too, trains on
+    # the records of its own points (a repair's, not the passed check's before it)
+    assert len(fitted) >= 3
+    for x, at in fitted:
+        np.testing.assert_array_equal(np.array(at), x)
     assert none.status == "unreliable" and none.failed_checks == []
     assert none.nfev == plain.nfev - 8 * len(plain.failed_checks)  # no runs at its draws
     assert repaired.status == "unreliable" and len(repaired.failed_checks) == 2

@@ -141,3 +141,6 @@ def test_gp_smc_puts_the_model_check_into_its_status(sigma_n, e_bounds, options,
     else:
         assert result.message.startswith(cause) and result.status == "unreliable"
         assert not result.success and result.model_check.causes
+    # the runs the check reads are the framework's book: in mode = "direct" the SMC's own
+    # runs (a study's design records before issue 48, so none there)
+    assert result.model_check.best_fit is not None
