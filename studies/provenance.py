@@ -8,7 +8,7 @@ import platform
 import socket
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -104,15 +104,20 @@ def provenance(
     }
 
 
-@dataclass
+@dataclass(frozen=True)
 class RunOutputs:
     """What a session wrote beside its result: the files, the discrepancy at the result's
-    ``x`` (one table row per observation) and the warnings of the extras (filled as they are
-    made)."""
+    ``x`` (one table row per observation) and the warnings of the extras; a session's extras
+    make a new one after each file (:meth:`adding`)."""
 
-    files: dict[str, Any] = field(default_factory=dict)
+    files: Mapping[str, Any] = field(default_factory=dict)
     discrepancy: list[dict[str, Any]] | None = None
-    warnings: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
+
+    def adding(self, files: Mapping[str, Any], warning: str | None = None) -> RunOutputs:
+        """These outputs with more ``files`` and a ``warning`` (None: none)."""
+        warnings = self.warnings if warning is None else (*self.warnings, warning)
+        return replace(self, files={**self.files, **files}, warnings=warnings)
 
 
 @dataclass
@@ -126,4 +131,11 @@ class RunRecord:
     outputs: RunOutputs = field(default_factory=RunOutputs)
 
     def to_dict(self) -> dict[str, Any]:
-        return {**self.made, "problem": self.problem, **asdict(self.outputs)}
+        outputs = self.outputs
+        return {
+            **self.made,
+            "problem": self.problem,
+            "files": dict(outputs.files),
+            "discrepancy": outputs.discrepancy,
+            "warnings": list(outputs.warnings),  # as result.json reads back
+        }

@@ -10,10 +10,10 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from ..core.errors import ConfigError, Terminated
 from ..core.iteration import drive
@@ -35,6 +35,9 @@ from .tables import discrepancy_rows
 __all__ = ["STORE_NAME", "forward_study", "run_study", "study_seeds"]
 
 logger = logging.getLogger(__name__)
+
+#: a result and the same kind of result with its run record (:func:`_finish`)
+R = TypeVar("R", bound=Result)
 
 #: ``run_study``'s ``log_level``: what fbia.log records
 LOG_LEVELS = {"info": logging.INFO, "debug": logging.DEBUG}
@@ -105,12 +108,12 @@ def _forward_locked(
     )
     outputs = RunOutputs()
     if ev.ok and ev.solution is not None:
-        outputs.discrepancy = discrepancy_rows(problem, ev.solution, study.measure_name)
-        files = outputs.files = _write_solution(study, ev.solution, out, "forward run")
+        files = _write_solution(study, ev.solution, out, "forward run")
+        outputs = RunOutputs(files, discrepancy_rows(problem, ev.solution, study.measure_name))
         echo(f"interfaces: {len(files['interfaces'])} files in {out / 'interfaces'}")
         for name, path in files.get("fields", {}).items():
             echo(f"field {name}: {path}")
-    text = _finish(study, result, out, started, echo, outputs=outputs)
+    result, text = _finish(study, result, out, started, echo, outputs=outputs)
     times = SessionTimes(time.perf_counter() - t0, _forward_time(result), 1)
     _reports(study, result, out, text, times, echo, figures=_pngs(outputs.files))
     return result
@@ -225,7 +228,7 @@ def _run_draws(
     with OutputLock(out, "fbia run"):
         _write_oct_records(study, out, echo)
         result = run_draws(study, out, store, run_one, echo)
-        text = _finish(study, result, out, started, echo)
+        result, text = _finish(study, result, out, started, echo)
         wall = time.perf_counter() - t0
         times = SessionTimes(wall, result.forward_time, result.nfev)
         rows = None
@@ -251,9 +254,10 @@ def _write_oct_records(study: Study, out: Path, echo: Echo) -> None:
         )
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Session:
-    """What the stages of one ``fbia run`` session share."""
+    """What the stages of one ``fbia run`` session read, fixed once the evaluator is made
+    (:meth:`with_evaluator`: a new session with its description)."""
 
     study: Study
     problem: InverseProblem
@@ -261,10 +265,16 @@ class _Session:
     out: Path
     started: str
     echo: Echo
-    executor_info: dict[str, Any] = field(default_factory=dict)
+    executor_info: Mapping[str, Any] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
 
-    def finish(self, result: Result, outputs: RunOutputs | None = None, quiet: bool = False) -> str:
+    def with_evaluator(self, described: Mapping[str, Any]) -> _Session:
+        """This session with what the evaluator says of itself (workers, a Dask cluster)."""
+        return replace(self, executor_info={**self.executor_info, **described})
+
+    def finish(
+        self, result: Result, outputs: RunOutputs | None = None, quiet: bool = False
+    ) -> tuple[Result, str]:
         return _finish(
             self.study,
             result,
@@ -301,7 +311,14 @@ def _run_stored(
     )
     store.begin_session(session.executor_info, study.sha256)
     try:
-        result = _evaluate(session, executor, log, listener, retry_failed)
+        evaluator = evaluator_for(
+            executor, out, store=store, listener=listener, retry_failed=retry_failed
+        )
+        try:
+            session = session.with_evaluator(evaluator.describe())
+            result = _evaluate(session, executor.kind, evaluator, log)
+        finally:
+            evaluator.close()
     except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
         _save_partial(session, log, exc)
         raise
@@ -318,11 +335,12 @@ def _run_stored(
     # the result is written with what they had made.
     outputs = RunOutputs()
     try:
-        _extras(session, result, log, outputs)
+        for made in _extras(session, result, log):
+            outputs = made
     except BaseException:
         session.finish(result, outputs, quiet=True)
         raise
-    text = session.finish(result, outputs)
+    result, text = session.finish(result, outputs)
     wall = time.perf_counter() - session.t0
     times = SessionTimes(wall, _forward_time(result), result.nfev, totals["reused"])
     _reports(study, result, out, text, times, echo, figures=_pngs(outputs.files))
@@ -407,36 +425,24 @@ def _save_partial(session: _Session, log: EvaluationLog, exc: BaseException) -> 
             session.echo(f"warning: {what} failed: {' '.join(str(err).split())}")
 
 
-def _evaluate(
-    session: _Session,
-    executor: ExecutorSpec,
-    log: EvaluationLog,
-    listener: RunProgress,
-    retry_failed: bool,
-) -> Any:
-    """Make the evaluator (say where a Dask cluster is) and drive the iterator with it."""
+def _evaluate(session: _Session, kind: str, evaluator: Any, log: EvaluationLog) -> Any:
+    """Drive the iterator with ``evaluator`` (of the executor ``kind``; say where a Dask
+    cluster is)."""
     study, echo, info = session.study, session.echo, session.executor_info
     progress = _Progress(echo, log, session.problem.names)
-    evaluator = evaluator_for(
-        executor, session.out, store=session.store, listener=listener, retry_failed=retry_failed
-    )
-    try:
-        info.update(evaluator.describe())
-        if executor.kind == "dask":
-            where = (
-                f"the Dask scheduler at {info['scheduler']}"
-                if info["cluster"] == "scheduler"
-                else f"a Dask {info['cluster']} cluster ({info['scheduler']})"
-            )
-            echo(
-                f"{where}: {info['workers']} worker thread(s), ready after "
-                f"{info['startup_seconds']:.3g} s"
-            )
-        assert study.iterator is not None
-        name = study.iterator_name or ""
-        result = _drive(study.iterator, session.problem, evaluator, progress, name)
-    finally:
-        evaluator.close()
+    if kind == "dask":
+        where = (
+            f"the Dask scheduler at {info['scheduler']}"
+            if info["cluster"] == "scheduler"
+            else f"a Dask {info['cluster']} cluster ({info['scheduler']})"
+        )
+        echo(
+            f"{where}: {info['workers']} worker thread(s), ready after "
+            f"{info['startup_seconds']:.3g} s"
+        )
+    assert study.iterator is not None
+    name = study.iterator_name or ""
+    result = _drive(study.iterator, session.problem, evaluator, progress, name)
     progress.last()
     return result
 
@@ -463,50 +469,57 @@ def _oct_verdict(study: Study, result: Result) -> Result:
     return replace(result, status="unreliable", message=f"{result.message}; {'; '.join(notes)}")
 
 
-def _extras(session: _Session, result: Result, log: EvaluationLog, outputs: RunOutputs) -> None:
-    """The files beside the result, into ``outputs`` as they are made: the interfaces and
-    discrepancy at the result's x (one more forward run), the iterator's own plots, the
-    evaluations plot; what failed."""
+def _extras(session: _Session, result: Result, log: EvaluationLog) -> Iterator[RunOutputs]:
+    """The files beside the result, made one after the other: the interfaces and discrepancy
+    at the result's x (one more forward run), the iterator's own plots, the evaluations plot.
+    Yields what has been made so far after each (a new :class:`RunOutputs`, the last one all
+    of it), so that a session stopped during them writes its result with what they made; a
+    file that fails is a warning in them, never fatal."""
     study, problem, out, echo = session.study, session.problem, session.out, session.echo
-    files, warnings = outputs.files, outputs.warnings
+    made = RunOutputs()
 
-    def extra(what: str, make: Callable[[], Any]) -> Any:
+    def attempt(what: str, make: Callable[[], Any]) -> tuple[Any, str | None]:
         try:
-            return make()
+            return make(), None
         except Exception as exc:  # a plugin's plotting or the last run: keep the result
-            warnings.append(f"{what} failed: {type(exc).__name__}: {exc}")
-            echo(f"warning: {warnings[-1]}")
-            return None
+            warning = f"{what} failed: {type(exc).__name__}: {exc}"
+            echo(f"warning: {warning}")
+            return None, warning
 
     if result.x and all(n in result.x for n in problem.names):
         best = problem.evaluate(dict(result.x), workdir=out / "best", keep_solution=True)
         if best.ok and best.solution is not None:
             solution = best.solution
-            outputs.discrepancy = discrepancy_rows(problem, solution, study.measure_name)
+            rows = discrepancy_rows(problem, solution, study.measure_name)
+            made = replace(made, discrepancy=rows)
+            yield made
             title = f"{study.iterator_name} result"
-            written = extra(
+            written, warning = attempt(
                 "writing the interfaces", lambda: _write_solution(study, solution, out, title)
             )
-            files.update(written or {})
+            made = made.adding(written or {}, warning)
         else:
-            warnings.append(f"the forward run at the result's x {best.status}: {best.message}")
-            echo(f"warning: {warnings[-1]}")
+            warning = f"the forward run at the result's x {best.status}: {best.message}"
+            echo(f"warning: {warning}")
+            made = made.adding({}, warning)
+        yield made
     if not study.figures:  # e.g. one noise draw of many (fbia.studies.draws)
         return
     write_plots = getattr(study.iterator, "write_plots", None)
     if callable(write_plots):  # an iterator's own plots: write_plots(result, problem, folder)
-        made = extra("the iterator's plots", lambda: write_plots(result, problem, out / "plots"))
-        if made:
-            files["iterator plots"] = [str(p) for p in made]
+        plots, warning = attempt(
+            "the iterator's plots", lambda: write_plots(result, problem, out / "plots")
+        )
+        made = made.adding({"iterator plots": [str(p) for p in plots]} if plots else {}, warning)
+        yield made
     names, units = problem.names, [p.unit for p in problem.parameters]
-    made_ev = extra(
+    plot, warning = attempt(
         "the evaluations plot",
         lambda: plot_evaluations(
             out / "plots" / "evaluations.png", log.records, names, units, problem.truth
         ),
     )
-    if made_ev is not None:
-        files["evaluations plot"] = str(made_ev)
+    yield made.adding({} if plot is None else {"evaluations plot": str(plot)}, warning)
 
 
 def _announce_resume(
@@ -619,7 +632,7 @@ def _write_solution(study: Study, solution: Any, out: Path, title: str) -> dict[
 
 def _finish(
     study: Study,
-    result: Result,
+    result: R,
     out: Path,
     started: str,
     echo: Echo,
@@ -627,10 +640,11 @@ def _finish(
     quiet: bool = False,
     store: StudyStore | None = None,
     outputs: RunOutputs | None = None,
-) -> str:
+) -> tuple[R, str]:
     """The run record (:class:`RunRecord`: provenance, problem, ``outputs``), written once with
     the result as ``result.json``; the iterator's files; ``report.txt``, echoed unless
-    ``quiet``.  Returns the text of ``report.txt``."""
+    ``quiet``.  Returns the result with its record (a copy: the iterator's result is not
+    changed) and the text of ``report.txt``."""
     problem = study.problem
     outputs = outputs or RunOutputs()
     made = make_provenance(
@@ -646,7 +660,7 @@ def _finish(
         finished=now(),
         store=None if store is None else store.describe(),
     )
-    result.provenance = RunRecord(made, problem.describe(), outputs).to_dict()
+    result = replace(result, provenance=RunRecord(made, problem.describe(), outputs).to_dict())
     result.save(out / "result.json")
     write_files = getattr(study.iterator, "write_files", None)
     if callable(write_files):
@@ -660,7 +674,7 @@ def _finish(
     (out / "report.txt").write_text(text + "\n", encoding="utf-8")
     if not quiet:
         echo(text)
-    return text
+    return result, text
 
 
 def study_seeds(study: Study) -> dict[str, int | None]:
