@@ -126,6 +126,14 @@ def test_bad_input() -> None:
     for match, outline in bad_outlines.items():
         with pytest.raises(ConfigError, match=match):
             _ = CutFemFpiForwardModel(outline=outline).solver
+    # a named outline, as ale_fsi takes it (the poroelastic example: "paper_a_facts"); an
+    # unknown name is named in the error with the names there are
+    from fbia.plugins.fem.outlines import NAMED_OUTLINES
+
+    named = CutFemFpiForwardModel(outline="paper_a_facts")._outline()
+    np.testing.assert_array_equal(named, np.array(NAMED_OUTLINES["paper_a_facts"]))
+    with pytest.raises(ConfigError, match="unknown outline 'paper_b'; named outlines: fig2"):
+        CutFemFpiForwardModel(outline="paper_b")
 
 
 def test_protocol_conformance(tmp_path) -> None:  # type: ignore[no-untyped-def]
