@@ -85,8 +85,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
+    change = (
+        "a change of the study file after the files it extends are merged (repeatable): "
+        "section.key=value, the value in TOML (e.g. iterator.options.seed=3, "
+        "parameters.0.bounds=[100.0,900.0])"
+    )
     v = sub.add_parser("validate", help="check a study file without running the model")
     v.add_argument("study", metavar="FILE", help="study file (TOML)")
+    v.add_argument(
+        "--set", dest="changes", action="append", default=[], metavar="KEY=VALUE", help=change
+    )
 
     f = sub.add_parser("forward", help="one forward run and its discrepancy table")
     f.add_argument("study", metavar="FILE", help="study file (TOML)")
@@ -96,7 +104,8 @@ def _parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="a parameter value (repeatable); default: 'initial', else mid-bounds",
+        help="a parameter value (repeatable; default: 'initial', else mid-bounds), or with a "
+        "dotted name section.key=value " + change[0].lower() + change[1:],
     )
     f.add_argument(
         "--output", metavar="DIR", type=_folder, help="output folder (default: <output>/forward)"
@@ -104,6 +113,9 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run the study and write its output folder")
     r.add_argument("study", metavar="FILE", help="study file (TOML)")
+    r.add_argument(
+        "--set", dest="changes", action="append", default=[], metavar="KEY=VALUE", help=change
+    )
     r.add_argument(
         "--workers",
         type=int,
@@ -240,7 +252,7 @@ def _fail(message: str, status: int) -> int:
 def _load(args: argparse.Namespace, build: bool = True) -> Any:
     from .study_file import load_study
 
-    return load_study(args.study, build=build)
+    return load_study(args.study, build=build, overrides=getattr(args, "changes", ()))
 
 
 def _validate(args: argparse.Namespace) -> int:
@@ -281,7 +293,9 @@ def _parse_values(items: Sequence[str]) -> dict[str, float]:
 
 
 def _forward(args: argparse.Namespace) -> int:
-    values = _parse_values(args.values)
+    # a dotted name changes the study file (as run's --set), a plain one is a parameter's value
+    args.changes = [item for item in args.values if "." in item.partition("=")[0]]
+    values = _parse_values([item for item in args.values if item not in args.changes])
     study = _load(args)
     study.start_point(values)  # unknown names are user errors before anything runs
     from .runner import forward_study

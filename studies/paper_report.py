@@ -38,7 +38,6 @@ import json
 import math
 import os
 import re
-import tomllib
 import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -52,6 +51,7 @@ from .paper import DRAWS_RULE, KINDS, Comparison, compare, verdict
 from .provenance import source_commit
 from .study import Study
 from .study_report import MARKDOWN_NAME, SessionTimes
+from .study_sources import read_sources
 
 __all__ = [
     "PaperRecord",
@@ -486,9 +486,9 @@ def _provenance_line(rec: PaperRecord, changed: list[str]) -> str:
 
 def _has_paper(study_file: Path) -> bool:
     """Whether a study file (still) has a ``[paper]`` table."""
-    try:
-        return "paper" in tomllib.loads(study_file.read_text(encoding="utf-8"))
-    except (OSError, ValueError, UnicodeDecodeError):
+    try:  # a variant's [paper] may be its base's (fbia.studies.study_sources)
+        return "paper" in read_sources(study_file).raw
+    except (ConfigError, OSError, ValueError, UnicodeDecodeError):
         return False
 
 

@@ -61,6 +61,8 @@ def provenance(
     study_name: str | None = None,
     study_text: str | None = None,
     study_sha256: str | None = None,
+    study_bases: Sequence[Mapping[str, str]] = (),
+    study_overrides: Sequence[str] = (),
     seed: int | None = None,
     seeds: Mapping[str, Any] | None = None,
     executor: Mapping[str, Any] | None = None,
@@ -72,7 +74,8 @@ def provenance(
     """Everything needed to tell later how a result was made.
 
     fbia, Python, numpy and scipy versions; the plugins used (registry name, class,
-    distribution, version); the study file's path, text and SHA-256; the study's seed and
+    distribution, version); the study file's path, text and SHA-256, the texts of the files it
+    extends and its ``--set`` changes (the SHA-256 then over all of them); the study's seed and
     every seed derived from it (``seeds``); the executor and its settings; host, platform,
     command line; start and end time (UTC); the store (path, model key, runs per status,
     the sessions that made them: a resumed result tells which runs came from which session).
@@ -91,6 +94,9 @@ def provenance(
         "study_file": None if study_path is None else str(study_path),
         "study_sha256": study_sha256,
         "study_text": study_text,
+        # the files the study extends (path, text; nearest first) and its --set changes
+        "study_bases": [dict(b) for b in study_bases],
+        "study_overrides": list(study_overrides),
         "seed": seed,
         "seeds": dict(seeds or {}),
         "executor": dict(executor or {}),

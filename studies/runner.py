@@ -652,6 +652,8 @@ def _finish(
         study_name=study.name,
         study_text=study.text,
         study_sha256=study.sha256,
+        study_bases=[{"path": b.path, "text": b.text} for b in study.bases],
+        study_overrides=study.overrides,
         seed=study.seed,
         seeds=study_seeds(study),
         executor=executor or {"kind": "serial", "workers": 1},

@@ -22,6 +22,7 @@ from ..core.problem import InverseProblem
 from ..core.protocols import Discrepancy, ForwardModel, InverseIterator
 from ..execution.executors import ExecutorSpec
 from .paper import PaperSpec
+from .study_sources import StudySource
 
 if TYPE_CHECKING:
     from .study_oct import OctRecord
@@ -83,7 +84,10 @@ class Study:
     executor: ExecutorSpec
     raw: dict[str, Any] = field(repr=False)
     text: str = field(repr=False)
-    sha256: str = ""
+    sha256: str = ""  # of the file, or of it, its bases and the --set changes together
+    #: the files it extends, nearest first, and the ``--set`` changes (:mod:`.study_sources`)
+    bases: tuple[StudySource, ...] = field(default=(), repr=False)
+    overrides: tuple[str, ...] = ()
     paper: PaperSpec | None = field(default=None, repr=False)  # [paper]: published numbers
     figures: bool = True  # False: no plots (each noise draw of fbia.studies.draws)
     # the segmentation record of each OCT scan, written by the runner under the output lock

@@ -14,6 +14,9 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
                                 # <output>/store.sqlite): studies of one model that name the
                                 # same store share its forward runs (one study at a time;
                                 # --fresh refuses it then); a regular file, no control characters
+    extends = "base.toml"       # optional: read that study file first and merge this one's
+                                # tables into it (fbia.studies.study_sources; --set changes a
+                                # value on the command line)
 
     [model]                     # a forward model from the registry (`fbia plugins`)
     name = "analytic_mound_2d"
@@ -106,10 +109,8 @@ declared as paths (``Path`` fields of a plugin's ``Options``, e.g. a forward mod
 
 from __future__ import annotations
 
-import hashlib
 import math
 import stat
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -145,6 +146,7 @@ from .study_schema import (
     kind_of,
     parse_section,
 )
+from .study_sources import StudySources, read_sources
 
 if TYPE_CHECKING:
     from .study_oct import OctRecord
@@ -171,7 +173,12 @@ SECTIONS: dict[str, str] = {
 
 
 # -- reading -----------------------------------------------------------------------------------
-def load_study(path: str | Path, registry: Registry | None = None, build: bool = True) -> Study:
+def load_study(
+    path: str | Path,
+    registry: Registry | None = None,
+    build: bool = True,
+    overrides: Sequence[str] = (),
+) -> Study:
     """Read and check a study file.
 
     Parameters
@@ -183,6 +190,9 @@ def load_study(path: str | Path, registry: Registry | None = None, build: bool =
     build
         Also build :attr:`Study.problem` now (runs the model for ``[synthetic]`` data).
         ``False`` checks everything that needs no forward run.
+    overrides
+        ``section.key=value`` changes after the file and the bases it extends are merged
+        (``fbia run --set``; :mod:`fbia.studies.study_sources`).
 
     Raises
     ------
@@ -190,22 +200,8 @@ def load_study(path: str | Path, registry: Registry | None = None, build: bool =
         For any mistake, with one line naming the file and the key.
     """
     path = Path(path)
-    file = str(path)
-    if not path.is_file():
-        raise ConfigError("study file not found" if not path.exists() else "not a file", file)
-    raw_bytes = path.read_bytes()
-    try:
-        text = raw_bytes.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", file) from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"TOML syntax error: {exc}", file) from None
-    except RecursionError:  # tomllib recurses once per level of nesting
-        message = "TOML nested too deeply (arrays or tables in one another)"
-        raise ConfigError(message, file) from None
-    study = _Reader(path, raw, registry or default_registry()).read(text, raw_bytes)
+    sources = read_sources(path, overrides)
+    study = _Reader(path, sources.raw, registry or default_registry()).read(sources)
     if build:
         _ = study.problem
     return study
@@ -357,7 +353,7 @@ class _Reader:
         return out
 
     # -- sections ------------------------------------------------------------------------
-    def read(self, text: str, raw_bytes: bytes) -> Study:
+    def read(self, sources: StudySources) -> Study:
         raw = self.raw
         unknown = [k for k in raw if k not in SECTIONS]
         if unknown:
@@ -474,8 +470,10 @@ class _Reader:
             iterator_name=iterator_name,
             executor=executor,
             raw=raw,
-            text=text,
-            sha256=hashlib.sha256(raw_bytes).hexdigest(),
+            text=sources.text,
+            sha256=sources.sha256,
+            bases=sources.bases,
+            overrides=sources.overrides,
             paper=paper,
             oct_records=tuple(self.oct_records),
         )

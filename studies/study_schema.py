@@ -196,6 +196,9 @@ class StudySection(Section):
     seed: Annotated[Integer, Field(ge=0)] = 0
     output: Folder = "output"
     store: FileName | None = None  # the study store's file; default <output>/store.sqlite
+    # a study file this one extends (its tables merged under this one's, relative to this
+    # file; fbia.studies.study_sources): read before the sections, not a setting of the study
+    extends: FileName | None = None
 
 
 class LikelihoodSection(Section):
@@ -413,7 +416,19 @@ def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "fbia study file",
         "type": "object",
-        "properties": properties,
-        "required": ["model"],
+        # a variant ([study] extends) takes what it leaves out from its base: its tables are
+        # checked for names and types, what a whole study must have only without extends
+        "properties": _optional(properties),
+        "if": {"not": {"required": ["study"], "properties": {"study": {"required": ["extends"]}}}},
+        "then": {"required": ["model"], "properties": properties},
         "additionalProperties": False,
     }
+
+
+def _optional(schema: Any) -> Any:
+    """``schema`` without any ``required`` list (a variant's partial tables)."""
+    if isinstance(schema, dict):
+        return {k: _optional(v) for k, v in schema.items() if k != "required"}
+    if isinstance(schema, list):
+        return [_optional(v) for v in schema]
+    return schema

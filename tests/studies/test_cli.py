@@ -23,6 +23,7 @@ import fbia
 from fbia.core.registry import Registry
 from fbia.studies import study_file as study_module
 from fbia.studies.cli import main
+from fbia.studies.study_sources import read_sources
 
 FBIA = Path(sys.executable).parent / "fbia"
 
@@ -445,12 +446,21 @@ def test_the_json_schema_accepts_every_example_and_refuses_a_typo(capsys):
     studies = [
         f
         for f in sorted(root.rglob("*.toml"))
-        if "output" not in f.parts[-2] and "model" in tomllib.loads(f.read_text())
+        if "output" not in f.parts[-2] and "model" in read_sources(f).raw
     ]
     assert len(studies) > 30
-    for f in studies:
-        errors = list(validator.iter_errors(tomllib.loads(f.read_text())))
-        assert not errors, f"{f}: {errors[0].message}"
+    for f in studies:  # the file as an editor sees it (a variant too), and merged
+        for table in (tomllib.loads(f.read_text()), read_sources(f).raw):
+            errors = list(validator.iter_errors(table))
+            assert not errors, f"{f}: {errors[0].message}"
+    assert list(validator.iter_errors({"study": {"name": "no model, no base"}}))
+    # a variant's tables are partial, and still checked for names and types
+    variant = {"study": {"extends": "base.toml"}, "synthetic": {"noise_std": 0.01}}
+    assert not list(validator.iter_errors(variant))
+    assert list(validator.iter_errors({**variant, "synthetc": {}}))
+    assert list(validator.iter_errors({**variant, "synthetic": {"noise_std": "high"}}))
+    whole = tomllib.loads(STUDY)
+    assert list(validator.iter_errors({**whole, "synthetic": {"noise_std": 0.01}}))  # no truth
     assert not list(validator.iter_errors(tomllib.loads(STUDY)))
     typo = tomllib.loads(STUDY.replace("[executor]", "[executer]"))
     assert any("executer" in e.message for e in validator.iter_errors(typo))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 
 import numpy as np
 import pytest
@@ -17,12 +16,13 @@ from fbia.iterators.gp_smc.result import DesignRuns, GpSmcResult, ParticlePoster
 from fbia.studies.cli import main
 from fbia.studies.paper import KINDS, compare, lookup, read_paper
 from fbia.studies.paper_report import PaperRecord, comparison_table, rules_table, write_summary
+from fbia.studies.study_sources import read_sources
 
 EXAMPLES = ROOT / "examples"
 PAPER_STUDIES = sorted(
     p
     for p in [*EXAMPLES.glob("paper_*/*/*.toml"), *EXAMPLES.glob("growth/*.toml")]
-    if "paper" in tomllib.loads(p.read_text())
+    if "paper" in read_sources(p).raw
 )
 
 PAPER = """
@@ -565,7 +565,7 @@ def test_a_paper_json_of_the_per_row_rules_is_listed_stale(tmp_path):
 @pytest.mark.parametrize("path", PAPER_STUDIES, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_the_paper_examples_tables_read_under_the_kinds(path):
     """Every [paper] table of examples/paper_*: kinds only, each row a kind's rule."""
-    spec = read_paper(tomllib.loads(path.read_text())["paper"], str(path))
+    spec = read_paper(read_sources(path).raw["paper"], str(path))
     assert spec.values and all(v.kind in KINDS for v in spec.values)
 
 
