@@ -136,9 +136,9 @@ def adaptive_design(
         f"{opts.n_train} runs",
         run.record("design", design="adaptive", n_initial=n_initial, n_test=opts.n_test),
     )
-    evaluations = run.evaluate(start)
+    evaluations, loglik = run.runs_at(start)
     train = np.arange(len(start)) < n_initial
-    design = Design(start, run.log_likelihoods(evaluations), train, tuple(evaluations))
+    design = Design(start, loglik, train, tuple(evaluations))
     yield GpSmcState(
         "forward_runs",
         f"{len(evaluations)} forward runs, {run.n_failed} failed",
@@ -217,8 +217,7 @@ def adaptive_design(
             floor,
             "optimised" if optimise else "kept",
         )
-        new = run.evaluate(batch)
-        new_loglik = run.log_likelihoods(new)
+        new, new_loglik = run.runs_at(batch)
         check = validation_error(gp, batch[:n_draws], new_loglik[:n_draws])
         design = design.extended(batch, new_loglik, new)
         last = (post, check.centred if check.n >= 2 else math.inf)

@@ -60,8 +60,7 @@ def posterior_check(
     The held-out Sobol points measure the error over the whole box; what decides whether the
     posterior is right is the error where the posterior mass is."""
     x = distinct_draws(post, n_check, rng)[:, : len(run.inputs)]
-    evs = run.evaluate(x)
-    loglik = run.log_likelihoods(evs)
+    evs, loglik = run.runs_at(x)
     ok = np.isfinite(loglik)
     err = gp.predict_mean(x[ok]) - loglik[ok]
     n_ok = int(ok.sum())

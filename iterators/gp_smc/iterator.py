@@ -102,7 +102,7 @@ from .result import (
     SmcSummary,
     SurrogateFit,
 )
-from .run import Design, GpSmcState, SmcRun, log_prior, run_status
+from .run import Checked, Design, Fitted, GpSmcState, SmcRun, log_prior, run_status
 
 FloatArray = NDArray[np.float64]
 
@@ -146,6 +146,22 @@ class GpSmcIterator(IteratorBase):
     def steps(
         self, problem: InverseProblem, evaluator: Evaluator
     ) -> Generator[GpSmcState, None, GpSmcResult]:
+        """The stages (module docstring), each over the typed values the last one returned:
+        the surrogate on its design (surrogate mode), the posterior with its checks and
+        repairs, the result."""
+        run = self._run(problem, evaluator)
+        fitted: Fitted | None = None
+        if self.options.mode == "surrogate":
+            outcome = yield from self._surrogate(run)
+            if isinstance(outcome, GpSmcResult):  # fewer than 2 runs succeeded
+                return outcome
+            fitted = outcome
+        checked = yield from self._checked_posterior(run, fitted)
+        return self._result(run, checked)
+
+    def _run(self, problem: InverseProblem, evaluator: Evaluator) -> SmcRun:
+        """What the stages share (:class:`~.run.SmcRun`), once the options that need the
+        problem are checked and the sizes fit the machine."""
         opts = self.options
         inputs = self._inputs(problem)
         if opts.gradients == "tangents":
@@ -163,52 +179,58 @@ class GpSmcIterator(IteratorBase):
                 "gp_axes",
             )
         self._check_memory(run.n_x)
+        return run
+
+    def _surrogate(self, run: SmcRun) -> Generator[GpSmcState, None, Fitted | GpSmcResult]:
+        """Stages 1-3: the design (Sobol or adaptive) and its runs, the surrogate on them and
+        its errors; the ``all_failed`` result when fewer than 2 runs succeeded."""
+        opts = self.options
         adaptive: AdaptiveDesign | None = None
-        if opts.mode == "surrogate":
-            if opts.design == "sobol":
-                design = yield from self._design_stage(run)
-                use = design.train_mask & design.ok
-                gp = (
-                    None
-                    if use.sum() < 2
-                    else self._fit_gp(
-                        run,
-                        design.points[use],
-                        design.log_likelihood[use],
-                        None,
-                        [design.records[i] for i in np.flatnonzero(use)],
-                    )
-                )
-                if gp is not None and opts.failures == "classify":
-                    train = design.train_mask
-                    gp.feasibility = fit_feasibility(design.points[train], design.ok[train])
-            else:
-                outcome = yield from adaptive_design(
+        if opts.design == "sobol":
+            design = yield from self._design_stage(run)
+            use = design.train_mask & design.ok
+            gp = (
+                None
+                if use.sum() < 2
+                else self._fit_gp(
                     run,
-                    opts,
-                    lambda x, y, s, recs, axes, opt: self._fit_gp(run, x, y, s, recs, axes, opt),
-                    lambda ll, n: self._round_smc(run, ll, n),
+                    design.points[use],
+                    design.log_likelihood[use],
+                    None,
+                    [design.records[i] for i in np.flatnonzero(use)],
                 )
-                design, gp, adaptive = outcome.design, outcome.gp, outcome.summary
-            if gp is None:
-                return self._finish_failed(run, design)
-            floor = None if adaptive is None else adaptive.floor
-            fit = yield from self._surrogate_stage(run, design, gp, floor)
-            log_likelihood: Callable[[FloatArray], FloatArray] = gp.predict_mean_guarded
+            )
+            if gp is not None and opts.failures == "classify":
+                train = design.train_mask
+                gp.feasibility = fit_feasibility(design.points[train], design.ok[train])
         else:
-            design, fit, gp, floor = None, None, None, None
-            log_likelihood = run.forward_log_likelihood
-        # the SMC target: L (or its profile over sigma_N) where the forward model runs
-        trained_on = () if design is None else design.records
-        target = run.joint(log_likelihood, trained_on)
-        target = target if gp is None else gp.feasible(target)
-        post = yield from self._smc_stage(run, target, _trained(run, gp))
+            outcome = yield from adaptive_design(
+                run,
+                opts,
+                lambda x, y, s, recs, axes, opt: self._fit_gp(run, x, y, s, recs, axes, opt),
+                lambda ll, n: self._round_smc(run, ll, n),
+            )
+            design, gp, adaptive = outcome.design, outcome.gp, outcome.summary
+        if gp is None:
+            return self._finish_failed(run, design)
+        floor = None if adaptive is None else adaptive.floor
+        fit = yield from self._surrogate_stage(run, design, gp, floor)
+        return Fitted(design, gp, fit, adaptive)
+
+    def _checked_posterior(
+        self, run: SmcRun, fitted: Fitted | None
+    ) -> Generator[GpSmcState, None, Checked]:
+        """Stage 4 and the checks: SMC on the surrogate (or the forward model), the check at
+        posterior draws and the GP's sample paths, and the repairs of a failed one (their
+        runs join the design, the surrogate is refitted, SMC again: :mod:`.check`)."""
+        opts = self.options
+        post = yield from self._smc_stage(run, self._target(run, fitted), _trained(run, fitted))
         check, failed = None, list[float]()
         wanted = opts.surrogate_uncertainty == "expected_posterior"
-        uncertain = gp is not None and run.noise is None and (wanted or opts.uncertainty_check)
+        uncertain = fitted is not None and run.noise is None and (wanted or opts.uncertainty_check)
         expected, uncertainty = post, None
-        while opts.mode == "surrogate" and opts.n_check:
-            assert gp is not None and design is not None
+        while fitted is not None and opts.n_check:
+            design, gp, adaptive = fitted.design, fitted.gp, fitted.adaptive
             rng = np.random.default_rng([opts.seed, 2, *([len(failed)] if failed else [])])
             checked = yield from posterior_check(run, post, gp, opts.n_check, rng)
             check = checked.check
@@ -235,17 +257,37 @@ class GpSmcIterator(IteratorBase):
             design = repair.repaired(design)
             assert adaptive is not None  # repairable: only an adaptive design
             gp = self._refit(run, design, gp, post, adaptive.floor)
-            fit = yield from self._surrogate_stage(run, design, gp, floor)
-            target = gp.feasible(run.joint(gp.predict_mean_guarded, design.records))
-            post = yield from self._smc_stage(run, target, _trained(run, gp))
+            fit = yield from self._surrogate_stage(run, design, gp, adaptive.floor)
+            fitted = Fitted(design, gp, fit, adaptive)
+            post = yield from self._smc_stage(run, self._target(run, fitted), _trained(run, fitted))
             expected, uncertainty = post, None
         if uncertain and uncertainty is None:
-            assert gp is not None
-            expected, uncertainty = self._uncertainty(run, post, gp)
-        posterior_particles = expected if wanted else post
+            assert fitted is not None
+            expected, uncertainty = self._uncertainty(run, post, fitted.gp)
+        return Checked(fitted, post, expected if wanted else post, check, failed, uncertainty)
+
+    @staticmethod
+    def _target(run: SmcRun, fitted: Fitted | None) -> Callable[[FloatArray], FloatArray]:
+        """The SMC target: L (or its profile over sigma_N) where the forward model runs, from
+        the surrogate's mean or from forward runs (mode = "direct")."""
+        if fitted is None:
+            return run.joint(run.forward_log_likelihood)
+        gp = fitted.gp
+        return gp.feasible(run.joint(gp.predict_mean_guarded, fitted.design.records))
+
+    def _result(self, run: SmcRun, checked: Checked) -> GpSmcResult:
+        """Stage 5: the posterior's summaries, the status from the checks and the model
+        check, the message saying why."""
+        opts = self.options
+        fitted, post, particles = checked.fitted, checked.post, checked.particles
+        gp = None if fitted is None else fitted.gp
+        adaptive = None if fitted is None else fitted.adaptive
+        check, uncertainty = checked.check, checked.uncertainty
+        wanted = opts.surrogate_uncertainty == "expected_posterior"
         laplace = opts.laplace and opts.mode == "surrogate" and not wanted
+        target = self._target(run, fitted)
         posterior = summarise(
-            posterior_particles,
+            particles,
             run.n_x,
             run.sampled,
             opts.map_bins,
@@ -256,12 +298,13 @@ class GpSmcIterator(IteratorBase):
         status = "unreliable" if coarse else status
         # can the model and the prior explain the data at all (gp_smc/model_check.py)
         n_in = len(run.inputs)
+        reused = [] if fitted is None else fitted.design.records[: fitted.design.reused]
         model = model_check(
             run.problem,
             run.inputs,
-            posterior_particles.particles[:, :n_in],
-            posterior_particles.weights,
-            [*([] if design is None else design.records[: design.reused]), *run.runs],
+            particles.particles[:, :n_in],
+            particles.weights,
+            [*reused, *run.runs],
         )
         status = "unreliable" if model.causes and status == "completed" else status
         return GpSmcResult(
@@ -274,7 +317,7 @@ class GpSmcIterator(IteratorBase):
                 + ("" if gp is None or not gp.note else f"; {gp.note}")
                 + ("" if adaptive is None else adaptive.note())
                 + ("" if check is None else check.note())
-                + repair_note(failed)
+                + repair_note(checked.failed)
                 + _noise_note(run, posterior)
                 + ("" if gp is None else _extrapolation_note(post, gp))
                 + ("" if gp is None else feasibility_note(gp.feasibility))
@@ -288,17 +331,17 @@ class GpSmcIterator(IteratorBase):
                     else ""
                 )
             ),
-            x=dict(zip(problem.names, map(float, posterior.map), strict=True)),
+            x=dict(zip(run.problem.names, map(float, posterior.map), strict=True)),
             history=run.history,
             names=run.sampled_names,
             n_x=run.n_x,
             mode=opts.mode,
             priors=[p.describe() for p in run.sampled],
-            design=None if design is None else design.result(),
+            design=None if fitted is None else fitted.design.result(),
             adaptive=adaptive,
-            surrogate=fit,
+            surrogate=None if fitted is None else fitted.fit,
             check=check,
-            failed_checks=failed,
+            failed_checks=checked.failed,
             uncertainty=uncertainty,
             posterior=posterior,
             model_check=model,
@@ -650,8 +693,8 @@ def _extrapolation_note(post: SmcResult, gp: Surrogate) -> str:
     )
 
 
-def _trained(run: SmcRun, gp: Surrogate | None) -> tuple[float, float] | None:
+def _trained(run: SmcRun, fitted: Fitted | None) -> tuple[float, float] | None:
     """The surrogate's training range of L for the SMC's messages (known sigma_N only)."""
-    if gp is None or run.noise is not None:
+    if fitted is None or run.noise is not None:
         return None
-    return float(gp.y_train.min()), float(gp.y_train.max())
+    return float(fitted.gp.y_train.min()), float(fitted.gp.y_train.max())

@@ -22,8 +22,10 @@ from ...core.likelihood import (
 )
 from ...core.parameters import Parameter, Prior
 from ...core.problem import Evaluation, InverseProblem
+from ..smc.sampler import SmcResult
+from ..surrogates.residuals import Surrogate
 from ..surrogates.uncertainty import SurrogateUncertainty
-from .result import DesignRuns, PosteriorCheck
+from .result import AdaptiveDesign, DesignRuns, PosteriorCheck, SurrogateFit
 
 FloatArray = NDArray[np.float64]
 
@@ -216,10 +218,44 @@ class SmcRun:
         n = self.noise_n(evaluations)
         return np.array([profile_log_likelihood(ev, n) for ev in evaluations])
 
+    def runs_at(self, x: FloatArray) -> tuple[list[Evaluation], FloatArray]:
+        """Forward runs at the rows of ``x``, each with its L (:meth:`log_likelihoods`): what
+        the design's rounds and the checks add, one record and one L per run."""
+        records = self.evaluate(x)
+        return records, self.log_likelihoods(records)
+
     def forward_log_likelihood(self, x: FloatArray) -> FloatArray:
         """L by forward runs (``mode="direct"``): one batch per SMC call; failed runs have
         zero likelihood (L = -inf)."""
-        return self.log_likelihoods(self.evaluate(x))
+        return self.runs_at(x)[1]
+
+
+@dataclass(frozen=True)
+class Fitted:
+    """What the design stages leave in surrogate mode: the design with its runs, the
+    surrogate on them, its errors (:class:`~.result.SurrogateFit`) and the adaptive design's
+    rounds (None for a fixed Sobol design)."""
+
+    design: Design
+    gp: Surrogate
+    fit: SurrogateFit
+    adaptive: AdaptiveDesign | None
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What the posterior stage leaves: the surrogate as the last repair left it (None in
+    ``mode = "direct"``), the SMC posterior, the particles the result summarises (the
+    posterior averaged over the GP's sample paths with ``surrogate_uncertainty =
+    "expected_posterior"``, else ``post``), the last check, the failed checks' errors (their
+    runs repaired the design) and the GP-sample-path check."""
+
+    fitted: Fitted | None
+    post: SmcResult
+    particles: SmcResult
+    check: PosteriorCheck | None
+    failed: list[float]
+    uncertainty: SurrogateUncertainty | None
 
 
 def run_status(
