@@ -48,6 +48,25 @@ Bates and Watts' relative offset 0.42, 0.34, 0.14, 0.054, 0.0032, 2.5e-6 (black 
 alike).  A relative-offset stop at 1e-3 (their usual value) saves no run here, at 1e-2 one
 run per start.  Fewer iterations would need the second-order part of the Hessian (a secant
 model of it, as NL2SOL's, Dennis, Gay and Welsch 1981): not tried.
+
+Measured 2026-11-29 at ffa0d9b (2 cores shared with a reproduction loop, so the ratios, from
+one run each, matter, not the seconds), fbia's options against scipy in the same run:
+
+* ``jacobian = "forward"`` (what a cost-based "auto" would take for two parameters, the
+  tangent costing more than two chord-step runs): six starts twice, 560 runs and 2.73x scipy's
+  wall time (tangents: 108 runs, 1.44x), and optima up to 0.1 Pa off the tangents' and scipy's
+  398.092 Pa (398.06-398.19). fbia's forward-difference mode needs about twice scipy's runs
+  with the same 2-point Jacobians (50-61 per start against 21-32); why is not measured (one
+  candidate: its central-difference end phase, ``final_jacobian = "central"``, 2 n_x runs per
+  Jacobian once forward differences have converged). So "auto" by cost was not built: the
+  forward-difference mode is the slower one here.
+* The black start's 3 s (11 runs) are one failed run: the first step from E = 1000 Pa goes
+  to the bound E = 100 Pa, where the biofilm cannot carry the flow (continuation fails at
+  81 of 100 mm^2/s after 1.84 s). ``mu0 = 1`` (a first step about half the Gauss-Newton one;
+  robust mode's default is 1e-2) avoids it: all eleven starts twice, 184 runs and **1.09x
+  scipy's wall time** against 200 runs and 1.39x with the default, no failed run, the same
+  optimum. Not kept as the default: NIST's MGH10 from start 1 then ends at the iteration
+  limit (its plateau needs the long first step, ``test_lm_nist.py``); the study can set it.
 """
 
 from __future__ import annotations
