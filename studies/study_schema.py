@@ -420,9 +420,25 @@ def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
         # checked for names and types, what a whole study must have only without extends
         "properties": _optional(properties),
         "if": {"not": {"required": ["study"], "properties": {"study": {"required": ["extends"]}}}},
-        "then": {"required": ["model"], "properties": properties},
+        "then": {"required": ["model"], "properties": _required_only(properties)},
         "additionalProperties": False,
     }
+
+
+def _required_only(properties: dict[str, Any]) -> dict[str, Any]:
+    """Of each property's schema only what a whole study must have: its ``required`` lists
+    (types and bounds are checked once, by the partial schema every file meets)."""
+    out: dict[str, Any] = {}
+    for name, schema in properties.items():
+        kept: dict[str, Any] = {}
+        if "required" in schema:
+            kept["required"] = schema["required"]
+        if isinstance(schema.get("properties"), dict):
+            kept["properties"] = _required_only(schema["properties"])
+        if isinstance(schema.get("items"), dict):
+            kept["items"] = _required_only({"": schema["items"]})[""]
+        out[name] = kept
+    return out
 
 
 def _optional(schema: Any) -> Any:
