@@ -201,7 +201,14 @@ def load_study(
     """
     path = Path(path)
     sources = read_sources(path, overrides)
-    study = _Reader(path, sources.raw, registry or default_registry()).read(sources)
+    try:
+        study = _Reader(path, sources.raw, registry or default_registry()).read(sources)
+    except ConfigError as err:
+        if not overrides:
+            raise
+        # the fault may be a change's: the line says which study was read
+        changes = " ".join(f"--set {change}" for change in overrides)
+        raise ConfigError(f"{err.reason} (the study as changed by {changes})", err.where) from None
     if build:
         _ = study.problem
     return study

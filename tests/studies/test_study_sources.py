@@ -168,6 +168,7 @@ def test_the_cli_refuses_a_bad_change_with_exit_2_and_names_it(study_file, capsy
     assert main(["validate", "study.toml", "--set", "iterator.options.max_itre=3"]) == 2
     err = capsys.readouterr().err
     assert "unknown option 'max_itre'" in err and "Traceback" not in err
+    assert "(the study as changed by --set iterator.options.max_itre=3)" in err
     assert main(["run", "study.toml", "--set", "nope"]) == 2
     assert "--set nope: expected section.key=value" in capsys.readouterr().err
     assert not Path("out").exists()  # refused before anything ran
