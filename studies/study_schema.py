@@ -428,17 +428,16 @@ def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
 def _required_only(properties: dict[str, Any]) -> dict[str, Any]:
     """Of each property's schema only what a whole study must have: its ``required`` lists
     (types and bounds are checked once, by the partial schema every file meets)."""
-    out: dict[str, Any] = {}
-    for name, schema in properties.items():
-        kept: dict[str, Any] = {}
-        if "required" in schema:
-            kept["required"] = schema["required"]
-        if isinstance(schema.get("properties"), dict):
-            kept["properties"] = _required_only(schema["properties"])
-        if isinstance(schema.get("items"), dict):
-            kept["items"] = _required_only({"": schema["items"]})[""]
-        out[name] = kept
-    return out
+    return {name: _required_of(schema) for name, schema in properties.items()}
+
+
+def _required_of(schema: dict[str, Any]) -> dict[str, Any]:
+    kept: dict[str, Any] = {k: schema[k] for k in ("required",) if k in schema}
+    if isinstance(schema.get("properties"), dict):
+        kept["properties"] = _required_only(schema["properties"])
+    if isinstance(schema.get("items"), dict):
+        kept["items"] = _required_of(schema["items"])
+    return kept
 
 
 def _optional(schema: Any) -> Any:

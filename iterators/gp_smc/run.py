@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from itertools import chain
 from typing import Any, Literal
 
 import numpy as np
@@ -147,7 +148,7 @@ class SmcRun:
         of one measure); None before any run succeeded."""
         if self.count is not None:
             return self.count
-        for ev in (*records, *self.runs):
+        for ev in chain(records, self.runs):
             if ev.ok and ev.residuals is not None:
                 return squared_distance(ev)[1]
         return None
@@ -162,9 +163,13 @@ class SmcRun:
             return design_l
         d = len(self.inputs)
 
+        n = self.noise_n(records)  # known once a run succeeded: looked up once, not per call
+
         def log_likelihood(z: FloatArray) -> FloatArray:
+            nonlocal n
             profile = design_l(z[:, :d])
-            n = self.noise_n(records)
+            if n is None:  # mode = "direct": n from the first runs design_l made
+                n = self.noise_n()
             if n is None:  # no run succeeded yet: every profile is -inf
                 return np.full(len(z), -np.inf)
             return log_likelihood_from_profile(profile, n, z[:, d])
