@@ -43,9 +43,7 @@ changing and the surrogate is right at posterior draws (the loop is in
   their Monte Carlo noise, of the order of the 0.1-std tolerance for the rounds' coarse SMC
   on a broad 6 + 1-D posterior, where a design so compared used all of its 1000 runs with
   an accurate surrogate (issue 42; the noise's share of its round-to-round moves was
-  inferred, not logged). The reweighted particles keep a noise of their own (a refit
-  corrects L near its new runs, and which particles lie there is chance): every move counts
-  only beyond twice its bootstrap standard error (:class:`PosteriorChange`).
+  inferred, not logged).
 
 References: Järvenpää, Gutmann, Vehtari, Marttinen (2019), Bayesian Analysis 14(2) 595-622;
 Ginsbourger, Le Riche, Carraro (2010), in Computational Intelligence in Expensive
@@ -173,35 +171,23 @@ def centred_rmse(errors: FloatArray) -> float:
 class PosteriorChange:
     """How a refitted surrogate changes a posterior, measured on that posterior's own
     particles (:func:`posterior_change`): free of the Monte Carlo noise that two separate SMC
-    runs differ by, but not of the noise of the particles themselves. A reweighting whose
-    log-ratio varies from particle to particle (a refit corrects L locally, near its new runs)
-    moves a weighted statistic by an amount that depends on which particles happen to lie
-    there; the ``*_resolved`` fields are the moves beyond twice their bootstrap standard error
-    (:data:`NOISE_Z`), the part the particles resolve. On example 8's rounds (2000 particles,
-    ESS ~ 1400) the 5 and 95 % quantiles' moves had standard errors of 0.03-0.11 std, as large
-    as the tolerance: the largest of 21 such moves was over 0.1 std in four of the last six
-    checks while no mean moved by 0.1 std (issue 42)."""
+    runs differ by."""
 
     mean_shift: float  # largest |change of a mean| in posterior std
     std_change: float  # largest |log| ratio of a std
     quantile_shift: float  # largest move of a 5, 50 or 95 % quantile, in posterior std
     evidence_change: float  # |change of log Z|
     ess_fraction: float  # ESS of the new weights over the ESS of the old ones
-    #: the same three beyond NOISE_Z bootstrap standard errors, each statistic its own
-    mean_resolved: float = math.inf
-    std_resolved: float = math.inf
-    quantile_resolved: float = math.inf
 
     def settled(self, tol: float) -> bool:
-        """Whether the posterior stopped moving: every mean and quantile moved by less than
-        ``tol`` std and every std by less than a factor 1 + ``tol`` beyond what its particles
-        resolve (:data:`NOISE_Z` standard errors), log Z within :data:`EVIDENCE_TOL`, and the
-        new weights still spread over at least :data:`MIN_ESS_FRACTION` of the particles
-        (else the particles no longer describe the new posterior and nothing is measured)."""
+        """Whether the posterior stopped moving: means and quantiles within ``tol`` std, std
+        within a factor 1 + ``tol``, log Z within :data:`EVIDENCE_TOL`, and the new weights
+        still spread over at least :data:`MIN_ESS_FRACTION` of the particles (else the
+        particles no longer describe the new posterior and nothing is measured)."""
         return bool(
-            self.mean_resolved < tol
-            and self.quantile_resolved < tol
-            and self.std_resolved < math.log1p(tol)
+            self.mean_shift < tol
+            and self.quantile_shift < tol
+            and self.std_change < math.log1p(tol)
             and self.evidence_change < EVIDENCE_TOL
             and self.ess_fraction >= MIN_ESS_FRACTION
         )
@@ -213,10 +199,6 @@ EVIDENCE_TOL = 0.5
 MIN_ESS_FRACTION = 0.5
 #: the quantiles whose moves :class:`PosteriorChange` measures
 QUANTILES = (0.05, 0.5, 0.95)
-#: a move counts when it exceeds this many of its bootstrap standard errors (over
-#: :data:`N_BOOTSTRAP` resamplings of the particles, a fixed seed: reproducible)
-NOISE_Z = 2.0
-N_BOOTSTRAP = 100
 
 
 def posterior_change(
@@ -245,47 +227,16 @@ def posterior_change(
         log_likelihood=new,
         log_evidence=post.log_evidence + d_log_z,
     )
-    moves = _moves(post.particles, post.weights, w)
-    rng = np.random.default_rng(0)
-    n = len(w)
-    boot = np.array(
-        [
-            _moves(post.particles[i], post.weights[i], w[i])
-            for i in (rng.integers(0, n, n) for _ in range(N_BOOTSTRAP))
-        ]
-    )
-    resolved = np.maximum(np.abs(moves) - NOISE_Z * boot.std(axis=0), 0.0)
-    d = post.particles.shape[1]
-    mean, std, quantile = np.split(np.arange(moves.size), [d, 2 * d])
-
-    def largest(values: FloatArray, part: NDArray[np.int_]) -> float:
-        return float(np.max(np.abs(values[part])))
-
-    change = PosteriorChange(
-        mean_shift=largest(moves, mean),
-        std_change=largest(moves, std),
-        quantile_shift=largest(moves, quantile),
-        evidence_change=abs(d_log_z),
-        ess_fraction=float(np.sum(post.weights**2) / np.sum(w**2)),  # ESS new / ESS old
-        mean_resolved=largest(resolved, mean),
-        std_resolved=largest(resolved, std),
-        quantile_resolved=largest(resolved, quantile),
-    )
+    old, now = Moments.of(post), Moments.of(reweighted)
+    old_std = np.maximum(old.std, 1e-300)
+    shift = float(np.max(np.abs(now.mean - old.mean) / old_std))
+    spread = float(np.max(np.abs(np.log(np.maximum(now.std, 1e-300) / old_std))))
+    q_old = _weighted_quantiles(post.particles, post.weights)
+    q_new = _weighted_quantiles(post.particles, w)
+    q_shift = float(np.max(np.abs(q_new - q_old) / old_std))
+    ess_fraction = float(np.sum(post.weights**2) / np.sum(w**2))  # ESS new / ESS old
+    change = PosteriorChange(shift, spread, q_shift, abs(d_log_z), ess_fraction)
     return reweighted, change
-
-
-def _moves(x: FloatArray, w_old: FloatArray, w_new: FloatArray) -> FloatArray:
-    """The changes from weights ``w_old`` to ``w_new`` on particles ``x``: every mean, in the
-    old posterior std; the log ratio of every std; every :data:`QUANTILES` move, in the old
-    std; one vector (means, log stds, quantiles row by row)."""
-    w_old, w_new = w_old / w_old.sum(), w_new / w_new.sum()
-    m_old, m_new = w_old @ x, w_new @ x
-    s_old = np.sqrt(np.maximum(w_old @ (x - m_old) ** 2, 1e-300))
-    s_new = np.sqrt(np.maximum(w_new @ (x - m_new) ** 2, 1e-300))
-    q_old, q_new = _weighted_quantiles(x, w_old), _weighted_quantiles(x, w_new)
-    return np.concatenate(
-        [(m_new - m_old) / s_old, np.log(s_new / s_old), ((q_new - q_old) / s_old).ravel()]
-    )
 
 
 def _weighted_quantiles(x: FloatArray, w: FloatArray) -> FloatArray:

@@ -12,9 +12,8 @@ before they are used.
 **Converged** means what the user gets stopped changing: the last round's posterior,
 reweighted on its own particles from the surrogate that chose the batch to the one refitted
 with it (:func:`~.adaptive.posterior_change`: no Monte Carlo noise between two SMC runs to
-mistake for a change), moved no mean or 5/50/95 % quantile by ``adaptive_tol`` posterior std
-and no std by a factor 1 + ``adaptive_tol`` beyond twice the move's bootstrap error over the
-particles, and log Z by no more than 0.5; the surrogate's error at the
+mistake for a change), moved no mean or 5/50/95 % quantile by ``adaptive_tol`` posterior std,
+no std by a factor 1 + ``adaptive_tol`` and log Z by 0.5; the surrogate's error at the
 batch's posterior draws, without its mean (:func:`~.adaptive.centred_rmse`: a constant
 error cancels in the posterior), was below
 :data:`~fbia.iterators.gp_smc.result.RELIABLE_RMSE`; and the posterior averaged over the
@@ -186,15 +185,11 @@ def adaptive_design(
                 converged = not _gp_unsure(gp, reweighted, run, opts, rng)
             logger.info(
                 "design check on %d runs: the last posterior moved %.3g std (quantiles "
-                "%.3g), std changed %.3g (beyond their noise %.3g, %.3g, %.3g), surrogate "
-                "error %.3g in L at its draws: %s",
+                "%.3g), std changed %.3g, surrogate error %.3g in L at its draws: %s",
                 n_design,
                 change.mean_shift,
                 change.quantile_shift,
                 change.std_change,
-                change.mean_resolved,
-                change.quantile_resolved,
-                change.std_resolved,
                 last[1],
                 "converged" if converged else f"not settled (tolerance {opts.adaptive_tol:g})",
             )
@@ -244,9 +239,6 @@ def adaptive_design(
             quantile_shift=math.inf if change is None else change.quantile_shift,
             ess_fraction=math.nan if change is None else change.ess_fraction,
             optimised=optimise,
-            mean_resolved=math.inf if change is None else change.mean_resolved,
-            quantile_resolved=math.inf if change is None else change.quantile_resolved,
-            std_resolved=math.inf if change is None else change.std_resolved,
         )
         rounds.append(entry)
         hyper = gp.hyperparameters()

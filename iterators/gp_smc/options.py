@@ -91,8 +91,8 @@ class GpSmcOptions(PluginOptions):
         description="the adaptive design stops when the last round's batch, refitted into "
         "the surrogate, moved no posterior mean or 5/50/95 % quantile by more than this many "
         "posterior std and no std by more than this fraction (measured on the round's own "
-        "particles, beyond twice each move's Monte Carlo error), and the spread of the "
-        "surrogate's errors at the batch's posterior draws is below 0.5 in L [-]",
+        "particles), and the spread of the surrogate's errors at the batch's posterior "
+        "draws is below 0.5 in L [-]",
     )
     round_particles: int = Field(
         2000,

@@ -104,20 +104,13 @@ class AdaptiveRound:
     ess_fraction: float = float("nan")  # the last posterior's reweighting: ESS new / old
     optimised: bool = True  # the GP's hyperparameters optimised (else kept, conditioned)
     validation_z: float = float("nan")  # rms of error / GP std there (1: calibrated)
-    #: the moves beyond their particles' Monte Carlo noise (PosteriorChange's ``*_resolved``):
-    #: what the stopping rule compares with its tolerance
-    mean_resolved: float = float("inf")
-    quantile_resolved: float = float("inf")
-    std_resolved: float = float("inf")
 
     def describe(self) -> str:
         return (
             f"round {self.round}: GP on {self.n_runs} runs"
             f"{'' if self.optimised else ' (hyperparameters kept)'}, the last posterior "
             f"moved {self.mean_shift:.3g} std (quantiles {self.quantile_shift:.3g}), std "
-            f"changed {self.std_change:.3g}, beyond their noise {self.mean_resolved:.3g}, "
-            f"{self.quantile_resolved:.3g}, {self.std_resolved:.3g}, log Z "
-            f"{self.evidence_change:.3g}; surrogate "
+            f"changed {self.std_change:.3g}, log Z {self.evidence_change:.3g}; surrogate "
             f"error {self.validation_centred:.3g} in L at new posterior draws (RMSE "
             f"{self.validation_rmse:.3g} with its mean, {self.validation_z:.3g} GP std); "
             f"{self.n_batch} runs added"
@@ -469,17 +462,14 @@ class GpSmcResult(Result):
             )
             lines.append(
                 "    (moved: what the round's GP, refitted with the last batch, did to the last "
-                "posterior, in std; beyond noise: the largest of those moves beyond twice its "
-                "Monte Carlo error, which the rule compares with its tolerance; error: the "
-                "spread of the GP's errors at the batch's posterior draws, in L)"
+                "posterior, in std; error: the spread of the GP's errors at the batch's "
+                "posterior draws, in L)"
             )
             for r in self.adaptive.rounds:
                 lines.append(
                     f"    round {r.round:<3} runs {r.n_runs:<5} +{r.n_batch:<4} mean moved "
                     f"{r.mean_shift:<8.3g} quantiles {r.quantile_shift:<8.3g} std changed "
-                    f"{r.std_change:<8.3g} beyond noise "
-                    f"{max(r.mean_resolved, r.quantile_resolved, r.std_resolved):<8.3g} "
-                    f"error at new draws {r.validation_centred:.3g}"
+                    f"{r.std_change:<8.3g} error at new draws {r.validation_centred:.3g}"
                 )
             change, rounds = self.adaptive.final_change, self.adaptive.rounds
             if change is not None and rounds:
