@@ -6,8 +6,11 @@
 * The layers: which package may import which (``LAYERS``, as docs/architecture.md states
   them); the kernel imports nothing of fbia outside itself, and importing it loads no store,
   executor, plotting, GP or finite-element library.
-* The kernel stays thin, iterators/ keeps its families in sub-packages, and no module grows
-  beyond about 600 lines.
+* The kernel stays thin, iterators/ keeps its families in sub-packages.
+* Size is a matter for review, not a gate (issue 48: the line budgets shaped modules, splits
+  were made for a count and left seams): a module over :data:`MAX_LINES` lines of code, or a
+  kernel over :data:`KERNEL_LINES`, is a :class:`SizeWarning` in the test summary, counted in
+  lines of code (docstrings, comments and blank lines do not count).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -33,8 +37,12 @@ PACKAGES = (
     "testing",
 )
 MAX_LINES = 600  # lines of code: docstrings, comments and blank lines do not count
-#: Modules still above MAX_LINES, with the size they may not exceed (shrink, never grow).
-OVERSIZE: dict[str, int] = {}
+#: the kernel's lines of code above which its size is worth a look (1987 when first counted so)
+KERNEL_LINES = 2050
+
+
+class SizeWarning(UserWarning):
+    """A module or the kernel has grown past the size that is worth a look in review."""
 
 
 def package_files() -> list[Path]:
@@ -160,12 +168,17 @@ def test_plugins_do_not_import_each_other_except_the_shared_fem():
 
 def test_the_kernel_is_thin_and_light():
     modules = sorted((ROOT / "core").glob("*.py"))
+    assert len(modules) <= 16, [p.name for p in modules]
     # lines of code, not docstrings or comments (issue 48: a budget must not push against the
-    # kernel's documentation, which the contracts live in): 1987 when it was counted so (3173
-    # lines in all, once the typed posterior hand-off, PosteriorEstimate, joined Result); until
-    # then 3160 lines in all, raised four times for what the kernel had to hold
+    # kernel's documentation, which the contracts live in), and a note for review, not a gate
     lines = sum(code_lines(p.read_text(encoding="utf-8")) for p in modules)
-    assert len(modules) <= 16 and lines <= 2050, (len(modules), lines)
+    if lines > KERNEL_LINES:
+        warnings.warn(
+            f"the kernel (core/) has {lines} lines of code, over {KERNEL_LINES}: does all of it "
+            "belong in the kernel?",
+            SizeWarning,
+            stacklevel=1,
+        )
     code = (
         "import sys, fbia.core\n"
         "heavy = ('sqlite3', 'dask', 'distributed', 'GPy', 'ngsolve', 'netgen', 'matplotlib')\n"
@@ -204,14 +217,25 @@ def test_code_lines_leave_documentation_out():
     assert code_lines(text) == 2
 
 
-def test_modules_stay_small():
+def test_module_sizes_are_a_note_for_review():
     too_big = {}
     for path in package_files():
-        rel = path.relative_to(ROOT).as_posix()
         lines = code_lines(path.read_text(encoding="utf-8"))
-        if lines > OVERSIZE.get(rel, MAX_LINES):
-            too_big[rel] = lines
-    assert too_big == {}, f"modules above {MAX_LINES} lines (or above their listed size)"
+        if lines > MAX_LINES:
+            too_big[path.relative_to(ROOT).as_posix()] = lines
+    for rel, lines in sorted(too_big.items()):
+        warnings.warn(
+            f"{rel} has {lines} lines of code, over {MAX_LINES}: one concern still?",
+            SizeWarning,
+            stacklevel=1,
+        )
+
+
+def test_a_size_note_is_a_warning_not_a_failure(monkeypatch):
+    # what the rules above do with a module over the size: the test passes and says so
+    monkeypatch.setattr(sys.modules[__name__], "MAX_LINES", 10)
+    with pytest.warns(SizeWarning, match="lines of code, over 10"):
+        test_module_sizes_are_a_note_for_review()
 
 
 def test_no_private_name_is_imported_across_modules():
