@@ -17,6 +17,8 @@ The format (every section but ``[model]``, ``[[parameters]]``, ``[measure]`` and
     extends = "base.toml"       # optional: read that study file first and merge this one's
                                 # tables into it (fbia.studies.study_sources; --set changes a
                                 # value on the command line)
+    base_only = false           # true: the file holds what a family of variants shares and
+                                # is no study by itself (fbia run refuses it; not inherited)
 
     [model]                     # a forward model from the registry (`fbia plugins`)
     name = "analytic_mound_2d"
@@ -201,6 +203,12 @@ def load_study(
     """
     path = Path(path)
     sources = read_sources(path, overrides)
+    study_table = sources.raw.get("study")
+    if isinstance(study_table, dict) and study_table.get("base_only") is True:
+        raise ConfigError(
+            "a base that variants extend, not a study of its own: run a study file that extends it",
+            f"{path}: [study] base_only",
+        )
     try:
         study = _Reader(path, sources.raw, registry or default_registry()).read(sources)
     except ConfigError as err:

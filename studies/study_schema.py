@@ -199,6 +199,8 @@ class StudySection(Section):
     # a study file this one extends (its tables merged under this one's, relative to this
     # file; fbia.studies.study_sources): read before the sections, not a setting of the study
     extends: FileName | None = None
+    # true: the file holds what a family of variants shares, no study by itself (not inherited)
+    base_only: bool = False
 
 
 class LikelihoodSection(Section):
@@ -416,13 +418,23 @@ def study_json_schema(sections: dict[str, str]) -> dict[str, Any]:
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "fbia study file",
         "type": "object",
-        # a variant ([study] extends) takes what it leaves out from its base: its tables are
-        # checked for names and types, what a whole study must have only without extends
+        # a variant ([study] extends) takes what it leaves out from its base, and a base
+        # ([study] base_only = true) leaves out what its variants say: their tables are
+        # checked for names and types, what a whole study must have only for the others
         "properties": _optional(properties),
-        "if": {"not": {"required": ["study"], "properties": {"study": {"required": ["extends"]}}}},
+        "if": {"not": {"required": ["study"], "properties": {"study": _PARTIAL}}},
         "then": {"required": ["model"], "properties": _required_only(properties)},
         "additionalProperties": False,
     }
+
+
+#: a [study] table of a file that is not a whole study: a variant or a base
+_PARTIAL = {
+    "anyOf": [
+        {"required": ["extends"]},
+        {"required": ["base_only"], "properties": {"base_only": {"const": True}}},
+    ]
+}
 
 
 def _required_only(properties: dict[str, Any]) -> dict[str, Any]:

@@ -10,6 +10,10 @@ A family of studies that differ in a few settings is a base and variants (issue 
     [measure]
     name = "ray"
 
+A file that only holds what a family shares, and is no study by itself, says so with
+``[study] base_only = true``: its variants extend it, ``fbia run`` refuses it, and the
+setting is not passed on to them.
+
 The variant's tables are merged into the base's key by key (a table in both is merged the same
 way, any other value of the variant replaces the base's: an array such as ``[[parameters]]`` is
 replaced whole); a base may extend another (at most :data:`MAX_DEPTH` files), a cycle is
@@ -104,8 +108,13 @@ def read_sources(path: Path, overrides: Sequence[str] = ()) -> StudySources:
         chain.append(base.resolve())
         here = base
     if bases:
+        # what a file says of itself is not inherited: whom it extends, whether it is a base
         study = dict(merged["study"])
         study.pop("extends")
+        study.pop("base_only", None)
+        own = raw["study"].get("base_only")
+        if own is not None:
+            study["base_only"] = own
         merged = {**merged, "study": study}
     for change in overrides:
         merged = with_override(merged, change)

@@ -459,6 +459,11 @@ def test_the_json_schema_accepts_every_example_and_refuses_a_typo(capsys):
     assert not list(validator.iter_errors(variant))
     assert list(validator.iter_errors({**variant, "synthetc": {}}))
     assert list(validator.iter_errors({**variant, "synthetic": {"noise_std": "high"}}))
+    # so are a base's ([study] base_only = true): what its variants say is not required
+    base = {"study": {"base_only": True}, "synthetic": {"noise_std": 0.01}}
+    assert not list(validator.iter_errors(base))
+    assert list(validator.iter_errors({**base, "study": {"base_only": False}}))
+    assert list(validator.iter_errors({**base, "study": {"base_only": "yes"}}))
     whole = tomllib.loads(STUDY)
     assert list(validator.iter_errors({**whole, "synthetic": {"noise_std": 0.01}}))  # no truth
     assert not list(validator.iter_errors(tomllib.loads(STUDY)))

@@ -71,6 +71,29 @@ def test_a_variant_runs_and_its_result_records_every_source(study_file, capsys):
     assert plain.sha256 == hashlib.sha256(Path("study.toml").read_bytes()).hexdigest()
 
 
+def test_a_base_only_file_is_refused_and_its_variants_run(study_file, capsys):
+    """``[study] base_only = true``: the shared part of a family, no study by itself (fbia run
+    and validate refuse it in one line, exit 2); a variant that extends it is a study, and
+    does not inherit the setting."""
+    base = STUDY.replace("[study]\n", "[study]\nbase_only = true\n", 1)
+    assert base != STUDY
+    Path("base.toml").write_text(base)
+    with pytest.raises(ConfigError, match=r"base.toml: \[study\] base_only: a base that"):
+        load_study("base.toml")
+    for command in ("run", "validate"):
+        assert main([command, "base.toml"]) == 2
+        err = capsys.readouterr().err
+        assert "not a study of its own" in err and "Traceback" not in err
+    Path("variant.toml").write_text('[study]\nextends = "base.toml"\noutput = "out_v"\n')
+    assert "base_only" not in read_sources(Path("variant.toml")).raw["study"]
+    assert main(["validate", "variant.toml"]) == 0
+    # a variant may itself be a base of further variants
+    Path("mid.toml").write_text('[study]\nextends = "base.toml"\nbase_only = true\n')
+    assert read_sources(Path("mid.toml")).raw["study"]["base_only"] is True
+    with pytest.raises(ConfigError, match="not a study of its own"):
+        load_study("mid.toml")
+
+
 def test_relative_paths_of_a_base_are_read_from_the_extending_file(tmp_path):
     """The base in another folder names its data relative to itself; merged, the variant's
     folder reads them (the documented rule): a variant elsewhere must say where they are."""
