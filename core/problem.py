@@ -495,6 +495,13 @@ class Result:
         out["n_failed"] = float(self.n_failed)
         return out
 
+    def undetermined(self) -> dict[str, str]:
+        """Names of :meth:`quantities` whose value the result's own diagnostics say it does
+        not determine, each with why (e.g. a histogram MAP decided by Monte Carlo noise); a
+        paper comparison judges them "no" with that reason. None here; iterators' results
+        add theirs."""
+        return {}
+
     def summary(self) -> str:
         lines = [f"{self.iterator or 'result'}: {self.status} - {self.message}"]
         if self.x:

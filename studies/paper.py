@@ -322,12 +322,19 @@ def lookup(quantities: Mapping[str, float], name: str, where: str = "") -> float
 
 
 def compare(
-    spec: PaperSpec, quantities: Mapping[str, float], status: str = "", success: bool = True
+    spec: PaperSpec,
+    quantities: Mapping[str, float],
+    status: str = "",
+    success: bool = True,
+    undetermined: Mapping[str, str] | None = None,
 ) -> list[Comparison]:
     """One :class:`Comparison` per value of ``spec``, fbia's number from ``quantities``.
 
     ``status``, ``success``: the result's; a result with status ``unreliable`` or without
-    success agrees with nothing (every judged row "no", with that reason)."""
+    success agrees with nothing (every judged row "no", with that reason). ``undetermined``
+    (``Result.undetermined``): quantities the result says it does not determine, each with
+    why; a judged row of one (or ordered against one) is "no" with that reason."""
+    loose = undetermined or {}
     flagged = ""
     if status == "unreliable":
         flagged = f"the result is flagged unreliable (status {status})"
@@ -339,7 +346,8 @@ def compare(
         f = lookup(quantities, v.quantity, f"{at} quantity")
         key = "above" if v.above is not None else "below"
         ref = lookup(quantities, v.than, f"{at} {key}") if v.than is not None else None
-        rows.append(_judge(v, f, ref, flagged))
+        why = flagged or loose.get(v.quantity) or (loose.get(v.than) if v.than else None)
+        rows.append(_judge(v, f, ref, why or ""))
     return rows
 
 

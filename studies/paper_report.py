@@ -167,7 +167,9 @@ def write_paper_report(
     spec = study.paper
     assert spec is not None
     if rows is None:
-        rows = compare(spec, result.quantities(), result.status, result.success)
+        rows = compare(
+            spec, result.quantities(), result.status, result.success, result.undetermined()
+        )
     rows = tuple(rows)
     forward = forward_time
     if forward is None:

@@ -54,9 +54,11 @@ The stages (each yields a :class:`GpSmcState`; ``steps()`` returns the typed
    The posterior under uncertainty q(x | Y) (eq. 3b) is the theta-marginal of the particles.
 5. **Summaries**: MAP (best particle of the last step when there is no theta; the heaviest bin
    of a weighted histogram with ``map_bins`` intervals per x when theta is marginalised,
-   Remark 8), maximum likelihood, posterior mean and covariance (the global Gaussian
-   approximation), the Laplace approximation at the MAP (finite-difference Hessian on the
-   surrogate), 1-D credible intervals.
+   Remark 8, with the share of resamplings of the particles that keep each interval: below
+   90 % the message and ``undetermined()`` say it is not determined), maximum likelihood,
+   posterior mean and covariance (the global Gaussian approximation), the Laplace
+   approximation at the MAP (finite-difference Hessian on the surrogate), 1-D credible
+   intervals.
 """
 
 from __future__ import annotations
@@ -96,6 +98,8 @@ from .model_check import model_check
 from .options import GpSmcOptions
 from .posterior import summarise, write_posterior_files
 from .result import (
+    MAP_RESAMPLINGS,
+    MAP_SUPPORT,
     AdaptiveDesign,
     GpSmcResult,
     ParticlePosterior,
@@ -292,6 +296,7 @@ class GpSmcIterator(IteratorBase):
             run.sampled,
             opts.map_bins,
             (lambda z: target(z) + log_prior(run.sampled, z)) if laplace else None,
+            opts.seed,
         )
         status = run_status(opts.mode, check, uncertainty)
         tabled, coarse = table_note(post.table, opts.smc_table_tol)
@@ -319,6 +324,7 @@ class GpSmcIterator(IteratorBase):
                 + ("" if check is None else check.note())
                 + repair_note(checked.failed)
                 + _noise_note(run, posterior)
+                + _map_note(posterior)
                 + ("" if gp is None else _extrapolation_note(post, gp))
                 + ("" if gp is None else feasibility_note(gp.feasibility))
                 + ("" if uncertainty is None or not wanted else "; " + uncertainty.note())
@@ -679,6 +685,26 @@ def _noise_note(run: SmcRun, posterior: ParticlePosterior) -> str:
         return ""
     lo, mid, hi = posterior.credible_intervals[run.noise.name]
     return f"; sigma_N = {mid:.3g} mm (95 % interval {lo:.3g} .. {hi:.3g} mm, inferred)"
+
+
+def _map_note(posterior: ParticlePosterior) -> str:
+    """The inputs whose histogram MAP interval the particles do not decide (Remark 8's MAP
+    under uncertain inputs: posterior.map_by_binning), in the result message."""
+    if posterior.map_support is None:
+        return ""
+    loose = [
+        f"{name} ({s * 100:.0f} %)"
+        for name, s in zip(posterior.names, posterior.map_support, strict=False)
+        if s < MAP_SUPPORT
+    ]
+    if not loose:
+        return ""
+    return (
+        f"; the histogram MAP is not determined in {', '.join(loose)}: the heaviest cell of a "
+        f"resampling of the particles keeps its interval in fewer than "
+        f"{MAP_SUPPORT * 100:.0f} % of {MAP_RESAMPLINGS} (the posterior is flat there at "
+        "this resolution)"
+    )
 
 
 def _extrapolation_note(post: SmcResult, gp: Surrogate) -> str:

@@ -3,7 +3,8 @@
 * :func:`summarise`: the :class:`~fbia.iterators.gp_smc.result.ParticlePosterior` of an SMC
   run: mean and covariance (the global Gaussian approximation), credible intervals, the MAP
   (the best particle, or with uncertain inputs the heaviest histogram bin of the x-marginal,
-  Paper B Remark 8) and the Laplace approximation at the MAP;
+  Paper B Remark 8, with its support over resamplings of the particles:
+  :func:`map_by_binning`) and the Laplace approximation at the MAP;
 * :func:`hpd_mass`: the posterior mass of the highest-density region through a point;
 * :func:`save_posterior` / :func:`load_posterior`: ``posterior.npz`` + ``posterior.json``
   (format ``fbia-posterior-1``), and :func:`to_inference_data` for arviz.
@@ -16,7 +17,7 @@ import json
 import math
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ from ...core.problem import jsonable
 from ..smc.sampler import SmcResult
 from .inference_data import inference_data
 from .result import (
+    MAP_RESAMPLINGS,
     FloatArray,
     GpSmcResult,
     LaplaceApproximation,
@@ -39,6 +41,7 @@ from .result import (
 __all__ = [
     "MAX_POSTERIOR_BYTES",
     "POSTERIOR_FORMAT",
+    "HistogramMap",
     "hpd_mass",
     "laplace_approximation",
     "load_posterior",
@@ -60,9 +63,11 @@ def summarise(
     inputs: Sequence[Parameter],
     map_bins: int,
     log_posterior: Callable[[FloatArray], FloatArray] | None,
+    seed: int = 0,
 ) -> ParticlePosterior:
     """The posterior of an SMC run; ``log_posterior`` (L + log p, vectorised) gives the
-    Laplace approximation at the MAP when there are no uncertain inputs (None: no Laplace)."""
+    Laplace approximation at the MAP when there are no uncertain inputs (None: no Laplace);
+    ``seed`` seeds the resamplings that measure the histogram MAP's support."""
     x = post.particles[:, :n_x]
     w = post.weights
     mean = w @ x
@@ -70,9 +75,14 @@ def summarise(
     cov = (dx * w[:, None]).T @ dx
     has_theta = post.particles.shape[1] > n_x
     laplace = None
+    support = None
     if has_theta:
-        x_map = map_by_binning(x, w, inputs[:n_x], map_bins)
-        method = f"histogram, {map_bins} bins per parameter (Remark 8)"
+        binned = map_by_binning(x, w, inputs[:n_x], map_bins, seed)
+        x_map, support = binned.x, binned.support
+        method = (
+            f"histogram, {map_bins} bins per parameter (Remark 8); the whole cell kept in "
+            f"{binned.cell_support * 100:.0f} % of {MAP_RESAMPLINGS} resamplings of the particles"
+        )
     else:
         x_map = post.map[:n_x]
         method = "particle of highest posterior in the last SMC step"
@@ -100,6 +110,7 @@ def summarise(
         map_method=method,
         best_particle=post.map if has_theta else None,
         laplace=laplace,
+        map_support=support,
     )
 
 
@@ -110,12 +121,36 @@ def weighted_quantiles(values: FloatArray, weights: FloatArray, q: Sequence[floa
     return [float(values[order][min(int(np.searchsorted(cdf, qi)), len(cdf) - 1)]) for qi in q]
 
 
+@dataclass(frozen=True)
+class HistogramMap:
+    """The histogram MAP of :func:`map_by_binning`."""
+
+    x: FloatArray  # the centre of the heaviest cell
+    #: per parameter: the share of resamplings of the particles whose heaviest cell lies in
+    #: the same interval of that parameter (1: the particles decide it; near 1/bins: noise)
+    support: FloatArray
+    cell_support: float  # the share whose heaviest cell is the same cell
+
+
 def map_by_binning(
-    x: FloatArray, weights: FloatArray, parameters: Sequence[Parameter], bins: int
-) -> FloatArray:
+    x: FloatArray,
+    weights: FloatArray,
+    parameters: Sequence[Parameter],
+    bins: int,
+    seed: int = 0,
+    resamplings: int = MAP_RESAMPLINGS,
+) -> HistogramMap:
     """MAP of the theta-marginal: centre of the heaviest of ``bins`` intervals per parameter
     (Paper B Remark 8). The box is the parameters' bounds, else the particles' range; only
-    occupied bins are counted, so any dimension works."""
+    occupied bins are counted, so any dimension works.
+
+    Its support: the particles are a Monte Carlo sample, and where the posterior is flat at
+    the bins' resolution the heaviest cell is decided by which cell drew a few particles
+    more (example 8: 10^6 cells, the heaviest holds 18 of 10 000 particles, the next ones
+    15-17). ``resamplings`` bootstrap resamplings of the particles with their weights
+    (uniform draws with replacement, seeded by ``seed``) give the share in which each
+    parameter's interval of the heaviest cell stays the same; it measures the particles'
+    noise only, not the surrogate's."""
     lo = np.array(
         [p.lower if math.isfinite(p.lower) else x[:, j].min() for j, p in enumerate(parameters)]
     )
@@ -125,9 +160,21 @@ def map_by_binning(
     width = np.where(hi > lo, (hi - lo) / bins, 1.0)
     idx = np.clip(np.floor((x - lo) / width).astype(np.int64), 0, bins - 1)
     cells, inverse = np.unique(idx, axis=0, return_inverse=True)
-    mass = np.zeros(len(cells))
-    np.add.at(mass, inverse.ravel(), weights)
-    return np.asarray(lo + (cells[int(np.argmax(mass))] + 0.5) * width)
+    inverse = inverse.ravel()
+    top = cells[int(np.argmax(np.bincount(inverse, weights=weights, minlength=len(cells))))]
+    rng = np.random.default_rng(seed)
+    kept = np.zeros(len(top))
+    whole = 0
+    for _ in range(resamplings):
+        i = rng.integers(0, len(weights), len(weights))
+        drawn = cells[int(np.argmax(np.bincount(inverse[i], weights[i], len(cells))))]
+        kept += drawn == top
+        whole += bool(np.all(drawn == top))
+    return HistogramMap(
+        x=np.asarray(lo + (top + 0.5) * width),
+        support=kept / resamplings,
+        cell_support=whole / resamplings,
+    )
 
 
 def laplace_approximation(

@@ -38,6 +38,8 @@ __all__ = [
     "AdaptiveRound",
     "DesignRuns",
     "GpSmcResult",
+    "MAP_RESAMPLINGS",
+    "MAP_SUPPORT",
     "LaplaceApproximation",
     "ParticlePosterior",
     "PosteriorCheck",
@@ -260,6 +262,16 @@ def principal_angle(a: FloatArray, b: FloatArray, width: FloatArray) -> float:
     return float(np.degrees(np.arccos(cosine)))
 
 
+#: How many resamplings of the particles the histogram MAP's support is measured over
+#: (:func:`~fbia.iterators.gp_smc.posterior.map_by_binning`).
+MAP_RESAMPLINGS = 200
+
+#: The least support (the share of resamplings that keep it) for which a parameter's interval
+#: of the histogram MAP counts as determined by the particles; below it the result says so
+#: (message, ``GpSmcResult.undetermined``) and a paper comparison of it does not agree.
+MAP_SUPPORT = 0.9
+
+
 @dataclass(frozen=True)
 class ParticlePosterior:
     """The weighted particles of the last SMC step and their summaries (stage 5)."""
@@ -282,6 +294,9 @@ class ParticlePosterior:
     map_method: str
     best_particle: FloatArray | None = None  # with theta: the particle of highest posterior
     laplace: LaplaceApproximation | None = None
+    #: with theta, per x: the share of resamplings of the particles that keep the histogram
+    #: MAP's interval (posterior.map_by_binning); None for the best particle's MAP
+    map_support: FloatArray | None = None
 
     @property
     def std(self) -> FloatArray:
@@ -407,6 +422,7 @@ class GpSmcResult(Result):
                 "max_likelihood": (post.max_likelihood, (d,)),
                 "map": (post.map, (n_x,)),
                 "best_particle": (post.best_particle, (d,)),
+                "map_support": (post.map_support, (n_x,)),
             }
             if post.laplace is not None:
                 arrays["laplace.mean"] = (post.laplace.mean, (n_x,))
@@ -439,7 +455,21 @@ class GpSmcResult(Result):
         post = self.posterior
         if post is None:
             return text
-        lines = [text, "  posterior (mean, std, 2.5 % / 50 % / 97.5 %):"]
+        lines = [text]
+        if post.map_support is not None:
+            kept = ", ".join(
+                f"{n} {s * 100:.0f} %" for n, s in zip(post.names, post.map_support, strict=False)
+            )
+            loose = [k.removeprefix("map.") for k in self.undetermined()]
+            lines.append(
+                f"  MAP: {post.map_method}; each input's interval kept in: {kept}"
+                + (
+                    f"; not determined (< {MAP_SUPPORT * 100:.0f} %): {', '.join(loose)}"
+                    if loose
+                    else ""
+                )
+            )
+        lines.append("  posterior (mean, std, 2.5 % / 50 % / 97.5 %):")
         std = np.sqrt(np.maximum(np.diag(post.cov_all), 0.0))
         for j, name in enumerate(post.names):
             lo, mid, hi = post.credible_intervals[name]
@@ -491,6 +521,8 @@ class GpSmcResult(Result):
         posterior (x, theta, an inferred sigma_N) ``map.<name>`` (x only), ``pm.<name>``
         (posterior mean), ``sd.<name>`` (posterior std), ``q2.5.<name>``, ``q97.5.<name>``
         (95 % interval), ``mode.<name>`` (peak of the 1-D marginal: :func:`marginal_mode`);
+        with uncertain inputs ``map_support.<name>`` (x only: the share of resamplings of the
+        particles that keep the histogram MAP's interval, :meth:`undetermined`);
         ``log_evidence``; ``check.rmse`` (the surrogate's error in L at the posterior draws);
         ``design.n_failed`` and per input ``design.failed_min.<name>``,
         ``design.failed_max.<name>``: where the design's failed runs lie (NaN if none failed);
@@ -513,6 +545,8 @@ class GpSmcResult(Result):
         for j, name in enumerate(post.names):
             if j < len(post.map):
                 out[f"map.{name}"] = float(post.map[j])
+            if post.map_support is not None and j < len(post.map_support):
+                out[f"map_support.{name}"] = float(post.map_support[j])
             out[f"pm.{name}"] = float(post.mean_all[j])
             out[f"sd.{name}"] = float(std[j])
             lo, _, hi = post.credible_intervals[name]
@@ -524,6 +558,24 @@ class GpSmcResult(Result):
             width = np.ptp(self.design.points[:, :2], axis=0)
             out["laplace.angle"] = principal_angle(lap.cov, post.cov, width)
         return out
+
+    def undetermined(self) -> dict[str, str]:
+        """``map.<name>`` of each x whose histogram MAP interval the particles do not decide:
+        kept by fewer than :data:`MAP_SUPPORT` of the resamplings (the posterior is flat there
+        at the bins' resolution, Paper B: 'a rough estimate')."""
+        post = self.posterior
+        if post is None or post.map_support is None:
+            return {}
+        n = MAP_RESAMPLINGS
+        return {
+            f"map.{name}": (
+                f"the histogram MAP's interval of {name} is not determined: the heaviest cell "
+                f"of a resampling of the particles keeps it in {s * 100:.0f} % of {n} (needed: "
+                f"{MAP_SUPPORT * 100:.0f} %)"
+            )
+            for name, s in zip(post.names, post.map_support, strict=False)
+            if s < MAP_SUPPORT
+        }
 
     def units(self) -> dict[str, str]:
         """The inputs' units (from ``priors``, the inputs' descriptions)."""
@@ -566,9 +618,16 @@ class GpSmcResult(Result):
             return super()._html_body()
         head = ["input", "MAP", "PM", "std", "2.5 %", "97.5 %", "unit"]
         keys = ["input", "map", "pm", "std", "q2.5", "q97.5", "unit"]
-        parts = [html_table(head, [[r[k] for k in keys] for r in records])]
         post = self.posterior
         assert post is not None
+        table = [[r[k] for k in keys] for r in records]
+        if post.map_support is not None:
+            head.insert(2, "MAP support")
+            for j, row in enumerate(table):
+                row.insert(
+                    2, f"{post.map_support[j] * 100:.0f} %" if j < len(post.map_support) else ""
+                )
+        parts = [html_table(head, table)]
         how = (
             f"{self.mode} mode, {len(post.weights)} particles, log evidence {post.log_evidence:.4g}"
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -228,6 +229,26 @@ def test_an_unreliable_result_agrees_with_nothing(status, success, reason):
     assert f"| **no**: {reason} |" in line
 
 
+def test_an_undetermined_quantity_agrees_with_nothing_that_uses_it():
+    # the result says its histogram MAP of nu is decided by Monte Carlo noise: a row of it,
+    # or an ordering against it, is "no" with that reason; the rest are judged as usual
+    q = {"map.E": 400.0, "map.nu": 0.3, "map.E2": 200.0}
+    spec = _spec(
+        [
+            {"quantity": "map.E", "kind": "modulus", "paper": 400.0},
+            {"quantity": "map.nu", "kind": "ratio", "paper": 0.3},
+            {"quantity": "map.E", "kind": "ordering", "above": "map.nu"},
+            {"quantity": "map.E", "kind": "ordering", "above": "map.E2"},
+            {"quantity": "map.nu", "kind": "shown"},
+        ]
+    )
+    why = "the histogram MAP's interval of nu is not determined"
+    rows = compare(spec, q, "completed", True, {"map.nu": why})
+    assert [r.agrees for r in rows] == [True, False, False, True, None]
+    assert [r.reason for r in rows][:3] == ["", why, why]
+    assert [r.agrees for r in compare(spec, q, "completed", True, {})][:4] == [True] * 4
+
+
 def test_the_rules_are_the_kinds_table():
     assert {k: (v.rule, v.tolerance) for k, v in KINDS.items()} == {
         "modulus": ("relative", 0.02),
@@ -317,6 +338,13 @@ def test_gp_smc_quantities_are_map_mean_and_std():
     post.weights[:] = [0.2, 0.8]
     assert res.quantities()["mode.E"] == pytest.approx(500.0 - 200.0 / 60)
     assert "check.rmse" not in q and "design.n_failed" not in q  # stages that did not run
+    assert res.undetermined() == {} and "map_support.E" not in q  # the best particle's MAP
+    res.posterior = dataclasses.replace(post, map_support=np.array([0.97, 0.41]))
+    q = res.quantities()
+    assert (q["map_support.E"], q["map_support.nu"]) == (0.97, 0.41)
+    assert list(res.undetermined()) == ["map.nu"] and "41 %" in res.undetermined()["map.nu"]
+    assert "not determined (< 90 %): nu" in res.summary()
+    res.posterior = post
     res.design = DesignRuns(
         points=np.array([[150.0, -0.5], [120.0, 0.2], [600.0, 0.1]]),
         log_likelihood=np.array([-np.inf, -np.inf, -3.0]),

@@ -103,7 +103,29 @@ def test_map_by_binning_finds_the_heaviest_bin():
     x = np.r_[rng.uniform(0, 10, size=(4000, 2)), rng.normal([7.2, 2.2], 0.05, size=(500, 2))]
     w = np.full(len(x), 1.0 / len(x))
     params = [fbia.Parameter("a", bounds=(0, 10)), fbia.Parameter("b", bounds=(0, 10))]
-    np.testing.assert_allclose(map_by_binning(x, w, params, bins=20), [7.25, 2.25])
+    found = map_by_binning(x, w, params, bins=20)
+    np.testing.assert_allclose(found.x, [7.25, 2.25])
+    # a peak of 500 particles in one cell against ~10 a cell: every resampling keeps it
+    assert found.support.tolist() == [1.0, 1.0] and found.cell_support == 1.0
+
+
+def test_the_histogram_map_says_where_the_particles_do_not_decide_it():
+    # the exact posterior is known: a is sharp (N(7.2, 0.05)), b uniform on its prior; the
+    # heaviest cell's interval of a is the truth's, that of b is Monte Carlo noise
+    rng = np.random.default_rng(1)
+    n = 10_000
+    x = np.c_[rng.normal(7.2, 0.05, n), rng.uniform(0, 10, n)]
+    w = np.full(n, 1.0 / n)
+    params = [fbia.Parameter("a", bounds=(0, 10)), fbia.Parameter("b", bounds=(0, 10))]
+    found = map_by_binning(x, w, params, bins=10, seed=3)
+    assert found.x[0] == 7.5 and found.support[0] == 1.0
+    assert found.support[1] < 0.5 and found.cell_support < 0.5  # 10 equal cells in b
+    again = map_by_binning(x, w, params, bins=10, seed=3)  # seeded: reproducible
+    assert again.support.tolist() == found.support.tolist()
+    # weights count, not particles: the same uniform cloud weighted towards b in [2, 3)
+    tilted = np.where((x[:, 1] >= 2) & (x[:, 1] < 3), 3.0, 1.0)
+    found = map_by_binning(x, tilted / tilted.sum(), params, bins=10)
+    assert found.x[1] == 2.5 and found.support.tolist() == [1.0, 1.0]
 
 
 def test_laplace_approximation_of_a_gaussian_is_exact():
@@ -175,6 +197,11 @@ def test_uncertain_inflow_widens_the_posterior(runs):
     assert under.x["E"] < plain.x["E"] - 50.0
     assert under.posterior.mean[0] < plain.posterior.mean[0] - 50.0
     assert "histogram" in under.posterior.map_method and under.posterior.laplace is None
+    support = under.posterior.map_support  # per x; the message names the undetermined ones
+    assert support.shape == (2,) and plain.posterior.map_support is None
+    for name, s in zip(["E", "nu"], support, strict=True):
+        assert (f"map.{name}" in under.undetermined()) == (s < 0.9)
+        assert (f" {name} ({s * 100:.0f} %)" in under.message) == (s < 0.9)
 
 
 def test_failed_runs_are_excluded_from_training_and_reported():
