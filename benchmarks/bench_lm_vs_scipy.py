@@ -76,18 +76,19 @@ options), why fbia's forward differences take twice scipy's runs, in two parts:
   last accepted step six rejected trial steps with growing damping precede the stop (red);
 * the step: the default ``beta = 1e-3`` moves each parameter by 0.1 %, so a perturbed run needs
   Newton steps of its own (about 50 ms a run), while scipy's 2-point step (1.5e-8 relative)
-  lands where the warm start converges in a chord step (about 14 ms).  With
+  lands where the warm start converges in a chord step (about 14 ms: the median run of fbia's
+  forward differences at such a step, below).  With
   ``--options jacobian=forward final_jacobian=forward alpha=0 beta=1e-6`` fbia takes 292 runs
   against scipy's 296 (0.99x) and 11.56 s against 9.01 s (1.28x), the same optimum from every
   start (0.001 std. errors apart); the tangents (the default) in the next run: 100 runs,
-  11.87 s against 9.12 s (1.30x).  Without the black start both modes are within 6-10 % of
+  11.87 s against 9.12 s (1.30x).  Without the black start both modes are within 6-11 % of
   scipy's wall time: black's one failed run (E = 100 Pa, continuation failing at 81 of 100
-  mm^2/s) costs 1.6-2.0 s, more than the other ten runs of that fit together.  What is left
-  for "never slower than scipy" is that failed run's cost (the solver's continuation before it
-  gives up; scipy's trf never steps to the bound) or the step that reaches it.  Not changed:
-  a default of 1e-6 holds only for models converged far below 1e-6 relative (ale_fsi's Newton
-  is; Paper A's eq. 21 step is chosen for noisy ones), so a cost-based "auto" would need the
-  model to state its accuracy.
+  mm^2/s) costs 1.6-1.8 s (1.59 s measured here, 1.84 s before), more than the other ten runs
+  of that fit together.  What is left for "never slower than scipy" is that failed run's cost
+  (the solver's continuation before it gives up; scipy's trf keeps its iterates strictly
+  inside the bounds) or the step that reaches it.  Not changed: a default of 1e-6 holds only
+  for models converged far below 1e-6 relative (ale_fsi's Newton is; Paper A's eq. 21 step is
+  chosen for noisy ones), so a cost-based "auto" would need the model to state its accuracy.
 """
 
 from __future__ import annotations

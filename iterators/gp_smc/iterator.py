@@ -690,13 +690,7 @@ def _noise_note(run: SmcRun, posterior: ParticlePosterior) -> str:
 def _map_note(posterior: ParticlePosterior) -> str:
     """The inputs whose histogram MAP interval the particles do not decide (Remark 8's MAP
     under uncertain inputs: posterior.map_by_binning), in the result message."""
-    if posterior.map_support is None:
-        return ""
-    loose = [
-        f"{name} ({s * 100:.0f} %)"
-        for name, s in zip(posterior.names, posterior.map_support, strict=False)
-        if s < MAP_SUPPORT
-    ]
+    loose = [f"{name} ({s * 100:.0f} %)" for name, s in posterior.undetermined_map().items()]
     if not loose:
         return ""
     return (

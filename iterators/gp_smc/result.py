@@ -302,6 +302,14 @@ class ParticlePosterior:
     def std(self) -> FloatArray:
         return np.asarray(np.sqrt(np.diag(self.cov)))
 
+    def undetermined_map(self) -> dict[str, float]:
+        """The x whose histogram MAP interval fewer than :data:`MAP_SUPPORT` of the
+        resamplings keep, with that share (none for the best particle's MAP)."""
+        if self.map_support is None:
+            return {}
+        support = zip(self.names, map(float, self.map_support), strict=False)
+        return {name: s for name, s in support if s < MAP_SUPPORT}
+
     @property
     def log_posterior(self) -> FloatArray:
         """L + log p, unnormalised."""
@@ -460,7 +468,7 @@ class GpSmcResult(Result):
             kept = ", ".join(
                 f"{n} {s * 100:.0f} %" for n, s in zip(post.names, post.map_support, strict=False)
             )
-            loose = [k.removeprefix("map.") for k in self.undetermined()]
+            loose = list(post.undetermined_map())
             lines.append(
                 f"  MAP: {post.map_method}; each input's interval kept in: {kept}"
                 + (
@@ -564,7 +572,7 @@ class GpSmcResult(Result):
         kept by fewer than :data:`MAP_SUPPORT` of the resamplings (the posterior is flat there
         at the bins' resolution, Paper B: 'a rough estimate')."""
         post = self.posterior
-        if post is None or post.map_support is None:
+        if post is None:
             return {}
         n = MAP_RESAMPLINGS
         return {
@@ -573,8 +581,7 @@ class GpSmcResult(Result):
                 f"of a resampling of the particles keeps it in {s * 100:.0f} % of {n} (needed: "
                 f"{MAP_SUPPORT * 100:.0f} %)"
             )
-            for name, s in zip(post.names, post.map_support, strict=False)
-            if s < MAP_SUPPORT
+            for name, s in post.undetermined_map().items()
         }
 
     def units(self) -> dict[str, str]:
