@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core.errors import ForwardModelError
 from ..fem.flow_cell import FLUID, solid_regions
 from .boundaries import inflow_of, mesh_dirichlet, symmetry_axis
 from .checks import StateChecks
@@ -70,6 +71,7 @@ class SolverSettings:
     mesh_stiffening: float = 1.0  # exponent chi of the Jacobian-based stiffening
     mesh_weight: float = 1e-8  # weight of the mesh-motion operator (a stiffness, Pa)
     mesh_slip: bool = True  # mesh slides along straight walls/inflow/outflow (eq. 2.24)
+    motion_layer: float | None = None  # mm; the mesh moves only this near the interface
     order: int = 2  # velocity/displacement order (pressure: order - 1)
     newton_tol: float = 1e-8  # scaled Newton correction
     newton_max_iter: int = 12  # Jacobian assemblies per Newton solve (chord steps extra)
@@ -133,6 +135,7 @@ class AleFsiProblem:
         self._mu = {r: ngs.Parameter(1.0) for r in self.solids}
         self._lam = {r: ngs.Parameter(1.0) for r in self.solids}
         self.transient = False
+        self._fluid_parts = self._motion_layer(s.motion_layer)
         self._build_motion()
         self._build_forms(transient=False)
         self._det_points = mesh.MapToAllElements(self._check_rule(dim), ngs.VOL)
@@ -157,6 +160,47 @@ class AleFsiProblem:
             pts = [tuple(p) for p in [*corners, *mids, corners.mean(axis=0)]]
         return ngs.IntegrationRule(pts, [0.0] * len(pts))
 
+    def _motion_layer(self, layer: float | None) -> tuple[Any, Any]:
+        """The fluid elements whose mesh moves and those whose mesh stays fixed (NGSolve
+        BitArrays over all elements; ``(None, None)``: the whole fluid moves).
+
+        With ``layer`` (mm) the ALE mesh displacement lives only on the fluid elements with a
+        vertex within ``layer`` of an interface vertex (those touching the interface always);
+        the displacement dofs of every other fluid element, and so of the layer's outer
+        boundary, are fixed at zero (:meth:`_set_free_dofs`) and those elements are assembled
+        on the reference geometry, F = I.  The ALE extension is arbitrary (eq. 2.24 asks only
+        that it follow the interface and keep the mesh valid), so the solution changes at the
+        size of the discretisation error; the unknowns and the Jacobian's entries that couple
+        the flow to the mesh motion go.  The layer must be thick enough for the mesh to take
+        the interface's displacement: a fold shows as det F <= ``min_det_f`` (a failed run).
+        """
+        if layer is None:
+            return None, None
+        ngs = self.ngs
+        mesh = self.mesh
+        on_interface = np.zeros(mesh.nv, dtype=bool)
+        for el in mesh.Elements(ngs.BND):
+            if el.mat == "interface":
+                on_interface[[v.nr for v in el.vertices]] = True
+        if not on_interface.any():
+            raise ForwardModelError("motion_layer: the mesh has no interface", "bad_mesh")
+        from scipy.spatial import cKDTree
+
+        points = np.array([v.point for v in mesh.vertices], dtype=float)
+        near, _ = cKDTree(points[on_interface]).query(points, distance_upper_bound=layer)
+        near_vertex = np.isfinite(near)  # inf beyond the bound
+        moving, fixed = ngs.BitArray(mesh.ne), ngs.BitArray(mesh.ne)
+        moving.Clear()
+        fixed.Clear()
+        for el in mesh.Elements(ngs.VOL):
+            if el.mat != FLUID:
+                continue
+            if near_vertex[[v.nr for v in el.vertices]].any():
+                moving.Set(el.nr)
+            else:
+                fixed.Set(el.nr)
+        return moving, fixed
+
     def _build_forms(self, transient: bool) -> None:
         """The residual of the coupled problem (thesis eqs. 2.19-2.30) as one nonlinear form.
 
@@ -172,36 +216,49 @@ class AleFsiProblem:
         rho_f, mu_f, rho_s = s.fluid_density, s.fluid_viscosity, s.solid_density
         v_old, d_old, _ = self.gfu_old.components
         theta = s.theta if transient else 1.0
-        mesh_velocity = (d - d_old) / self.dt if transient else None
 
-        def kinematics(dd: Any) -> tuple[Any, Any, Any]:
-            F = I2 + ngs.Grad(dd)
-            return F, ngs.Det(F), ngs.Inv(F)
+        def fluid_integrand(disp: Any, disp_old: Any) -> Any:
+            """Eq. 2.19 pulled back by the ALE map of ``disp`` (None: the mesh does not move,
+            F = I, as beyond the motion layer)."""
+            moves = disp is not None
+            mesh_velocity = (disp - disp_old) / self.dt if transient and moves else None
 
-        def fluid_terms(vv: Any, dd: Any) -> Any:
-            """Viscous and convective terms of eq. 2.19a on the reference domain."""
-            F, J, Finv = kinematics(dd)
-            grad_v = ngs.Grad(vv) * Finv  # spatial velocity gradient
-            sigma_v = mu_f * (grad_v + grad_v.trans)  # eq. 2.20-2.21 without the pressure
-            c = vv if mesh_velocity is None else vv - mesh_velocity  # ALE convective velocity
-            return J * ngs.InnerProduct(sigma_v * Finv.trans, ngs.Grad(phi)) + rho_f * J * (
-                ngs.InnerProduct(grad_v * c, phi)
-            )
+            def kinematics(dd: Any) -> tuple[Any, Any, Any]:
+                if dd is None:
+                    return I2, 1.0, I2
+                F = I2 + ngs.Grad(dd)
+                return F, ngs.Det(F), ngs.Inv(F)
 
-        F, J, Finv = kinematics(d)
-        fluid = theta * fluid_terms(v, d)
-        fluid += -p * J * ngs.InnerProduct(Finv.trans, ngs.Grad(phi))  # pressure, implicit
-        fluid += -J * ngs.Trace(ngs.Grad(v) * Finv) * q  # eq. 2.19b
-        if transient:
-            fluid += rho_f * J * ngs.InnerProduct((v - v_old) / self.dt, phi)
-            if theta < 1.0:
-                fluid += (1.0 - theta) * fluid_terms(v_old, d_old)
+            def fluid_terms(vv: Any, dd: Any) -> Any:
+                """Viscous and convective terms of eq. 2.19a on the reference domain."""
+                F, J, Finv = kinematics(dd)
+                grad_v = ngs.Grad(vv) * Finv  # spatial velocity gradient
+                sigma_v = mu_f * (grad_v + grad_v.trans)  # eq. 2.20-2.21 without the pressure
+                c = vv if mesh_velocity is None else vv - mesh_velocity  # ALE convective vel.
+                return J * ngs.InnerProduct(sigma_v * Finv.trans, ngs.Grad(phi)) + rho_f * J * (
+                    ngs.InnerProduct(grad_v * c, phi)
+                )
 
-        fluid_cf = fluid.Compile()
+            F, J, Finv = kinematics(disp)
+            fluid = theta * fluid_terms(v, disp)
+            fluid += -p * J * ngs.InnerProduct(Finv.trans, ngs.Grad(phi))  # pressure, implicit
+            fluid += -J * ngs.Trace(ngs.Grad(v) * Finv) * q  # eq. 2.19b
+            if transient:
+                fluid += rho_f * J * ngs.InnerProduct((v - v_old) / self.dt, phi)
+                if theta < 1.0:
+                    fluid += (1.0 - theta) * fluid_terms(v_old, disp_old)
+            return fluid.Compile()
+
         self._fluid_form = ngs.BilinearForm(self.fes, symmetric=False)
-        self._fluid_form += fluid_cf * ngs.dx(FLUID)
         form = ngs.BilinearForm(self.fes, symmetric=False)
-        form += fluid_cf * ngs.dx(FLUID)  # the mesh motion is added as a fixed matrix
+        moving, fixed = self._fluid_parts
+        parts = [(fluid_integrand(d, d_old), moving)]
+        if fixed is not None:
+            parts.append((fluid_integrand(None, None), fixed))
+        for integrand, elements in parts:
+            where = ngs.dx(FLUID) if elements is None else ngs.dx(FLUID, definedonelements=elements)
+            self._fluid_form += integrand * where
+            form += integrand * where  # the mesh motion is added as a fixed matrix
         gravity = [float(c) for c in s.gravity][: self.dim]
         g = ngs.CoefficientFunction(tuple(gravity + [0.0] * (self.dim - len(gravity))))
         for region in self.solids:
@@ -263,7 +320,10 @@ class AleFsiProblem:
             raise ValueError(f"unknown mesh motion {s.mesh_motion!r}")
         self._area = area
         self._motion = ngs.BilinearForm(self.fes, symmetric=False)
-        self._motion += motion * ngs.dx(FLUID)
+        moving = self._fluid_parts[0]
+        self._motion += motion * (
+            ngs.dx(FLUID) if moving is None else ngs.dx(FLUID, definedonelements=moving)
+        )
         self._motion.Assemble()
 
     def _set_free_dofs(self, transient: bool) -> None:
@@ -276,6 +336,14 @@ class AleFsiProblem:
         self._v_solid = r_v.start + solid_v  # velocity dofs of the solid (interface included)
         if not transient:
             free[self._v_solid] = False
+        fixed = self._fluid_parts[1]
+        if fixed is not None:  # the mesh beyond the motion layer stays where it is
+            D = self.fes.components[1]
+            on_fixed = np.zeros(D.ndof, dtype=bool)
+            for nr in np.flatnonzero(np.array(fixed, dtype=bool)):
+                dofs = [k for k in D.GetDofNrs(ngs.ElementId(ngs.VOL, int(nr))) if k >= 0]
+                on_fixed[dofs] = True
+            free[r_d.start + np.flatnonzero(on_fixed)] = False
         # interface dofs whose displacement is free: their fluid-momentum rows (phi) are added
         # to their displacement rows (psi) in quasi-static mode
         iface = np.flatnonzero(np.array(V.GetDofs(self.mesh.Boundaries("interface"))))
@@ -383,7 +451,10 @@ class AleFsiProblem:
             n = mat.width
             cols, ptr = (np.asarray(a, dtype=np.int64) for a in mat.CSR()[1:])
             keys = np.repeat(np.arange(mat.height, dtype=np.int64), np.diff(ptr)) * n + cols
-            order = np.argsort(keys, kind="stable")
+            if bool(np.all(keys[1:] > keys[:-1])):  # NGSolve's CSR: columns sorted per row
+                order = np.arange(len(keys), dtype=np.int64)
+            else:
+                order = np.argsort(keys, kind="stable")
             sorted_keys = keys[order]
 
             def lookup(wanted: NDArray[np.int64]) -> NDArray[np.int64]:

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..fem.flow_cell import SOLID
-from ..fem.newton import NewtonFailure
+from ..fem.newton import NewtonFailure, direct_solver_threads
 
 __all__ = ["TangentReport", "material_inputs", "vertex_tangents"]
 
@@ -184,13 +184,15 @@ def _refined(solver: Any, newton: Any, rhs: Any, report: TangentReport) -> Any:
     jx = rhs.CreateVector()
     corr = rhs.CreateVector()
     free = solver.free_mask
-    x.data = newton.inverse * rhs
+    with direct_solver_threads(newton.threads):
+        x.data = newton.inverse * rhs
     blocks = [idx for b in solver.field_blocks() if len(idx := b.start + np.flatnonzero(free[b]))]
     previous = np.inf
     for _ in range(REFINE_MAX):
         solver.matrix.Mult(x, jx)
         r.data = rhs - jx
-        corr.data = newton.inverse * r
+        with direct_solver_threads(newton.threads):
+            corr.data = newton.inverse * r
         x.data += corr
         report.refinements += 1
         xv, cv = x.FV().NumPy(), corr.FV().NumPy()

@@ -61,6 +61,10 @@ class AleFsiSolver(AleFsiProblem):
             settings.newton_max_iter,
             direct,
             blocks=blocks,
+            # nested dissection: in 3-D it halved the analysis and factorisation against
+            # minimum degree (benchmarks/bench_ale_fsi_3d.py); 2-D keeps NGSolve's ordering
+            ordering="metis" if mesh.dim == 3 else None,
+            threads=max(1, int(settings.threads)),
         )
         if mesh.dim == 3 and blocks is None:
             # with the direct solver a fresh Jacobian costs tens of chord steps in 3-D and a

@@ -42,7 +42,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -55,6 +56,7 @@ __all__ = [
     "NewtonSolver",
     "NonlinearSystem",
     "StepReport",
+    "direct_solver_threads",
     "sparse_direct_solver",
 ]
 
@@ -164,6 +166,12 @@ class NewtonSolver:
         ``linear_solver`` factorises (:class:`~fbia.plugins.fem.krylov.BlockGMResInverse`).
     chord
         When the factorisation is reused (default :class:`ChordRule`).
+    ordering
+        Pardiso's fill-reducing ordering (``"metis"``, ``"minimum_degree"``); None keeps
+        NGSolve's (minimum degree).  Nested dissection (METIS) is the ordering for 3-D meshes.
+    threads
+        Threads of the direct solver's factorisations and solves (``ngsolve.SetNumThreads``
+        must allow as many); 1 keeps them serial (:func:`direct_solver_threads`).
     """
 
     def __init__(
@@ -177,6 +185,8 @@ class NewtonSolver:
         inadmissible: str = "ale_jacobian",
         blocks: Callable[[], list[Any]] | None = None,
         chord: ChordRule | None = None,
+        ordering: str | None = None,
+        threads: int = 1,
     ) -> None:
         self.system = system
         self.tol = tol
@@ -187,6 +197,8 @@ class NewtonSolver:
         #: when the factorisation is reused (:class:`ChordRule`)
         self.chord = chord or ChordRule()
         self.blocks = blocks
+        self.ordering = ordering
+        self.threads = threads
         #: seconds spent assembling and solving, summed over every solve
         self.timings = {"assembly": 0.0, "solve": 0.0}
         #: the factorised Jacobian (None until the first factorisation)
@@ -323,12 +335,18 @@ class NewtonSolver:
                     self.system.matrix, self.blocks(), self.system.free, self.linear_solver
                 )
             elif self.inverse is None:
-                flags = {"refinement": 0} if self.linear_solver == "pardiso" else {}
-                self.inverse = self.system.matrix.Inverse(
-                    self.system.free, inverse=self.linear_solver, flags=Flags(flags)
-                )
+                flags: dict[str, Any] = {}
+                if self.linear_solver == "pardiso":
+                    flags["refinement"] = 0
+                    if self.ordering is not None:
+                        flags["ordering"] = self.ordering
+                with direct_solver_threads(self.threads):
+                    self.inverse = self.system.matrix.Inverse(
+                        self.system.free, inverse=self.linear_solver, flags=Flags(flags)
+                    )
             else:
-                self.inverse.Update()
+                with direct_solver_threads(self.threads):
+                    self.inverse.Update()
         except Exception as exc:  # Pardiso/NGSolve report a singular matrix as plain errors
             self.inverse = None
             raise NewtonFailure(f"{where}: factorisation failed: {exc}", "linear_solver") from exc
@@ -344,7 +362,8 @@ class NewtonSolver:
         rigid solid (Turek-Hron CFD1, E = 1e15 Pa, next to a mesh motion of weight 1e-8 Pa).
         """
         try:
-            du.data = self.inverse * res
+            with direct_solver_threads(self.threads):
+                du.data = self.inverse * res
             if not refine:
                 return True
             size = self.scaled_norm(du)
@@ -354,7 +373,8 @@ class NewtonSolver:
             for k in range(3):
                 self.system.matrix.Mult(du, k_du)
                 r.data = res - k_du
-                correction.data = self.inverse * r
+                with direct_solver_threads(self.threads):
+                    correction.data = self.inverse * r
                 du.data += correction
                 if self.scaled_norm(correction) <= 1e-6 * max(size, 1e-12):
                     return k == 0
@@ -371,6 +391,25 @@ class NewtonSolver:
             raise NewtonFailure("the linear solve returned NaN", "newton_nan")
         free = self.system.free_mask
         return float(np.max(np.abs(step[free]) / self.system.scales()[free]))
+
+
+@contextmanager
+def direct_solver_threads(threads: int) -> Iterator[None]:
+    """Run a sparse direct solver's factorisation or solve on NGSolve's threads if
+    ``threads`` > 1 (else serially, as before).
+
+    NGSolve's Pardiso wrapper gives MKL the task manager's thread count
+    (``pyngcore.GetNumThreads``), which is 1 outside ``ngsolve.TaskManager()``: a solver set to
+    two threads factorised on one (Pardiso's own statistics: "running on 1 OpenMP").  Inside
+    the task manager it uses ``ngsolve.SetNumThreads``'s count; nested use is harmless.
+    """
+    if threads <= 1:
+        yield
+        return
+    import ngsolve as ngs
+
+    with ngs.TaskManager():
+        yield
 
 
 def sparse_direct_solver() -> str:

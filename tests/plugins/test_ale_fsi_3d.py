@@ -124,6 +124,48 @@ def _assert_mirror_symmetric(model: AleFsiForwardModel) -> None:
     assert np.abs(di[:, 2]).max() > 1e-3 * scale  # not trivially symmetric: it bulges sideways
 
 
+def test_motion_layer_fixes_the_far_mesh_and_keeps_the_solution(dome, tmp_path):
+    """``mesh_motion_layer``: the ALE mesh moves only near the interface.  The extension of
+    the displacement into the fluid is arbitrary (eq. 2.24), so the discrete solution moves
+    by the size of the discretisation error, not more: measured on this coarse dome +0.02 %
+    in the largest displacement and +0.03 % in the drag against the whole fluid moving; the
+    displacement dofs beyond the layer leave the Newton system (22 % fewer unknowns here),
+    the mesh there stays exactly where it was, and the state is still mirror-symmetric."""
+    import ngsolve as ngs
+
+    whole, whole_sol = dome
+    layer = 0.15
+    model = AleFsiForwardModel(**DOME, warm_start=False, mesh_motion_layer=layer)
+    sol = model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path)
+    got, want = sol.diagnostics["max_displacement"][0], whole_sol.diagnostics["max_displacement"][1]
+    assert abs(got - want) < 1e-3 * want
+    drag, drag_whole = (
+        sol.diagnostics["fluid_force"][0][0],
+        whole_sol.diagnostics["fluid_force"][1][0],
+    )
+    assert abs(drag - drag_whole) < 1e-3 * drag_whole
+    assert sol.diagnostics["ndof"] < 0.85 * whole_sol.diagnostics["ndof"]
+    # every vertex farther than the layer from the interface stays put; nearer ones move
+    mesh = model.solver.mesh
+    pts = np.array([v.point for v in mesh.vertices])
+    iface = pts[_interface_vertices(model)]
+    dist = np.min(np.linalg.norm(pts[:, None, :] - iface[None, :, :], axis=2), axis=1)
+    fluid_only = np.ones(mesh.nv, dtype=bool)
+    for el in mesh.Elements(ngs.VOL):
+        if el.mat != "fluid":
+            fluid_only[[v.nr for v in el.vertices]] = False
+    d = np.linalg.norm(_vertex_displacement(model), axis=1)
+    far = fluid_only & (dist > 2 * layer)  # beyond the layer and its elements' reach
+    assert far.sum() > 100 and d[far].max() == 0.0
+    assert d[fluid_only & (dist > 0) & (dist < layer / 2)].max() > 0.1 * got
+    _assert_mirror_symmetric(model)
+
+
+def test_motion_layer_must_be_positive():
+    with pytest.raises(fbia.ConfigError, match="mesh_motion_layer"):
+        AleFsiForwardModel(**DOME, mesh_motion_layer=0.0)
+
+
 def test_dome_interface_is_a_surface_that_the_measures_take(dome):
     _, sol = dome
     moved = sol.interface({"inflow_rate": 100.0})

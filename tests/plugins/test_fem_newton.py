@@ -139,3 +139,42 @@ def test_a_warm_first_step_that_makes_it_worse_is_undone() -> None:
     assert 0.01 < rep.norms[0] < 0.1  # the first (chord) update, taken on trust
     assert np.array_equal(system.assembled_at[0], start)
     assert np.max(np.abs(system.gfu.vec.FV().NumPy() - solution)) < 1e-9
+
+
+def test_direct_solver_threads_give_pardiso_ngsolves_thread_count() -> None:
+    """NGSolve's Pardiso wrapper hands MKL ``pyngcore.GetNumThreads()``, which is 1 outside
+    the task manager: a solver asked for 2 threads factorised on one until the factorisation
+    ran inside it (``direct_solver_threads``); a serial solver stays outside."""
+    from pyngcore import GetNumThreads
+
+    from fbia.plugins.fem.newton import direct_solver_threads
+
+    with ngs.TaskManager():
+        before = GetNumThreads()  # the count in use, restored below
+    ngs.SetNumThreads(2)
+    try:
+        assert GetNumThreads() == 1
+        with direct_solver_threads(2):
+            assert GetNumThreads() == 2
+            with direct_solver_threads(2):  # nested: harmless
+                assert GetNumThreads() == 2
+        with direct_solver_threads(1):
+            assert GetNumThreads() == 1
+    finally:
+        ngs.SetNumThreads(before)
+
+
+@pytest.mark.parametrize("ordering", [None, "metis"])
+def test_the_fill_reducing_ordering_gives_the_same_solution(ordering: str | None) -> None:
+    """Pardiso with nested dissection (``ordering = "metis"``, the 3-D choice of ale_fsi) or
+    NGSolve's minimum degree: the same Newton solution to the tolerance."""
+    from fbia.plugins.fem.newton import sparse_direct_solver
+
+    direct = sparse_direct_solver()
+    system = Cubic()
+    rep = NewtonSolver(system, 1e-10, 12, direct, ordering=ordering, threads=2).solve()
+    anchor = Cubic()
+    NewtonSolver(anchor, 1e-10, 12, "umfpack").solve()
+    assert rep.converged
+    diff = system.gfu.vec.FV().NumPy() - anchor.gfu.vec.FV().NumPy()
+    assert np.max(np.abs(diff)) < 1e-9 * np.max(np.abs(anchor.gfu.vec.FV().NumPy()))
