@@ -33,12 +33,27 @@ under a 0.1 mm dome changed it by 1.2 %; order 3 at 0.15 / 0.3 mm does what orde
 dome at <= 0.15 mm and the duct at <= 0.3 mm scatter by +-0.8 % (non-nested netgen meshes):
 the reference is good to about that.  A second reference: orders 2, 3, 4 on the 0.15/0.3 mm
 mesh converge geometrically (differences 2.2e-3, 2.7e-4 mm), Aitken's limit 0.026359 mm
-(-0.45 % from the finest run).  The last lines check the issue's target for the recommended
-settings (:data:`RECOMMENDED`: order 3, dome 0.15 mm, duct 0.2 mm, two threads): one run in
-<= 60 s wall on 2 cores, within 1 % of both references.  Measured on two free cores (the
-lead, load < 1.5): 42.3 s wall, 2.4 GB, -0.84 % / -0.39 %.  The duct at 0.3 mm is 18 s but
-+0.7 % / +1.15 %; order 4 there is -0.3 % / +0.14 % but 69 s, 4.5 GB.  Under load (5 on 2
-cores) two threads were slower than one; they pay on free cores only.
+(-0.45 % from the finest run).  The last lines check issue 47's target for the recommended
+settings (:data:`RECOMMENDED`: order 3, dome 0.15 mm, duct 0.2 mm, two threads, the mesh
+moving within 0.15 mm of the dome): one run in <= 10 s wall on 2 cores, <= 1.5 GB, within
+1 % of both references.  Measured 2026-11-30 on two free cores, ``--target``:
+
+    p  h_if h_duct curved thr layer    ndof  max |d| mm  err %  wall s   cpu s     MB
+    3 0.150  0.200   True   2     -   57392   0.0262558  -0.84    29.5    47.3   2456
+    3 0.150  0.200   True   2  0.15   39614   0.0262506  -0.86    14.5    25.3   1426
+
+(-0.41 % from the p-limit): memory and error met, wall time not (14.5-16 s over three runs).
+Before, the same run took 34-42 s (2.4 GB): Pardiso factorised on one thread whatever
+``threads`` said (NGSolve's wrapper takes the task manager's count, 1 outside it) with
+minimum-degree ordering, and the whole fluid mesh moved.  Where the 14.5 s go (cProfile):
+three Jacobians (1.0-1.3 s assembly each: 0.56 s the 654 moving fluid elements, 0.43 s the
+1468 fixed ones, 0.03 s the solid) and their factorisations (Pardiso's analysis with the
+matching it needs for the saddle point, ~2 s once; 0.75 s a refactorisation), 16 residuals
+and back-substitutions (~0.15 s each: 13 chord steps to the 1e-10 tolerance), meshing and
+forms (~2.5 s).  Without Pardiso's matching (iparm 13 = 0) the continuation failed.
+Earlier (before these changes): the duct at 0.3 mm was 18 s but +0.7 % / +1.15 %; order 4
+there -0.3 % / +0.14 % but 69 s, 4.5 GB.  Under load (5 on 2 cores) two threads were slower
+than one; they pay on free cores only.
 
 The machine may be shared: CPU times are printed next to wall times, and the load average.
 """

@@ -61,6 +61,19 @@ an SVK biofilm past its limit point followed to the fold, cost the same 7-10 s i
 the dome 0.59x with free tangents.  The 3-D chord rule made both modes faster (forward 2.1x,
 tangents 1.3x) and the ratio worse; it is kept because a user's wall time is what counts.
 The optima agree to 0.011 and 0.001 standard errors.
+
+Measured 2026-11-30 (issue 47), ``--dome``, 2 free cores, the dome now with
+``mesh_motion_layer = 0.15`` and Pardiso on both threads with nested dissection
+(``benchmarks/bench_ale_fsi_3d.py``): forward 34 runs 41.5 s (42.2 s in a second run), tangents
+6 runs 32.3 s (30.8 s) of which the tangents 15.7 s (14.9 s); the same optima (errors from the
+truth -0.0021 / -0.0003 Pa in E).  Issue 47's target for the tangent row is 20 s: not met.
+Where the time goes (the runs' diagnostics): each run assembles one Jacobian (1.0-1.3 s) and
+factorises it (0.75 s), takes 4-16 chord steps (~0.15 s each), and its tangents assemble the
+Jacobian again at the converged state (1.0-1.3 s) and refine 6-24 back-substitutions against
+it (2.2-2.9 s a run for the tangents).  Factorising afresh for the tangents instead (2
+refinements) gave 28.0 s against 30.9 s in one pair of runs, within this VM's scatter: not
+kept.  NGSolve's compiled coefficient functions (``realcompile``) would speed the assembly
+but need ``ngscxx``, which the pip wheels do not ship.
 """
 
 from __future__ import annotations

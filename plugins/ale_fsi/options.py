@@ -47,7 +47,7 @@ class AleFsiOptions(PluginOptions):
         "flow_cell",
         description="flow_cell: the 2-D cell; dome_3d: a 3-D duct with a spherical-cap "
         "biofilm (inflow_rate in mm^3/s; for its displacement to 1 %: order 3, mesh_size "
-        "0.2, interface_mesh_size 0.15, curved, threads 2 -- see "
+        "0.2, interface_mesh_size 0.15, curved, threads 2, mesh_motion_layer 0.15 -- see "
         "benchmarks/bench_ale_fsi_3d.py); ridge_3d: the 2-D cell extruded over "
         "channel_width between symmetry walls (plane strain); colony_3d: the dome_3d duct "
         "with the colony of colony_surface [-]",
