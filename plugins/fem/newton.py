@@ -364,21 +364,20 @@ class NewtonSolver:
         try:
             with direct_solver_threads(self.threads):
                 du.data = self.inverse * res
-            if not refine:
-                return True
-            size = self.scaled_norm(du)
-            k_du = res.CreateVector()
-            r = res.CreateVector()
-            correction = res.CreateVector()
-            for k in range(3):
-                self.system.matrix.Mult(du, k_du)
-                r.data = res - k_du
-                with direct_solver_threads(self.threads):
+                if not refine:
+                    return True
+                size = self.scaled_norm(du)
+                k_du = res.CreateVector()
+                r = res.CreateVector()
+                correction = res.CreateVector()
+                for k in range(3):
+                    self.system.matrix.Mult(du, k_du)
+                    r.data = res - k_du
                     correction.data = self.inverse * r
-                du.data += correction
-                if self.scaled_norm(correction) <= 1e-6 * max(size, 1e-12):
-                    return k == 0
-            return False
+                    du.data += correction
+                    if self.scaled_norm(correction) <= 1e-6 * max(size, 1e-12):
+                        return k == 0
+                return False
         except NewtonFailure:
             raise
         except Exception as exc:  # see factorise
