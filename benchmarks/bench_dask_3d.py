@@ -101,6 +101,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -147,8 +148,11 @@ def _points(n: int, seed: int) -> list[dict[str, float]]:
     return [{"E": float(E)} for E in rng.uniform(300.0, 500.0, n)]
 
 
-def _batch(problem: fbia.InverseProblem, workers: int, n: int, root: Path, isolate: bool) -> float:
-    """Wall time of one batch of ``n`` runs on a LocalCluster of ``workers`` workers."""
+def _batch(
+    problem: fbia.InverseProblem, workers: int, n: int, root: Path, isolate: bool
+) -> tuple[float, list[Any]]:
+    """Wall time and records of one batch of ``n`` runs on a LocalCluster of ``workers``
+    workers."""
     options = {"workdir": root, "keep_workdirs": False, "isolate": isolate}
     with fbia.make_evaluator("dask", workers=workers, **options) as ev:
         warm = ev.evaluate(problem, _points(workers, seed=99))
@@ -158,10 +162,43 @@ def _batch(problem: fbia.InverseProblem, workers: int, n: int, root: Path, isola
         wall = time.perf_counter() - t0
     failed = [r.message for r in records if not r.ok]
     assert not failed, failed
-    return wall
+    return wall, records
 
 
-def _serial(problem: fbia.InverseProblem, n: int, root: Path) -> float:
+def _where(records: list[Any]) -> str:
+    """Where a batch's time went: the runs' own wall times, their fresh Jacobians and the
+    assembly time per Jacobian (the same work alone and side by side)."""
+    own = sum(r.time for r in records)
+    jac = sum(int(r.diagnostics.get("jacobians", 0)) for r in records)
+    asm = sum(float(r.diagnostics.get("assembly_time", 0.0)) for r in records)
+    per = f"{asm / jac:.2f} s assembly per Jacobian" if jac else "no Jacobian"
+    return f"runs' own time {own:.1f} s, {jac} fresh Jacobians, {per}"
+
+
+#: a pure-Python loop that counts for a given number of seconds of wall time
+_SPIN = (
+    "import time\nt = time.perf_counter()\ns = 0\n"
+    "while time.perf_counter() - t < {}: s += 1\nprint(s)"
+)
+
+
+def machine_parallelism(seconds: float = 3.0) -> float:
+    """How much work two single-threaded processes side by side get done against one alone
+    (2.0 on two free cores): a pure-Python loop counting for ``seconds`` of wall time."""
+    import subprocess
+
+    def spin(k: int) -> list[int]:
+        code = _SPIN.format(seconds)
+        procs = [
+            subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE) for _ in range(k)
+        ]
+        return [int(p.communicate()[0]) for p in procs]
+
+    alone = spin(1)[0]
+    return sum(spin(2)) / alone
+
+
+def _serial(problem: fbia.InverseProblem, n: int, root: Path) -> tuple[float, list[Any]]:
     """The anchor: ``n`` runs in this process, warm (one run before, not timed)."""
     with fbia.make_evaluator("serial", workdir=root, keep_workdirs=False, isolate=False) as ev:
         assert all(r.ok for r in ev.evaluate(problem, _points(1, seed=99)))
@@ -169,7 +206,7 @@ def _serial(problem: fbia.InverseProblem, n: int, root: Path) -> float:
         records = ev.evaluate(problem, _points(n, seed=0))
         wall = time.perf_counter() - t0
     assert all(r.ok for r in records), [r.message for r in records if not r.ok]
-    return wall
+    return wall, records
 
 
 def main() -> None:
@@ -195,16 +232,19 @@ def main() -> None:
     )
     with tempfile.TemporaryDirectory() as tmp:
         for name, options in MODELS.items():
-            serial = _serial(_problem(options), args.runs, Path(tmp) / f"{name}-serial")
+            serial, records = _serial(_problem(options), args.runs, Path(tmp) / f"{name}-serial")
             print(
                 f"{name:14} {'serial':>7} {args.runs:5d} {serial:9.1f} "
                 f"{args.runs / serial:7.3f} {'':8} {'':10} {serial / args.runs:14.2f} s/run"
             )
+            print(f"{'':14} {_where(records)}")
             problem = _problem(options)
             walls: dict[int, float] = {}
             for workers in (1, 2):
                 root = Path(tmp) / name
-                walls[workers] = _batch(problem, workers, args.runs, root, not args.no_isolate)
+                walls[workers], records = _batch(
+                    problem, workers, args.runs, root, not args.no_isolate
+                )
                 up = walls[1] / walls[workers]
                 ratio = walls[workers] * workers / serial
                 print(
@@ -212,10 +252,15 @@ def main() -> None:
                     f"{args.runs / walls[workers]:7.3f} {up:8.2f} {up / workers:10.0%} "
                     f"{ratio:14.2f}x"
                 )
+                print(f"{'':14} {_where(records)}")
             print(
                 f"{name:14} 2 workers against serial: {serial / walls[2]:.2f}x faster "
                 f"(issue 47's target for the 3-D dome: >= 1.6x)"
             )
+    print(
+        f"the machine: two single-threaded processes side by side do {machine_parallelism():.2f}x "
+        "the work of one alone (2.00 on two free cores; the ceiling of any 2-worker speed-up)"
+    )
     print(f"load average after:  {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
