@@ -426,15 +426,21 @@ def test_dome_displacement_converges_under_mesh_refinement(tmp_path):
 
 
 @pytest.mark.slow
-def test_recommended_3d_settings_are_within_one_percent_of_the_finest_run(tmp_path):
-    """The recommended 3-D settings (order 3, dome 0.15 mm, duct 0.2 mm, curved; 57 k
-    unknowns, ~50 s CPU) against the finest run of benchmarks/bench_ale_fsi_3d.py (order 3,
-    dome and duct 0.15 mm: 0.026478 mm).  Measured: 0.026256 mm, -0.84 % (and -0.39 % from
-    the limit of orders 2-4 on the 0.15/0.3 mm mesh, 0.026359 mm: the bench prints both)."""
-    reference = 0.026478
+def test_recommended_3d_settings_are_within_one_percent_of_both_references(tmp_path):
+    """The recommended 3-D settings (order 3, dome 0.15 mm, duct 0.2 mm, curved, the mesh
+    moving within 0.15 mm of the dome; 40 k unknowns, ~25 s CPU) against both references of
+    benchmarks/bench_ale_fsi_3d.py: the finest run (order 3, dome and duct 0.15 mm:
+    0.026478 mm) and the limit of orders 2-4 on the 0.15/0.3 mm mesh (0.026359 mm).
+    Measured: 0.0262506 mm, -0.86 % and -0.41 % (without the layer 0.0262558 mm)."""
     model = AleFsiForwardModel(
-        geometry="dome_3d", order=3, mesh_size=0.2, interface_mesh_size=0.15, warm_start=False
+        geometry="dome_3d",
+        order=3,
+        mesh_size=0.2,
+        interface_mesh_size=0.15,
+        mesh_motion_layer=0.15,
+        warm_start=False,
     )
     sol = model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path)
     value = sol.diagnostics["max_displacement"][0]
-    assert abs(value - reference) < 0.01 * reference
+    for reference in (0.026478, 0.026359):
+        assert abs(value - reference) < 0.01 * reference
