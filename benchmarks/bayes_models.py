@@ -87,7 +87,7 @@ TANGENT_STEP = 1e-5
 CASE_NAMES = ("2d", "2d_inflow", "7d", "banana", "banana_inflow", "bimodal", "bimodal_inflow")
 
 
-class GraphMound(fbia.Configurable):
+class GraphMound(fbia.ForwardModelBase):
     """What the closed-form mounds share: the grid of x, the undeformed graph f0 and the
     inputs, pairs of material inputs (``material_names``) then ``inflow_rate``."""
 

@@ -1,7 +1,8 @@
 """fbia.core, the kernel: the contracts and values every other part of fbia builds on.
 
 Errors, options, the plugin registry and its hooks, the three extension contracts
-(``ForwardModel``, ``Discrepancy`` and ``InverseIterator`` in ``protocols``; the
+(the protocols ``ForwardModel``, ``Discrepancy`` and ``InverseIterator`` and the bases
+``ForwardModelBase`` and ``MeasureBase`` in ``protocols``; ``IteratorBase`` and the
 ``Evaluator`` an iterator receives in ``iteration``), interfaces, observations, parameters
 and priors, the inverse problem and its results, the likelihood and synthetic data.  It
 imports nothing of fbia outside itself (``tests/test_architecture.py``), and no store,
@@ -24,7 +25,7 @@ from .observation import (
 from .options import Configurable, PluginOptions
 from .parameters import Parameter, Prior
 from .problem import Evaluation, InverseProblem, Result
-from .protocols import Discrepancy, ForwardModel, InverseIterator
+from .protocols import Discrepancy, ForwardModel, ForwardModelBase, InverseIterator, MeasureBase
 from .registry import Registry, forward_model, iterator, list_plugins, measure
 
 __all__ = [
@@ -36,11 +37,13 @@ __all__ = [
     "Evaluator",
     "FbiaError",
     "ForwardModel",
+    "ForwardModelBase",
     "IteratorBase",
     "ForwardModelError",
     "Interface",
     "InverseProblem",
     "InverseIterator",
+    "MeasureBase",
     "MeasureError",
     "MeasurementPoints",
     "Observation",

@@ -18,10 +18,9 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Generator, Mapping, Sequence
-from typing import Any, Protocol, TypeVar, runtime_checkable
+from typing import Any, Protocol, TypeVar, final, runtime_checkable
 
-from .options import Configurable
-from .problem import Evaluable, Evaluation, InverseProblem, Result
+from .problem import Evaluable, Evaluation, InverseProblem, IteratorMembers, Result
 from .registry import default_registry
 
 logger = logging.getLogger(__name__)
@@ -39,10 +38,16 @@ class Evaluator(Protocol):
 
     def evaluate(
         self, problem: Evaluable, points: Sequence[Mapping[str, float]]
-    ) -> list[Evaluation]: ...
+    ) -> list[Evaluation]:
+        """One :class:`fbia.Evaluation` per point, in their order, failed runs included (a
+        failure is an outcome, not an exception)."""
+        ...
 
     @property
-    def slots(self) -> int: ...
+    def slots(self) -> int:
+        """How many runs it makes at once (1 serially, the workers of a pool): a batch that
+        is a multiple of it keeps every worker busy."""
+        ...
 
 
 #: What :meth:`IteratorBase.run` evaluates with when it is given no evaluator: a factory of
@@ -136,20 +141,23 @@ def stamp(result: Result, iterator: Any, book: RunBook, name: str = "") -> Resul
     return result
 
 
-class IteratorBase(Configurable):
-    """Base class of iterators: subclasses implement :meth:`steps`."""
+class IteratorBase(IteratorMembers):
+    """The base of every iterator: its optional members, with their defaults, and ``run``.
 
-    #: The result of the last completed :meth:`steps` generator (also returned by :meth:`run`).
+    An iterator writes ``Options`` and ``steps(problem, evaluator)``
+    (:class:`fbia.InverseIterator`) and overrides the members of
+    :class:`~fbia.core.problem.IteratorMembers` that it offers (``result_type``,
+    ``write_files``, ``write_plots``, ``example_options``, ...); :meth:`run` is the
+    framework's."""
+
     result: Result | None = None
-    #: The class of its results: :func:`fbia.load_result` reads a ``result.json`` of this
-    #: iterator back as it (a dataclass subclass of :class:`Result`).
-    result_type: type[Result] = Result
+    """The result of the last completed ``steps`` generator (also returned by :meth:`run`)."""
 
-    def steps(self, problem: InverseProblem, evaluator: Evaluator) -> Generator[Any, None, Result]:
-        raise NotImplementedError
-
+    @final
     def run(self, problem: InverseProblem, evaluator: Evaluator | None = None) -> Result:
-        """Run to the end and return the :class:`Result` (serial evaluation by default)."""
+        """Drive ``steps`` to the end (:func:`fbia.core.iteration.drive`; a serial evaluator
+        when none is given) and return the stamped :class:`fbia.Result`, also kept as
+        ``self.result``."""
         own = evaluator is None
         if evaluator is None:
             if _default_evaluator is None:

@@ -69,7 +69,7 @@ def noise_levels(problem: InverseProblem) -> list[float]:
 def measurement_count(problem: InverseProblem) -> int | None:
     """n of eq. 5 over all observations when the measure fixes it per observation, else None
     (then it is the residual count of each record)."""
-    per_observation = getattr(problem.measure, "measurements_per_observation", None)
+    per_observation = problem.measure.measurements_per_observation
     if per_observation is None:
         return None
     return int(per_observation) * len(problem.observations)

@@ -83,7 +83,9 @@ class PluginOptions(BaseModel):
 
 
 class Configurable:
-    """Mixin for plugin classes: ``Cls(**options)`` or ``Cls(Cls.Options(...))``.
+    """What every plugin class is built on (through its kind's base,
+    :class:`fbia.ForwardModelBase`, :class:`fbia.MeasureBase` or :class:`fbia.IteratorBase`):
+    ``Cls(**options)`` or ``Cls(Cls.Options(...))``, and the members every kind shares.
 
     The registry builds a plugin as ``factory(parsed_options)``; a user may also write
     ``AnalyticMound2DForwardModel(height=0.4)``.  Either way ``self.options`` holds the
@@ -91,13 +93,23 @@ class Configurable:
     """
 
     Options: type[PluginOptions] = PluginOptions
-    #: modules the plugin needs beyond fbia's core (checked before it is built:
-    #: :mod:`fbia.core.extras`), e.g. ``("ngsolve", "netgen")``
+    """Its options, a subclass of :class:`fbia.PluginOptions` (every option with its unit;
+    unknown keys are rejected)."""
+
     requires: tuple[str, ...] = ()
-    #: True: pickling (process pools, Dask workers) ships the options only, and the copy is
-    #: built anew from them (caches, meshes and solver state stay behind, as they should for
-    #: a model whose state is a cache of what its options determine)
+    """Modules the plugin needs beyond fbia's core, checked before it is built
+    (:mod:`fbia.core.extras`), e.g. ``("ngsolve", "netgen")``."""
+
     pickle_options_only: bool = False
+    """True: pickling (process pools, Dask workers) ships the options only, and the copy is
+    built anew from them (caches, meshes and solver state stay behind, as they should for a
+    model whose state is a cache of what its options determine)."""
+
+    @classmethod
+    def example_options(cls) -> dict[str, Any]:
+        """The options of a cheap instance for the conformance kit (a coarse mesh, a few
+        particles).  The base: ``{}``, the defaults."""
+        return {}
 
     def __init__(self, options: PluginOptions | None = None, /, **kwargs: Any) -> None:
         require(type(self).requires, type(self).__name__)

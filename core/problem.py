@@ -1,4 +1,5 @@
-"""The inverse problem, the record of one evaluation, and the result of an iterator.
+"""The inverse problem, the record of one evaluation, the result of an iterator, and the
+members an iterator may declare (:class:`IteratorMembers`, beside ``result_type``'s default).
 
 >>> import fbia
 >>> model = fbia.forward_model("analytic_mound_2d")
@@ -23,7 +24,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, final, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,9 +32,9 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import ConfigError, ForwardModelError, MeasureError
 from .interface import NonFiniteInterfaceError
 from .observation import Coordinate, Observation, Solution, coordinate_key
-from .options import plugin_options
+from .options import Configurable, plugin_options
 from .parameters import Parameter, Prior
-from .protocols import Discrepancy, ForwardModel
+from .protocols import ForwardModelBase, InverseIterator, MeasureBase
 
 #: Evaluation outcomes.  ``failed``: the forward model raised ForwardModelError;
 #: ``measure_failed``: the measure could not compare (MeasureError); ``error``: the plugin
@@ -137,9 +138,9 @@ class InverseProblem:
     Parameters
     ----------
     model
-        A forward model (protocol :class:`~fbia.core.protocols.ForwardModel`).
+        A forward model (a :class:`~fbia.core.protocols.ForwardModelBase`).
     measure
-        A measure (protocol :class:`~fbia.core.protocols.Discrepancy`).
+        A measure (a :class:`~fbia.core.protocols.MeasureBase`).
     observations
         The observed states; their coordinates are the states every forward run computes.
     parameters
@@ -159,8 +160,8 @@ class InverseProblem:
         reads it).
     """
 
-    model: ForwardModel
-    measure: Discrepancy
+    model: ForwardModelBase
+    measure: MeasureBase
     observations: Sequence[Observation]
     parameters: Sequence[Parameter]
     uncertain: Sequence[Parameter] = ()
@@ -174,6 +175,13 @@ class InverseProblem:
         self.parameters = list(self.parameters)
         self.uncertain = list(self.uncertain)
         self.fixed = dict(self.fixed)
+        for role, plugin, base in (
+            ("model", self.model, ForwardModelBase),
+            ("measure", self.measure, MeasureBase),
+        ):
+            if not isinstance(plugin, base):  # the framework calls the base's members directly
+                name = type(plugin).__name__
+                raise ConfigError(f"the {role} {name} does not derive from fbia.{base.__name__}")
         if not self.observations:
             raise ConfigError("an inverse problem needs at least one observation")
         if not self.parameters:
@@ -554,6 +562,37 @@ class Result:
         if not units:  # a unit column only where the result knows units
             head, rows = head[:-1], [row[:-1] for row in rows]
         return html_table(head, rows) if rows else ""
+
+
+class IteratorMembers(Configurable, InverseIterator):
+    """The members an iterator may declare, with their defaults: the base of
+    :class:`fbia.IteratorBase`, which adds ``run``.  Derive an iterator from
+    :class:`fbia.IteratorBase`; the registry checks for this class, since it sits below
+    :mod:`fbia.core.iteration` (``IteratorBase.run`` names its result through the registry),
+    and it lives beside :class:`Result`, ``result_type``'s default."""
+
+    result_type: ClassVar[type[Result]] = Result
+    """The :class:`Result` dataclass its ``steps`` return, which :func:`fbia.load_result`
+    reads a ``result.json`` of this iterator back as."""
+
+    def write_files(self, result: Any, folder: Path) -> list[Path]:
+        """Files beside ``result.json`` for other tools (``fbia run`` calls it); returns their
+        paths.  The base: none."""
+        return []
+
+    def write_plots(self, result: Any, problem: Any, folder: Path) -> list[Path]:
+        """Its figures of ``result`` (``fbia.plot`` and ``fbia run`` call it); returns their
+        paths.  The base: none."""
+        return []
+
+    @property
+    @final
+    def seed(self) -> int | None:
+        """The seed of its random numbers, which ``fbia run`` draws from the study's seed and
+        records in the result's provenance: its option ``seed`` where its ``Options`` declare
+        one (an integer, or None: unseeded), else None (it draws none)."""
+        seed = dict(self.options).get("seed")
+        return seed if isinstance(seed, int) else None
 
 
 def html_table(head: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:

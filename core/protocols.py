@@ -1,27 +1,37 @@
-"""The three extension points of fbia: their written contracts.
+"""The three extension points of fbia: their contracts as code.
 
 A forward model turns parameters into interfaces (:class:`ForwardModel`), a measure compares a
 simulated interface with an observation (:class:`Discrepancy`), an iterator drives the inverse
 analysis (:class:`InverseIterator`; the evaluator it receives is
-:class:`fbia.core.iteration.Evaluator`).  Each contract lists every member in
-the order the framework uses it, as
+:class:`fbia.core.iteration.Evaluator`).  Each contract is two classes:
 
-* **required**: the plugin defines it;
-* **optional**: the plugin may define it, else the framework assumes the default given;
-* **framework**: provided for the plugin (by :class:`fbia.Configurable`, the base class every
-  plugin inherits, or by the framework around it); the plugin does not write it.
+* the **protocol** holds the members a plugin must write (**required**), as typed methods;
+* the **base** (:class:`ForwardModelBase`, :class:`MeasureBase`; an iterator's is
+  :class:`fbia.IteratorBase`, whose members below ``run`` are
+  :class:`fbia.core.problem.IteratorMembers`) derives from its protocol and from
+  :class:`fbia.Configurable` and holds every **optional** member with its default, as an
+  attribute or a method; a member marked ``@final`` is the **framework**'s, which the plugin
+  does not write.
 
-:func:`contracts` reads the same lists from these docstrings as data: the registry checks a
-plugin's required methods with it (:func:`required_methods`), and so does the conformance kit
-(:mod:`fbia.testing`).  Nothing in fbia checks inheritance from these protocols, only members.
+A plugin class derives from its kind's base and overrides what it needs::
+
+    class MySolverForwardModel(fbia.ForwardModelBase):
+        class Options(fbia.PluginOptions): ...
+
+        def parameter_names(self): ...
+
+        def solve(self, parameters, coordinates, workdir): ...
+
+The registry refuses a plugin class that does not derive from its kind's base or leaves a
+required method unwritten (:func:`missing_methods`); the framework calls the optional members
+directly, since the base guarantees them.  :func:`fbia.testing.contracts.contracts` reads the
+members, their roles, defaults and docstrings from these classes as data, and the member
+tables of ``docs/plugins.md`` are rendered from it.
 """
 
 from __future__ import annotations
 
-import functools
-import re
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Protocol, runtime_checkable
 
@@ -29,158 +39,164 @@ import numpy as np
 
 from .interface import Interface
 from .observation import Coordinate, Observation, Solution
-
-
-@dataclass(frozen=True)
-class Member:
-    """One member of an extension contract, as its protocol's docstring lists it: the name
-    (``solve(parameters, coordinates, workdir)`` for a method), who provides it and, for an
-    optional one, the default the framework assumes."""
-
-    name: str
-    role: Literal["required", "optional", "framework"]
-    default: str = ""
-
-    @property
-    def attribute(self) -> str:
-        """The attribute the plugin class carries (``solve`` for ``solve(...)``)."""
-        return self.name.partition("(")[0]
-
-
-_ITEM = re.compile(
-    r"^\s*\* ``(?P<name>[^`]+)`` \((?P<role>required|optional|framework)"
-    r"(?:, default (?P<default>``[^`]*``|[^,):]+))?",
-    re.M,
-)
-
-
-def contract(protocol: type) -> tuple[Member, ...]:
-    """The members a protocol's docstring lists (``* ``name`` (role[, default X])...``)."""
-    return tuple(
-        Member(m["name"], m["role"], (m["default"] or "").strip("`"))  # type: ignore[arg-type]
-        for m in _ITEM.finditer(protocol.__doc__ or "")
-    )
-
-
-@functools.cache
-def contracts() -> dict[str, tuple[Member, ...]]:
-    """Kind -> its contract, read from the three protocols' docstrings (once)."""
-    return {
-        "forward_model": contract(ForwardModel),
-        "measure": contract(Discrepancy),
-        "iterator": contract(InverseIterator),
-    }
-
-
-def required_methods(kind: str) -> list[str]:
-    """The methods a plugin of ``kind`` must define (the registry checks them)."""
-    return [m.attribute for m in contracts()[kind] if m.role == "required" and "(" in m.name]
-
-
-def missing_methods(kind: str, plugin: Any) -> list[str]:
-    """The required methods of ``kind`` that ``plugin`` (a class or an instance) lacks."""
-    return [m for m in required_methods(kind) if not callable(getattr(plugin, m, None))]
+from .options import Configurable
 
 
 @runtime_checkable
 class ForwardModel(Protocol):
-    """Parameters in, one interface per requested coordinate out.
+    """Parameters in, one interface per requested coordinate out: what a forward model
+    writes.  Its optional members and their defaults are :class:`ForwardModelBase`'s."""
 
-    Members, in the order the framework uses them:
-
-    * ``Options`` (required): its options, a subclass of :class:`fbia.PluginOptions`.
-    * ``requires`` (optional, default ``()``): modules it needs beyond fbia's core.
-    * ``__init__(options)`` (framework, :class:`fbia.Configurable`): ``self.options``.
-    * ``pickle_options_only`` (optional, default False): pickle by options only.
-    * ``numerics_version`` (optional, default None): the store keys its runs by it.
-    * ``dim`` (optional, default None: seen on the first run): its interfaces' dimension.
-    * ``up_axis`` (optional, default None: not declared): the axis of its 3-D interfaces along
-      the height above the substratum, ``"z"`` or ``"y"``; a study's OCT scan must map its
-      height onto it (``height_axis``).
-    * ``parameter_names()`` (required): every model input it can vary.
-    * ``undeformed()`` (optional): the unloaded interface, for synthetic point placement.
-    * ``solve(parameters, coordinates, workdir)`` (required): an :class:`fbia.Solution`
-      with one interface per coordinate; raises :class:`fbia.ForwardModelError` (and nothing
-      else) when the run fails; inputs it is not given keep their option values.
-    * ``tangent_inputs()`` (optional, default ``()``): the inputs whose tangents ``solve(...,
-      tangents=names)`` gives, each interface's ``tangents[name]`` = d vertices / d name.
-    * ``prepare()`` (optional): build what every run needs (a mesh) once, in the process from
-      which isolated runs are forked (``fbia.execution.isolation``), so they start warm.
-    * ``warm_state()`` (optional, default None): what a finished run leaves for later runs to
-      start from (picklable); an isolated run sends it back to the forking process, whose
-      model takes it with ``adopt_warm_state(state)``.
-    * ``adopt_warm_state(state)`` (optional): take the ``warm_state()`` of another process.
-    * ``example_parameters()`` (optional): where the conformance kit runs it.
-    * ``example_options()`` (optional, default ``{}``): the kit's options.
-    """
-
-    def parameter_names(self) -> Sequence[str]: ...
+    def parameter_names(self) -> Sequence[str]:
+        """Every model input it can vary."""
+        ...
 
     def solve(
         self, parameters: Mapping[str, float], coordinates: Sequence[Coordinate], workdir: Path
-    ) -> Solution: ...
+    ) -> Solution:
+        """An :class:`fbia.Solution` with one interface per coordinate; raises
+        :class:`fbia.ForwardModelError` (and nothing else) when the run fails; inputs it is
+        not given keep their option values."""
+        ...
 
 
 @runtime_checkable
 class Discrepancy(Protocol):
-    """A measure between a simulated interface and an observation (Paper B eq. 6-11).
+    """A measure between a simulated interface and an observation (Paper B eq. 6-11): what a
+    measure writes.  Its optional members and their defaults are :class:`MeasureBase`'s."""
 
-    Members, in the order the framework uses them:
+    def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray:
+        """A finite vector whose squared norm is D²; raises :class:`fbia.MeasureError` for
+        interfaces it cannot compare."""
+        ...
 
-    * ``Options`` (required): its options, a subclass of :class:`fbia.PluginOptions`.
-    * ``requires`` (optional, default ``()``): modules it needs beyond fbia's core.
-    * ``__init__(options)`` (framework, :class:`fbia.Configurable`): ``self.options``.
-    * ``pickle_options_only`` (optional, default False): pickle by options only.
-    * ``numerics_version`` (optional, default None): the store keys comparisons by it.
-    * ``residuals(simulated, observation)`` (required): a finite vector whose squared norm is
-      D²; raises :class:`fbia.MeasureError` for interfaces it cannot compare.
-    * ``residuals_jvp(simulated, observation, dvertices)`` (optional, default a difference):
-      d residuals for a vertex motion (default: a central difference of ``residuals``).
-    * ``distance(simulated, observation)`` (required): D, the norm of the residuals.
-    * ``measurements_per_observation`` (optional, default ``len(residuals)``): n of eq. 5.
-    * ``example_options()`` (optional, default ``{}``): the kit's options.
-    * ``dims`` (optional, default ``(2, 3)``): the dimensions the kit tries.
-    * ``mesh_dependent`` (optional, default False): residuals that belong to the simulated
-      mesh (the kit leaves out the residual-length and re-meshing checks).
-    """
-
-    def residuals(self, simulated: Interface, observation: Observation) -> np.ndarray: ...
-
-    def distance(self, simulated: Interface, observation: Observation) -> float: ...
+    def distance(self, simulated: Interface, observation: Observation) -> float:
+        """D, the norm of the residuals."""
+        ...
 
 
 @runtime_checkable
 class InverseIterator(Protocol):
-    """An inverse-analysis algorithm (registry kind ``iterator``).
+    """An inverse-analysis algorithm (registry kind ``iterator``): what an iterator writes.
+    Its optional members and their defaults are :class:`fbia.core.problem.IteratorMembers`',
+    the framework's :class:`fbia.IteratorBase` adds ``run``."""
 
-    Members, in the order the framework uses them:
+    def steps(self, problem: Any, evaluator: Any) -> Iterator[Any]:
+        """A generator; it asks ``evaluator.evaluate(problem, points)`` for runs (one
+        :class:`fbia.Evaluation` per point, failed runs included; ``evaluator.slots`` says how
+        many it makes at once: :class:`fbia.core.iteration.Evaluator`), yields a state after
+        every iteration and returns an :class:`fbia.Result` with ``status``, ``success``,
+        ``message`` and ``x``.  It does not count its runs: the framework stamps
+        ``iterator``, ``nfev``, ``n_failed`` and ``evaluations`` on the result
+        (:func:`fbia.core.iteration.drive`)."""
+        ...
 
-    * ``Options`` (required): its options, a subclass of :class:`fbia.PluginOptions`; an
-      option ``seed`` (an integer or None) is the seed of its random numbers, which ``fbia
-      run`` records in the result's provenance beside the study's seed.
-    * ``requires`` (optional, default ``()``): modules it needs beyond fbia's core.
-    * ``__init__(options)`` (framework, :class:`fbia.Configurable`): ``self.options``.
-    * ``pickle_options_only`` (optional, default False): pickle by options only.
-    * ``result_type`` (optional, default :class:`fbia.Result`): the Result dataclass its
-      ``steps`` return, which :func:`fbia.load_result` reads back.
-    * ``steps(problem, evaluator)`` (required): a generator; it asks
-      ``evaluator.evaluate(problem, points)`` for runs (one :class:`fbia.Evaluation` per point,
-      failed runs included; :class:`fbia.core.iteration.Evaluator`, whose ``slots`` says how
-      many it makes at once), yields a state after every iteration and returns an
-      :class:`fbia.Result` with ``status``, ``success``, ``message`` and ``x``; it does not
-      count its runs.
-    * ``result.iterator, nfev, n_failed, evaluations`` (framework,
-      :func:`fbia.core.iteration.drive`): the registered name, the runs the evaluator returned
-      and how many failed, stamped on the result.
-    * ``run(problem, evaluator=None)`` (framework, :class:`fbia.IteratorBase`): drives
-      ``steps`` to the end (a serial evaluator when none is given) and returns the stamped
-      result, also kept as ``self.result``.
-    * ``write_files(result, folder)`` (optional, default: none): files beside
-      ``result.json`` for other tools (``fbia run`` calls it); returns the paths.
-    * ``write_plots(result, problem, folder)`` (optional, default: no figures): its figures
-      (``fbia.plot`` and ``fbia run`` call it); returns the paths.
-    """
 
-    def steps(self, problem: Any, evaluator: Any) -> Iterator[Any]: ...
+class ForwardModelBase(Configurable, ForwardModel):
+    """The base of every forward model: its optional members, with their defaults.
 
-    def run(self, problem: Any, evaluator: Any = None) -> Any: ...
+    A model writes ``Options``, ``parameter_names()`` and ``solve(parameters, coordinates,
+    workdir)`` (:class:`ForwardModel`) and overrides the members below that it offers; the
+    others keep these defaults."""
+
+    numerics_version: str | None = None
+    """A string the store keys its runs by instead of the package's version (fbia's own
+    declare ``"1"``); bump it when a change alters the numbers.  None: the package's
+    version."""
+
+    up_axis: Literal["z", "y"] | None = None
+    """The axis of its 3-D interfaces along the height above the substratum; a study's OCT
+    scan must map its height onto it (``height_axis``).  None: not declared."""
+
+    @property
+    def dim(self) -> int | None:
+        """Its interfaces' dimension, 2 or 3: a class attribute, or a property where its
+        options decide.  The base: None, seen on the first run."""
+        return None
+
+    def undeformed(self) -> Interface | None:
+        """The unloaded interface, for synthetic point placement (``placement =
+        "displacement"``) and a study's dimension check.  The base: None, it has none."""
+        return None
+
+    def tangent_inputs(self) -> Sequence[str]:
+        """The inputs whose tangents ``solve(..., tangents=names)`` gives (an extra keyword
+        of ``solve``): each interface's ``tangents[name]`` = d vertices / d name.  The base:
+        none, ``()``."""
+        return ()
+
+    def prepare(self) -> None:
+        """Build what every run needs (a mesh) once, in the process from which isolated runs
+        are forked (``fbia.execution.isolation``), so they start warm.  The base: nothing."""
+
+    def warm_state(self) -> Any:
+        """What a finished run leaves for later runs to start from (picklable); an isolated
+        run sends it back to the forking process, whose model takes it with
+        :meth:`adopt_warm_state`.  The base: None, nothing."""
+        return None
+
+    def adopt_warm_state(self, state: Any) -> None:
+        """Take the :meth:`warm_state` of another process.  The base: ignores it."""
+
+    @classmethod
+    def example_parameters(cls) -> tuple[dict[str, float], list[dict[str, float]]] | None:
+        """``(parameters, coordinates)`` of a cheap, successful run, where the conformance kit
+        and ``fbia init`` run it.  The base: None, none given (the kit then refuses the
+        model, ``fbia init`` writes no study)."""
+        return None
+
+
+class MeasureBase(Configurable, Discrepancy):
+    """The base of every measure: its optional members, with their defaults.
+
+    A measure writes ``Options``, ``residuals(simulated, observation)`` and
+    ``distance(simulated, observation)`` (:class:`Discrepancy`) and overrides the members
+    below that it offers; the others keep these defaults."""
+
+    numerics_version: str | None = None
+    """A string the store keys its comparisons by instead of the package's version; bump it
+    when a change alters the numbers.  None: the package's version."""
+
+    measurements_per_observation: int | None = None
+    """n of Paper B eq. 5 per observation.  None: the length of each run's residuals."""
+
+    dims: tuple[int, ...] = (2, 3)
+    """The dimensions of the interfaces it compares (the conformance kit tries those)."""
+
+    mesh_dependent: bool = False
+    """True: its residuals belong to the simulated mesh, one per simulated vertex (the
+    conformance kit leaves out the residual-length and re-meshing checks)."""
+
+    def residuals_jvp(
+        self, simulated: Interface, observation: Observation, dvertices: np.ndarray
+    ) -> np.ndarray | None:
+        """d residuals for the vertex motion ``dvertices`` (an array of the vertices' shape),
+        for a model's tangents.  The base: None, no closed form; fbia then takes a central
+        difference of ``residuals`` along the motion
+        (:func:`fbia.iterators.tangents.directional_difference`)."""
+        return None
+
+
+#: The protocol of each plugin kind: the methods a plugin of that kind writes.
+PROTOCOLS: dict[str, type] = {
+    "forward_model": ForwardModel,
+    "measure": Discrepancy,
+    "iterator": InverseIterator,
+}
+
+
+def required_methods(kind: str) -> list[str]:
+    """The methods a plugin of ``kind`` must write: its protocol's, in order."""
+    return [n for n, v in vars(PROTOCOLS[kind]).items() if callable(v) and not n.startswith("_")]
+
+
+def missing_methods(kind: str, plugin: Any) -> list[str]:
+    """The required methods of ``kind`` that ``plugin`` (a class or an instance) does not
+    write: absent, not callable, or the protocol's own stub, which a base inherits."""
+    cls = plugin if isinstance(plugin, type) else type(plugin)
+    stubs = vars(PROTOCOLS[kind])
+    return [
+        m
+        for m in required_methods(kind)
+        if not callable(own := getattr(cls, m, None)) or own is stubs[m]
+    ]

@@ -22,8 +22,9 @@ import pluggy
 from . import hookspecs
 from .errors import PluginError
 from .extras import missing, require
-from .options import PluginOptions
-from .protocols import missing_methods
+from .options import Configurable, PluginOptions
+from .problem import IteratorMembers
+from .protocols import ForwardModelBase, MeasureBase, missing_methods
 
 KINDS: dict[str, str] = {
     "forward_model": "register_forward_models",
@@ -31,6 +32,14 @@ KINDS: dict[str, str] = {
     "iterator": "register_iterators",
 }
 ENTRY_POINT_GROUP = "fbia"
+#: The class every plugin of a kind derives from, and the base its author is told to use: an
+#: iterator derives from fbia.IteratorBase, whose members below ``run`` (IteratorMembers) are
+#: what the registry can see, as ``IteratorBase.run`` names its result through the registry.
+BASES: dict[str, tuple[type[Configurable], str]] = {
+    "forward_model": (ForwardModelBase, "fbia.ForwardModelBase"),
+    "measure": (MeasureBase, "fbia.MeasureBase"),
+    "iterator": (IteratorMembers, "fbia.IteratorBase"),
+}
 
 
 @dataclass(frozen=True)
@@ -52,7 +61,7 @@ class PluginEntry:
             "plugin": self.plugin,
             "distribution": self.distribution,
             "version": self.version,
-            "missing": ", ".join(missing(getattr(self.factory, "requires", ()))),
+            "missing": ", ".join(missing(self.factory.requires)),
         }
 
 
@@ -111,7 +120,13 @@ class Registry:
                 f"{kind} {name!r} must be a class, got an instance of {type(factory).__name__}",
                 where,
             )
-        options = getattr(factory, "Options", None)
+        base, shown = BASES[kind]
+        if not issubclass(factory, base):  # the framework calls the base's members directly
+            raise PluginError(
+                f"{kind} {name!r}: class {factory.__qualname__} does not derive from {shown}",
+                where,
+            )
+        options = factory.Options  # Configurable's, or the plugin's own
         if not (isinstance(options, type) and issubclass(options, PluginOptions)):
             raise PluginError(
                 f"{kind} {name!r} has no Options schema (a subclass of fbia.PluginOptions)", where
@@ -157,7 +172,7 @@ class Registry:
     ) -> Any:
         """Look ``name`` up and build it from ``options`` (validated by its ``Options`` schema)."""
         entry = self.get(kind, name, where)
-        require(getattr(entry.factory, "requires", ()), f"{where or kind} {name!r}")
+        require(entry.factory.requires, f"{where or kind} {name!r}")
         parsed = entry.factory.Options.parse(options or {}, where=where or f"{kind} {name!r}")
         return entry.factory(parsed)
 

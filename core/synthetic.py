@@ -31,13 +31,13 @@ from numpy.typing import NDArray
 from .errors import ConfigError, ForwardModelError
 from .interface import Interface
 from .observation import Coordinate, Observation, check_coordinate
-from .protocols import ForwardModel
+from .protocols import ForwardModelBase
 
 FloatArray = NDArray[np.float64]
 
 
 def synthetic_observations(
-    model: ForwardModel,
+    model: ForwardModelBase,
     truth: Mapping[str, float],
     coordinates: Sequence[Coordinate],
     noise_std: float,
@@ -166,15 +166,14 @@ def _noise(rng: np.random.Generator, sigma: float, kind: str, directions: FloatA
     return sigma * rng.standard_normal((n, dim))
 
 
-def _reference_interface(model: ForwardModel) -> Interface:
+def _reference_interface(model: ForwardModelBase) -> Interface:
     """The model's unloaded interface, for ``placement = "displacement"``."""
-    undeformed = getattr(model, "undeformed", None)
-    if not callable(undeformed):
+    gamma = model.undeformed()
+    if gamma is None:
         raise ConfigError(
             f"placement 'displacement' needs the model's undeformed() interface; "
             f"{type(model).__name__} has none (use placement 'even')"
         )
-    gamma = undeformed()
     if not isinstance(gamma, Interface):
         raise ConfigError(f"{type(model).__name__}.undeformed() must return an Interface")
     return gamma

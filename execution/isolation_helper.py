@@ -172,21 +172,27 @@ def _run_process(problem: Evaluable, requests: int, results: int) -> None:
 
 
 # -- warm runs: the model meshed once in the helper, each run's end state adopted by it ---------
+def _model(problem: Evaluable | None) -> Any:
+    """The problem's forward model, or None: ``fbia.least_squares``' residual function is a
+    problem without one."""
+    return getattr(problem, "model", None)
+
+
 def _prepare(problem: Evaluable) -> None:
-    """The model's optional ``prepare()`` in the helper, before the run process is forked, so
-    that it inherits what it built (a mesh).  A failure is left to the runs to report: each
-    one meets it again and records it."""
-    prepare = getattr(getattr(problem, "model", None), "prepare", None)
-    if callable(prepare):
+    """The model's ``prepare()`` in the helper, before the run process is forked, so that it
+    inherits what it built (a mesh).  A failure is left to the runs to report: each one
+    meets it again and records it."""
+    model = _model(problem)
+    if model is not None:
         with contextlib.suppress(Exception):
-            prepare()
+            model.prepare()
 
 
 def _warm_state(problem: Evaluable) -> Any:
-    """In the run process, after a run: the model's optional ``warm_state()`` (else None)."""
-    member = getattr(getattr(problem, "model", None), "warm_state", None)
+    """In the run process, after a run: the model's ``warm_state()`` (None without a model)."""
+    model = _model(problem)
     try:
-        return member() if callable(member) else None
+        return None if model is None else model.warm_state()
     except Exception:  # a warm start is an optimisation: never a reason to lose a record
         return None
 
@@ -194,7 +200,7 @@ def _warm_state(problem: Evaluable) -> Any:
 def _adopt(problem: Evaluable | None, warm: Any) -> None:
     """In the helper: the model takes a finished run's warm state (``adopt_warm_state``), so a
     run process forked later starts from it."""
-    adopt = getattr(getattr(problem, "model", None), "adopt_warm_state", None)
-    if warm is not None and callable(adopt):
+    model = _model(problem)
+    if warm is not None and model is not None:
         with contextlib.suppress(Exception):
-            adopt(warm)
+            model.adopt_warm_state(warm)

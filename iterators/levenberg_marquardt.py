@@ -82,7 +82,7 @@ from .lm.handoff import POSTERIOR_LABELS
 from .lm.options import LMOptions
 from .lm.result import FitStatistics, LMResult, LMState, compare_starts
 from .lm.robust import RobustChain
-from .tangents import TangentProblem, tangent_inputs
+from .tangents import TangentProblem
 
 FloatArray = NDArray[np.float64]
 
@@ -300,9 +300,9 @@ class LevenbergMarquardtIterator(IteratorBase):
                     "levenberg_marquardt: jacobian",
                 )
             return o.jacobian
-        model = getattr(problem, "model", None)
-        has = isinstance(problem, InverseProblem) and set(names) <= set(tangent_inputs(model))
-        return "tangent" if has else "forward"
+        if not isinstance(problem, InverseProblem):  # fbia.least_squares: a plain function
+            return "forward"
+        return "tangent" if set(names) <= set(problem.model.tangent_inputs()) else "forward"
 
     def _settings(self, names: list[str], jacobian: str = "forward") -> LMSettings:
         o = self.options

@@ -33,17 +33,11 @@ from ..core.interface import Interface
 from ..core.observation import Coordinate, Observation, Solution
 from ..core.problem import Evaluation, InverseProblem
 
-__all__ = ["TangentProblem", "directional_difference", "residual_jacobian", "tangent_inputs"]
+__all__ = ["TangentProblem", "directional_difference", "residual_jacobian"]
 
 #: Largest vertex motion of the directional difference, relative to the interface's size: the
 #: truncation error is O(h²), the rounding error O(ε/h), both far below the tangents' own.
 RELATIVE_STEP = 1e-6
-
-
-def tangent_inputs(model: Any) -> tuple[str, ...]:
-    """The inputs whose tangents the model gives (its optional ``tangent_inputs()``)."""
-    member = getattr(model, "tangent_inputs", None)
-    return tuple(member()) if callable(member) else ()
 
 
 def directional_difference(
@@ -76,7 +70,6 @@ def residual_jacobian(
     """dr/dx (n_r, len(names)) over all observations, in the order of
     :meth:`~fbia.InverseProblem.discrepancy`; None when an interface lacks a tangent."""
     measure = problem.measure
-    jvp = getattr(measure, "residuals_jvp", None)
     blocks = []
     for obs in problem.observations:
         simulated = solution.interface(obs.coordinate)
@@ -91,8 +84,8 @@ def residual_jacobian(
                     f"{simulated.vertices.shape}",
                     "forward model tangents",
                 )
-            col = jvp(simulated, obs, dv) if callable(jvp) else None
-            if col is None:
+            col = measure.residuals_jvp(simulated, obs, dv)
+            if col is None:  # no closed form (the base's): a difference of the measure
                 col = directional_difference(measure, simulated, obs, dv)
             cols.append(np.asarray(col, dtype=float).ravel())
         blocks.append(np.column_stack(cols))
@@ -116,7 +109,7 @@ class TangentProblem(InverseProblem):
     ) -> TangentProblem:
         """``problem`` with the tangents of ``names`` asked for; ConfigError (at ``where``,
         suggesting ``instead``) if the model does not give them."""
-        missing = [n for n in names if n not in tangent_inputs(problem.model)]
+        missing = [n for n in names if n not in problem.model.tangent_inputs()]
         if missing:
             raise ConfigError(
                 f"the forward model {type(problem.model).__name__} gives no tangents for "

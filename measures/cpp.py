@@ -18,7 +18,8 @@ from pydantic import Field, field_validator
 from ..core.errors import ConfigError
 from ..core.interface import Interface
 from ..core.observation import Observation
-from ..core.options import Configurable, PluginOptions
+from ..core.options import PluginOptions
+from ..core.protocols import MeasureBase
 from ._geometry import (
     ElementGeometry,
     IdentityCache,
@@ -28,7 +29,7 @@ from ._geometry import (
 )
 
 
-class CppMeasure(Configurable):
+class CppMeasure(MeasureBase):
     """Signed closest-point-projection distances ``d_cpp^i`` (Paper B eq. 7).
 
     For every vertex of the *simulated* interface the closest point on the *observed*

@@ -25,7 +25,8 @@ from pydantic import Field
 from ..core.errors import ConfigError, MeasureError
 from ..core.interface import Interface
 from ..core.observation import Observation
-from ..core.options import Configurable, PluginOptions
+from ..core.options import PluginOptions
+from ..core.protocols import MeasureBase
 from ._geometry import (
     ElementGeometry,
     FloatArray,
@@ -47,7 +48,7 @@ class Rays:
     side: FloatArray  # (n,), +1 where t > 0 points into the fluid
 
 
-class RayMeasure(Configurable):
+class RayMeasure(MeasureBase):
     """Signed distances from measurement points along search directions (Paper A; Paper B
     eq. 6).
 

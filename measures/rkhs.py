@@ -33,7 +33,8 @@ from scipy.spatial import cKDTree
 from ..core.errors import ConfigError
 from ..core.interface import Interface
 from ..core.observation import Observation
-from ..core.options import Configurable, PluginOptions
+from ..core.options import PluginOptions
+from ..core.protocols import MeasureBase
 from ._geometry import FloatArray, IdentityCache, check_dimensions, cutoff_radius
 from ._rkhs_field import (
     count_test_points,
@@ -183,7 +184,7 @@ def _column_chunks(
     return out
 
 
-class RkhsMeasure(Configurable):
+class RkhsMeasure(MeasureBase):
     """RKHS (surface currents) distance between interfaces (Paper B eq. 10-11).
 
     ``D^2 = <S1, S1> - 2 <S1, S2> + <S2, S2>`` where ``S1`` is the simulated and ``S2`` the

@@ -45,6 +45,7 @@ from ..core.interface import Interface
 from ..core.observation import coordinate_key
 from ..core.options import plugin_options
 from ..core.problem import InverseProblem, jsonable
+from ..core.protocols import ForwardModelBase, MeasureBase
 
 __all__ = [
     "canonical",
@@ -83,7 +84,7 @@ def _class_version(obj: Any) -> dict[str, str]:
     distribution named like its top-level package (``fbia``, ``fbia_mysolver``), else the
     module's ``__version__``."""
     cls = type(obj)
-    declared = getattr(cls, "numerics_version", None)
+    declared = _declared_numerics(cls)
     version = f"numerics {declared}" if declared is not None else _package_version(obj)
     return {"class": f"{cls.__module__}.{cls.__qualname__}", "version": version}
 
@@ -277,8 +278,14 @@ def code_digest_as_stored(
     return _folder_digest(obj) if isinstance(stored.get("files"), str) else code
 
 
+def _declared_numerics(cls: type) -> str | None:
+    """The numerics version a model or measure class declares (its base's default: None); an
+    iterator, whose code is digested for a paper's page too, declares none."""
+    return cls.numerics_version if issubclass(cls, (ForwardModelBase, MeasureBase)) else None
+
+
 def _numerics(cls: type) -> dict[str, str]:
-    declared = getattr(cls, "numerics_version", None)
+    declared = _declared_numerics(cls)
     if declared is None:
         return {}
     # a release may change the code but declare the same numerics

@@ -416,8 +416,7 @@ def _plugin_options(name: str, as_json: bool) -> int:
         raise ConfigError(f"no plugin named {name!r}{hint}", "--options")
     described = {}
     for e in entries:
-        options = getattr(e.factory, "Options", None)
-        described[e.kind] = options.describe() if options is not None else {}
+        described[e.kind] = e.factory.Options.describe()
     if as_json:
         print(json.dumps(described, indent=1, default=str))
         return 0

@@ -165,9 +165,7 @@ def plot(result: Result, problem: InverseProblem, folder: str | Path = "plots") 
     made: list[Path] = []
     if result.iterator:
         iterator = default_registry().create("iterator", result.iterator, {}, where="fbia.plot")
-        write = getattr(iterator, "write_plots", None)
-        if callable(write):
-            made += [Path(p) for p in write(result, problem, out)]
+        made += [Path(p) for p in iterator.write_plots(result, problem, out)]
     units = [p.unit for p in problem.parameters]
     path = plot_evaluations(
         out / "evaluations.png", result.evaluations, problem.names, units, problem.truth

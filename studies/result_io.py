@@ -219,7 +219,7 @@ def result_type(data: Mapping[str, Any]) -> type[Result]:
         entry = default_registry().get("iterator", name)
     except ConfigError:
         return Result
-    found = getattr(entry.factory, "result_type", None)
+    found = entry.factory.result_type
     return found if isinstance(found, type) and issubclass(found, Result) else Result
 
 

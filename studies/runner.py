@@ -505,13 +505,13 @@ def _extras(session: _Session, result: Result, log: EvaluationLog) -> Iterator[R
         yield made
     if not study.figures:  # e.g. one noise draw of many (fbia.studies.draws)
         return
-    write_plots = getattr(study.iterator, "write_plots", None)
-    if callable(write_plots):  # an iterator's own plots: write_plots(result, problem, folder)
-        plots, warning = attempt(
-            "the iterator's plots", lambda: write_plots(result, problem, out / "plots")
-        )
-        made = made.adding({"iterator plots": [str(p) for p in plots]} if plots else {}, warning)
-        yield made
+    iterator = study.iterator  # its own plots (the base's write_plots makes none)
+    assert iterator is not None  # _extras follows the iterator's run
+    plots, warning = attempt(
+        "the iterator's plots", lambda: iterator.write_plots(result, problem, out / "plots")
+    )
+    made = made.adding({"iterator plots": [str(p) for p in plots]} if plots else {}, warning)
+    yield made
     names, units = problem.names, [p.unit for p in problem.parameters]
     plot, warning = attempt(
         "the evaluations plot",
@@ -664,10 +664,8 @@ def _finish(
     )
     result = replace(result, provenance=RunRecord(made, problem.describe(), outputs).to_dict())
     result.save(out / "result.json")
-    write_files = getattr(study.iterator, "write_files", None)
-    if callable(write_files):
-        for path in write_files(result, out):
-            echo(f"wrote {path}")
+    for path in study.iterator.write_files(result, out) if study.iterator is not None else ():
+        echo(f"wrote {path}")
     truth = study.synthetic.truth if study.synthetic is not None else None
     text = report.result_report(study.name, result, out, truth)
     for folder in (out / "run", out / "best", out / "runs"):  # left empty: not worth a folder
@@ -681,12 +679,10 @@ def _finish(
 
 def study_seeds(study: Study) -> dict[str, int | None]:
     """The study's seed and those derived from it: of the synthetic data and the iterator."""
-    options = getattr(study.iterator, "options", None)
-    seed = getattr(options, "seed", None)
     return {
         "study": study.seed,
         "synthetic": study.synthetic.seed if study.synthetic is not None else None,
-        "iterator": seed if isinstance(seed, int) else None,
+        "iterator": None if study.iterator is None else study.iterator.seed,
     }
 
 

@@ -280,8 +280,7 @@ def _lengths(model: Any) -> Iterator[tuple[str, float, bool]]:
     """Name, value and whether it is the option's only number, of every number a model option
     in mm holds (points' coordinates too), but the channel's sides and resolutions
     (:data:`_RESOLUTION`)."""
-    options = getattr(type(model), "Options", None)
-    described = options.describe() if options is not None and hasattr(options, "describe") else {}
+    described = type(model).Options.describe()
     for name, value in plugin_options(model).items():
         about = described.get(name, {})
         if about.get("unit") != "mm" or name.startswith("channel_"):
@@ -318,7 +317,4 @@ def _noises(study: Any, observation: str) -> list[tuple[str, float | None]]:
 
 def _option_units(model: Any) -> dict[str, str]:
     """Option name -> the unit its description states (``fbia plugins --options``)."""
-    options = getattr(type(model), "Options", None)
-    if options is None or not hasattr(options, "describe"):
-        return {}
-    return {k: v["unit"] for k, v in options.describe().items() if v.get("unit")}
+    return {k: v["unit"] for k, v in type(model).Options.describe().items() if v.get("unit")}

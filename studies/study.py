@@ -18,8 +18,8 @@ from ..core.errors import ConfigError, ForwardModelError
 from ..core.observation import Observation
 from ..core.options import plugin_options
 from ..core.parameters import Parameter, Prior
-from ..core.problem import InverseProblem
-from ..core.protocols import Discrepancy, ForwardModel, InverseIterator
+from ..core.problem import InverseProblem, IteratorMembers
+from ..core.protocols import ForwardModelBase, MeasureBase
 from ..execution.executors import ExecutorSpec
 from .paper import PaperSpec
 from .study_sources import StudySource
@@ -68,9 +68,9 @@ class Study:
     seed: int
     output: Path
     store: Path | None  # the study store's file when not <output>/store.sqlite
-    model: ForwardModel
+    model: ForwardModelBase
     model_name: str
-    measure: Discrepancy
+    measure: MeasureBase
     measure_name: str
     parameters: list[Parameter]
     uncertain: list[Parameter]
@@ -79,7 +79,7 @@ class Study:
     synthetic: SyntheticSpec | None
     noise_std: float | None
     noise_prior: Prior | None
-    iterator: InverseIterator | None
+    iterator: IteratorMembers | None
     iterator_name: str | None
     executor: ExecutorSpec
     raw: dict[str, Any] = field(repr=False)

@@ -297,8 +297,7 @@ class _Reader:
     ) -> dict[str, Any]:
         """Relative paths given for ``Path`` options, made relative to the study's folder;
         they name input files (meshes), so a missing one is an error before any run."""
-        schema = getattr(self.registry.get(kind, name).factory, "Options", None)
-        fields = getattr(schema, "model_fields", {})
+        fields = self.registry.get(kind, name).factory.Options.model_fields
         for key, value in options.items():
             spec = fields.get(key)
             if spec is None or not isinstance(value, str) or not is_path_type(spec.annotation):
@@ -411,7 +410,7 @@ class _Reader:
                 self.where("[model]"),
             ) from None
         self.model_dim = _model_dim(model)
-        self.model_up = getattr(model, "up_axis", None)
+        self.model_up = model.up_axis
 
         self.parameters = self.read_parameters("parameters")
         uncertain = self.read_parameters("uncertain") if "uncertain" in raw else []
@@ -655,15 +654,11 @@ def _file_kind(path: Path) -> str:
 def _model_dim(model: Any) -> int | None:
     """The spatial dimension of a model's interfaces, when it tells (a ``dim`` attribute, or
     an ``undeformed()`` interface); None otherwise (then checked on the first run)."""
-    dim = getattr(model, "dim", None)
+    dim = model.dim
     if isinstance(dim, int) and not isinstance(dim, bool):
         return dim
-    undeformed = getattr(model, "undeformed", None)
-    if callable(undeformed):
-        try:
-            gamma = undeformed()
-        except Exception:  # an optional extra that failed: the first run will tell
-            return None
-        if isinstance(gamma, Interface):
-            return gamma.dim
-    return None
+    try:
+        gamma = model.undeformed()
+    except Exception:  # an optional extra that failed: the first run will tell
+        return None
+    return gamma.dim if isinstance(gamma, Interface) else None

@@ -49,8 +49,7 @@ def _toml(value: Any) -> str:
 
 def _options_block(title: str, factory: Any) -> list[str]:
     """``title``'s options as comments: ``# name = default``, then its description and unit."""
-    options = getattr(factory, "Options", None)
-    described = options.describe() if options is not None else {}
+    described = factory.Options.describe()
     if not described:
         return [f"# ({title} has no options)"]
     lines = [
@@ -85,8 +84,7 @@ def _bounds(factory: Any, name: str, value: float) -> tuple[float, float]:
     kept inside the limits the model's option of the same name declares (nu < 0.5, 0 <
     phi0 < 1), 0.1 % of the value short of an open limit."""
     low, high = (value / 2.0, value * 2.0) if value > 0 else (value - 0.5, value + 0.5)
-    options = getattr(factory, "Options", None)
-    field = getattr(options, "model_fields", {}).get(name)
+    field = factory.Options.model_fields.get(name)
     margin = max(1e-3 * abs(value), 1e-3)
     for limit in getattr(field, "metadata", []):
         if getattr(limit, "gt", None) is not None:
@@ -101,9 +99,7 @@ def _bounds(factory: Any, name: str, value: float) -> tuple[float, float]:
 
 
 def _unit(factory: Any, name: str) -> str:
-    options = getattr(factory, "Options", None)
-    described = options.describe() if options is not None else {}
-    return str(described.get(name, {}).get("unit") or "-")
+    return str(factory.Options.describe().get(name, {}).get("unit") or "-")
 
 
 def study_template(
@@ -117,14 +113,14 @@ def study_template(
     m = _entry("forward_model", model, "--model").factory
     meas = _entry("measure", measure, "--measure").factory
     it = _entry("iterator", iterator, "--iterator").factory
-    hook = getattr(m, "example_parameters", None)
-    if hook is None:
+    example = m.example_parameters()
+    if example is None:
         raise ConfigError(
             f"model {model!r} provides no example_parameters(): write its study by hand "
             "(fbia schema gives the format)",
             "--model",
         )
-    truth, coordinates = hook()
+    truth, coordinates = example
     truth = {k: float(v) for k, v in truth.items()}
     from ..core.version import __version__
 

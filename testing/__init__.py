@@ -32,19 +32,24 @@ Iterators are checked on a problem, e.g. ``check_iterator(lambda: MyIterator(see
 tiny_problem())``.  Fixtures: ``fbia_registry`` (the default registry), ``fbia_installer``
 (installs a plugin distribution for one test) and ``fbia_measure_cases``.
 
-Plugin classes may offer optional class attributes that the conformance tests of fbia (and
+A plugin class derives from its kind's base (:class:`fbia.ForwardModelBase`,
+:class:`fbia.MeasureBase`, :class:`fbia.IteratorBase`), and the checks refuse one that does
+not.  The base's optional members that the conformance tests of fbia (and
 :func:`check_registered`) use:
 
 ``example_parameters()``
     Forward models: ``(parameters, coordinates)`` of a cheap, successful run.  Every registered
-    forward model must provide it.
+    forward model must override it (the base's gives None).
 ``example_options()``
     Any kind: the options (a dict) of a cheap instance for conformance runs, e.g. a coarse
     mesh, a measure length scale that suits the sample interfaces of :func:`measure_cases`,
-    or a small number of particles.
+    or a small number of particles (the base's: ``{}``).
 ``dims``, ``mesh_dependent``
-    Measures: the spatial dimensions supported (default ``(2, 3)``), and whether the residuals
-    belong to the simulated mesh (see :func:`check_measure`; default False).
+    Measures: the spatial dimensions supported (the base's ``(2, 3)``), and whether the
+    residuals belong to the simulated mesh (see :func:`check_measure`; the base's False).
+
+Every member of every contract, with its role, default and docstring, read from the code:
+:func:`fbia.testing.contracts.contracts`.
 
 pytest loads only the fixtures of :mod:`fbia.pytest_plugin` at start-up; this module (numpy,
 trimesh, the fbia sub-modules) is imported when a test uses it.

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.iteration import RunBook, stamp
+from ..core.iteration import IteratorBase, RunBook, stamp
 from ..core.parameters import Parameter
 from ..core.problem import Evaluable, Evaluation, InverseProblem, Result
 from ..core.protocols import missing_methods
@@ -71,7 +71,8 @@ def check_iterator(
 
     * ``steps(problem, evaluator)`` is a generator that yields at least once and returns a
       :class:`fbia.Result` (so a caller can watch, checkpoint and stop);
-    * it has the methods its contract requires (:class:`fbia.InverseIterator`);
+    * it derives from :class:`fbia.IteratorBase` and writes the methods its contract
+      requires (:class:`fbia.InverseIterator`);
     * the result says why it stopped: ``status`` and ``message`` are non-empty strings,
       ``success`` is a bool;
     * the framework's books (:func:`fbia.core.iteration.stamp`: ``iterator``, ``nfev``,
@@ -87,6 +88,8 @@ def check_iterator(
 
     global_state = _global_rng_state()
     it = iterator_factory()
+    if not isinstance(it, IteratorBase):
+        raise fail(it, "does not derive from fbia.IteratorBase")
     lacking = missing_methods("iterator", it)
     if lacking:
         raise fail(it, f"lacks the method(s) its contract requires: {', '.join(lacking)}")

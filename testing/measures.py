@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from ..core.interface import Interface
 from ..core.observation import Observation
-from ..core.protocols import missing_methods
+from ..core.protocols import MeasureBase, missing_methods
 from .errors import fail
 from .samples import circle_2d, mound_2d, sphere_3d, square_3d, straight_line_2d
 
@@ -173,13 +173,15 @@ def check_measure(
     Returns ``{case: {"identical": D0, "simulated": D1, "refined": D1r, "farther": D2}}``.
     """
 
+    if not isinstance(measure, MeasureBase):
+        raise fail(measure, "does not derive from fbia.MeasureBase")
     lacking = missing_methods("measure", measure)
     if lacking:
         raise fail(measure, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
     if dims is None:
-        dims = tuple(getattr(measure, "dims", (2, 3)))
+        dims = tuple(measure.dims)
     if mesh_dependent is None:
-        mesh_dependent = bool(getattr(measure, "mesh_dependent", False))
+        mesh_dependent = bool(measure.mesh_dependent)
     cases = measure_cases(dims) if cases is None else list(cases)
     out: dict[str, dict[str, float]] = {}
     for case in cases:

@@ -14,7 +14,7 @@ import numpy as np
 from ..core.errors import ForwardModelError
 from ..core.interface import Interface
 from ..core.observation import Solution, coordinate_key
-from ..core.protocols import missing_methods
+from ..core.protocols import ForwardModelBase, missing_methods
 from .errors import ConformanceError, fail
 
 
@@ -30,7 +30,8 @@ def check_forward_model(
 
     Checks that
 
-    * it has the methods its contract requires (:class:`fbia.ForwardModel`);
+    * it derives from :class:`fbia.ForwardModelBase` and writes the methods its contract
+      requires (:class:`fbia.ForwardModel`);
     * ``parameter_names()`` is a sequence of distinct strings containing every key of
       ``parameters``;
     * ``solve(parameters, coordinates, workdir)`` returns an :class:`fbia.Solution` with an
@@ -41,10 +42,11 @@ def check_forward_model(
       in a fresh working folder, with a copy of the parameters and the coordinates reversed,
       gives the same interfaces (same connectivity, vertices equal to ``rtol`` times the
       interface's size);
-    * a model with ``tangent_inputs()`` gives, with ``solve(..., tangents=names)`` for those
-      of ``parameters``, tangents of the vertices' shape that agree with central differences
-      of the model itself (step 1e-4 relative) to 1e-3 of their largest entry (a check of
-      signs, scales and vertex order; a model's own tests verify the accuracy it claims);
+    * a model whose ``tangent_inputs()`` names inputs gives, with ``solve(...,
+      tangents=names)`` for those of ``parameters``, tangents of the vertices' shape that
+      agree with central differences of the model itself (step 1e-4 relative) to 1e-3 of
+      their largest entry (a check of signs, scales and vertex order; a model's own tests
+      verify the accuracy it claims);
     * with ``failing_parameters`` (a run known to fail), ``solve`` raises
       :class:`fbia.ForwardModelError` with a message, and nothing else.
 
@@ -52,6 +54,8 @@ def check_forward_model(
     """
 
     tmp_path = Path(tmp_path)
+    if not isinstance(model, ForwardModelBase):
+        raise fail(model, "does not derive from fbia.ForwardModelBase")
     lacking = missing_methods("forward_model", model)
     if lacking:
         raise fail(model, f"lacks the method(s) its contract requires: {', '.join(lacking)}")
@@ -170,15 +174,14 @@ def check_forward_model(
 
 
 def _check_tangents(
-    model: Any,
+    model: ForwardModelBase,
     parameters: Mapping[str, float],
     coordinates: Sequence[Mapping[str, float]],
     solve: Any,
 ) -> None:
     """The tangents of the inputs in ``parameters`` against central differences (see
     :func:`check_forward_model`)."""
-    member = getattr(model, "tangent_inputs", None)
-    offered = list(member()) if callable(member) else []
+    offered = list(model.tangent_inputs())
     in_coordinates = {k for c in coordinates for k in c}
     names = [n for n in offered if n in parameters and n not in in_coordinates]
     if not names:
@@ -210,16 +213,15 @@ def _check_tangents(
                 )
 
 
-def example_run(cls: type) -> tuple[dict[str, float], list[dict[str, float]]]:
+def example_run(cls: type[ForwardModelBase]) -> tuple[dict[str, float], list[dict[str, float]]]:
     """``cls.example_parameters()`` checked: (parameters, coordinates) of a cheap run."""
-    hook = getattr(cls, "example_parameters", None)
-    if hook is None:
+    out = cls.example_parameters()
+    if out is None:
         raise fail(
             cls,
             "provides no example_parameters(); every forward model needs a classmethod "
             "example_parameters() -> (parameters, coordinates) of a cheap successful run",
         )
-    out = hook()
     try:
         params, coords = out
         params = {str(k): float(v) for k, v in dict(params).items()}

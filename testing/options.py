@@ -21,6 +21,7 @@ def check_options(cls: type) -> list[str]:
     Returns the option names.
     """
 
+    # a probe, not a contract call: a candidate class without a schema is what this reports
     options = getattr(cls, "Options", None)
     if not (isinstance(options, type) and issubclass(options, PluginOptions)):
         raise fail(cls, "has no Options schema (a subclass of fbia.PluginOptions)")
@@ -65,12 +66,10 @@ def check_options(cls: type) -> list[str]:
     return names
 
 
-def example_options(cls: type) -> dict[str, Any]:
-    """The options of a cheap instance of ``cls``: ``cls.example_options()`` or ``{}``."""
-    hook = getattr(cls, "example_options", None)
-    if hook is None:
-        return {}
-    opts = hook()
+def example_options(cls: type[Configurable]) -> dict[str, Any]:
+    """The options of a cheap instance of ``cls``: ``cls.example_options()`` (the base's:
+    ``{}``)."""
+    opts = cls.example_options()
     if not isinstance(opts, Mapping):
         raise fail(cls, f"example_options() must return a dict, got {type(opts).__name__}")
     return dict(opts)

@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ..core.options import Configurable
 from ..core.registry import PluginEntry
 from .errors import fail
 from .measures import check_measure
@@ -14,7 +15,7 @@ from .options import check_options, example_options
 
 
 def failing_run(
-    cls: type, parameters: Mapping[str, float]
+    cls: type[Configurable], parameters: Mapping[str, float]
 ) -> tuple[dict[str, Any], dict[str, float]] | None:
     """Options and parameters of a run that must fail, by the ``failure_region`` convention.
 
@@ -24,8 +25,7 @@ def failing_run(
     region around the first of ``parameters`` moved by 10 %, which leaves ``parameters``
     themselves outside it; None if the model has no such option.
     """
-    options = getattr(cls, "Options", None)
-    if options is None or "failure_region" not in getattr(options, "model_fields", {}):
+    if "failure_region" not in cls.Options.model_fields:
         return None
     if not parameters:
         raise fail(cls, "example_parameters() gives no parameter to fail on")

@@ -51,7 +51,7 @@ def toy_curve(E: float, nu: float, inflow_rate: float = 100.0) -> np.ndarray:
     return np.c_[X, h * np.sin(np.pi * X) * (1.0 + nu * X)]
 
 
-class ToyMoundForwardModel(fbia.Configurable):
+class ToyMoundForwardModel(fbia.ForwardModelBase):
     """Closed-form 2-D test model with switchable failures (see the module docstring)."""
 
     dim = 2
@@ -165,7 +165,7 @@ def injected_fault(E: float, nu: float, rate: float) -> str | None:
     return ("fail", "hang", "exit")[min(2, int(3 * u / rate))]
 
 
-class VerticalMeasure(fbia.Configurable):
+class VerticalMeasure(fbia.MeasureBase):
     """Residuals: simulated minus observed y at the observed vertices (same x grid) [mm]."""
 
     class Options(fbia.PluginOptions):

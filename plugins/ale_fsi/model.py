@@ -55,7 +55,8 @@ from numpy.typing import NDArray
 from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Coordinate, Solution
-from ...core.options import Configurable, PluginOptions
+from ...core.options import PluginOptions
+from ...core.protocols import ForwardModelBase
 from ..fem.flow_cell import SOLID
 from .mesh_source import build_mesh, regions_in_file
 from .options import AleFsiOptions, solver_settings
@@ -64,7 +65,7 @@ from .sensitivities import TangentReport, vertex_tangents
 __all__ = ["AleFsiForwardModel", "AleFsiOptions", "solver_settings"]
 
 
-class AleFsiForwardModel(Configurable):
+class AleFsiForwardModel(ForwardModelBase):
     """Monolithic ALE fluid-biofilm interaction (Paper A eq. 1-4, thesis eq. 2.14-2.30).
 
     Incompressible Navier-Stokes in ALE form in the fluid, a plane-strain hyperelastic solid

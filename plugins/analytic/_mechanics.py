@@ -58,7 +58,8 @@ from pydantic import Field, model_validator
 from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Solution
-from ...core.options import Configurable, PluginOptions
+from ...core.options import PluginOptions
+from ...core.protocols import ForwardModelBase
 
 #: Gain of the lean (bending) response, C_B [-].
 BENDING_GAIN = 6.0
@@ -252,7 +253,7 @@ def diagnostics(states: Sequence[MoundState], max_displacement: Sequence[float])
     }
 
 
-class MoundModel(Configurable):
+class MoundModel(ForwardModelBase):
     """What the 2-D mound and the 3-D dome share: reference shape, parameter names, solve.
 
     A subclass gives ``Options``, ``_reference_shape()``, ``states()``, ``displacement()`` and

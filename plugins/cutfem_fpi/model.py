@@ -35,7 +35,8 @@ from pydantic import Field, field_validator, model_validator
 from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Coordinate, Solution
-from ...core.options import Configurable, PluginOptions, settings_from
+from ...core.options import PluginOptions, settings_from
+from ...core.protocols import ForwardModelBase
 from ..fem.outlines import NAMED_OUTLINES, OutlineName, resolve_outline
 
 if TYPE_CHECKING:
@@ -56,7 +57,7 @@ Point = tuple[float, float]
 POROELASTIC_OUTLINE: OutlineName = "fig2_sketch"
 
 
-class CutFemFpiForwardModel(Configurable):
+class CutFemFpiForwardModel(ForwardModelBase):
     """Fluid-poroelastic interaction on a fixed background grid (Paper A eq. 10-15).
 
     Navier-Stokes in the channel and Darcy flow in the biofilm on one background mesh cut by

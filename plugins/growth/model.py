@@ -40,7 +40,8 @@ from pydantic import Field
 from ...core.errors import ConfigError, ForwardModelError
 from ...core.interface import Interface
 from ...core.observation import Coordinate, Solution
-from ...core.options import Configurable, PluginOptions
+from ...core.options import PluginOptions
+from ...core.protocols import ForwardModelBase
 from ..ale_fsi.options import AleFsiOptions, solver_settings
 from .geometry import finger_outline, interface_state, vertex_coordinates
 from .growth_law import NODE_AREA, GrowthCoefficients, growth_displacement
@@ -132,7 +133,7 @@ class _StepState:
     transport: Any = None
 
 
-class GrowthForwardModel(Configurable):
+class GrowthForwardModel(ForwardModelBase):
     """Fluid-biofilm interaction, nutrient transport and surface growth (Paper A eq. 1-9).
 
     Parameters (``parameter_names``): ``K1g`` [mm^3/mol], ``K2g``, ``K3g`` (eq. 9; units per

@@ -1,6 +1,7 @@
-"""The three extension contracts (issue 28 item 3): one written contract per extension point,
-read by the registry and the conformance kit; the framework keeps an iterator's books; a
-plugin is pickled by its options when it says so."""
+"""The three extension contracts (issue 28 item 3; as code, issue 48 item 3): each kind's
+protocol holds what a plugin writes, its base what it may override with the defaults; the
+registry, the conformance kit and the docs read the same classes; the framework keeps an
+iterator's books; a plugin is pickled by its options when it says so."""
 
 from __future__ import annotations
 
@@ -8,47 +9,85 @@ import pickle
 
 import numpy as np
 import pytest
+from _paths import ROOT
 
 import fbia
 from fbia.core.iteration import RunBook, drive
-from fbia.core.protocols import contracts, required_methods
+from fbia.core.protocols import missing_methods, required_methods
 from fbia.testing import tiny_problem
+from fbia.testing.contracts import contracts
 
 
-def test_the_contracts_are_read_from_the_protocols_docstrings():
-    """Every member with its role, in order; a default for the optional ones."""
+def test_the_contracts_are_read_from_the_protocols_and_the_bases():
+    """Every member with its role, in the order of the code; a default for the optional
+    attributes; the framework's members are the ``@final`` ones."""
     read = contracts()
     roles = {kind: [(m.name, m.role) for m in members] for kind, members in read.items()}
-    common = [("Options", "required"), ("requires", "optional"),
-              ("__init__(options)", "framework"), ("pickle_options_only", "optional")]  # fmt: skip
-    for kind in ("forward_model", "measure", "iterator"):
-        assert roles[kind][:4] == common
-    assert [n for n, _ in roles["forward_model"][4:]] == [
-        "numerics_version", "dim", "up_axis", "parameter_names()", "undeformed()",
-        "solve(parameters, coordinates, workdir)", "tangent_inputs()", "prepare()",
-        "warm_state()", "adopt_warm_state(state)", "example_parameters()", "example_options()",
+    common = [("requires", "optional"), ("pickle_options_only", "optional"),
+              ("example_options()", "optional")]  # fmt: skip
+    assert roles["forward_model"][:3] == [
+        ("Options", "required"), ("parameter_names()", "required"),
+        ("solve(parameters, coordinates, workdir)", "required"),
+    ]  # fmt: skip
+    assert roles["measure"][3:6] == roles["iterator"][2:5] == common
+    assert [n for n, _ in roles["forward_model"][6:]] == [
+        "numerics_version", "up_axis", "dim", "undeformed()", "tangent_inputs()", "prepare()",
+        "warm_state()", "adopt_warm_state(state)", "example_parameters()",
     ]  # fmt: skip
     assert [n for n, r in roles["iterator"] if r == "framework"] == [
-        "__init__(options)", "result.iterator, nfev, n_failed, evaluations",
-        "run(problem, evaluator=None)",
+        "seed", "run(problem, evaluator=None)"
+    ]  # fmt: skip
+    assert roles["evaluator"] == [
+        ("evaluate(problem, points)", "required"), ("slots", "required")
     ]  # fmt: skip
     defaults = {m.name: m.default for m in read["measure"] if m.role == "optional"}
     assert defaults["requires"] == "()" and defaults["dims"] == "(2, 3)"
     assert defaults["mesh_dependent"] == "False"
-    assert "a difference" == defaults["residuals_jvp(simulated, observation, dvertices)"]
+    assert {m.name: m.default for m in read["iterator"]}["result_type"] == "Result"
+    assert all(m.doc for members in read.values() for m in members)  # each one documented
+
+
+class _Minimal(fbia.ForwardModelBase):
+    """A model that writes what its contract requires and nothing else."""
+
+    class Options(fbia.PluginOptions):
+        pass
+
+    def parameter_names(self):
+        return ["E"]
+
+    def solve(self, parameters, coordinates, workdir):  # pragma: no cover - not run here
+        raise fbia.ForwardModelError("not run")
+
+
+def test_a_plugin_that_overrides_nothing_optional_has_the_bases_defaults():
+    model = _Minimal()
+    assert (model.dim, model.up_axis, model.numerics_version) == (None, None, None)
+    assert (model.undeformed(), tuple(model.tangent_inputs()), model.warm_state()) == (
+        None, (), None,
+    )  # fmt: skip
+    assert model.prepare() is None and model.adopt_warm_state(object()) is None
+    assert _Minimal.example_parameters() is None and _Minimal.example_options() == {}
+    measure = fbia.measure("ray")  # overrides dims, leaves the jvp to the framework
+    observed = fbia.testing.circle_2d()
+    assert measure.residuals_jvp(observed, None, observed.vertices) is None
+    assert measure.measurements_per_observation is None and not measure.mesh_dependent
+    it = fbia.iterator("levenberg_marquardt", x0={"E": 300.0, "nu": 0.2})
+    assert it.write_files(None, ROOT) == [] and it.seed is None
+    assert fbia.iterator("sobol_indices", seed=7).seed == 7  # its option, read by the base
 
 
 def test_the_registry_requires_the_contracts_methods():
     assert required_methods("forward_model") == ["parameter_names", "solve"]
     assert required_methods("measure") == ["residuals", "distance"]
     assert required_methods("iterator") == ["steps"]
+    assert missing_methods("forward_model", _Minimal) == []
 
-    class NoSteps(fbia.Configurable):
+    class NoSteps(fbia.IteratorBase):  # the protocol's stub, inherited, is not a method
         class Options(fbia.PluginOptions):
             pass
 
-        def run(self, problem, evaluator=None):
-            return None
+    assert missing_methods("iterator", NoSteps()) == ["steps"]
 
     class Plugin:
         @fbia.hookimpl
@@ -57,6 +96,23 @@ def test_the_registry_requires_the_contracts_methods():
 
     with pytest.raises(fbia.PluginError, match="lacks method.*steps"):
         fbia.Registry.load(entry_points=False, extra=[Plugin()])
+
+
+def test_an_inverse_problem_refuses_a_model_or_measure_off_its_base():
+    problem = tiny_problem()
+
+    class Plain:  # a duck-typed model, as fbia took it before issue 48
+        def parameter_names(self):
+            return problem.model.parameter_names()
+
+        def solve(self, parameters, coordinates, workdir):  # pragma: no cover - refused first
+            return problem.model.solve(parameters, coordinates, workdir)
+
+    parts = dict(observations=problem.observations, parameters=problem.parameters)
+    with pytest.raises(fbia.ConfigError, match=r"^the model Plain does not derive from fbia\.Fo"):
+        fbia.InverseProblem(model=Plain(), measure=problem.measure, **parts)
+    with pytest.raises(fbia.ConfigError, match=r"^the measure Plain does not derive from fbia\.Me"):
+        fbia.InverseProblem(model=problem.model, measure=Plain(), **parts)
 
 
 class _Silent(fbia.IteratorBase):

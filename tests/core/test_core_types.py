@@ -472,7 +472,7 @@ def test_coordinate_key_is_order_independent_and_solution_lookup():
 # -- InverseProblem ------------------------------------------------------------------------------
 
 
-class _VertexMeasure:
+class _VertexMeasure(fbia.MeasureBase):
     """Local test measure (not registered): vertex-wise differences of equal meshes.
 
     ``residuals`` are the coordinate differences of the simulated and the observed vertices
@@ -481,6 +481,7 @@ class _VertexMeasure:
     """
 
     def __init__(self, bug: bool = False) -> None:
+        super().__init__()
         self.bug = bug
 
     def residuals(self, simulated: Interface, observation: fbia.Observation) -> np.ndarray:

@@ -16,6 +16,7 @@ import types
 
 import pytest
 from _paths import ROOT, TESTS
+from pydantic import BaseModel
 
 import fbia
 from fbia import testing as ft
@@ -46,7 +47,7 @@ def registers(kind: str, *pairs: tuple[str, object]) -> object:
     return fbia.hookimpl(hook)
 
 
-class GoodMeasure(fbia.Configurable):
+class GoodMeasure(fbia.MeasureBase):
     class Options(fbia.PluginOptions):
         pass
 
@@ -103,13 +104,15 @@ def test_unknown_name_in_the_default_registry_lists_every_installed_one():
     assert valid == [e.name for e in fbia.list_plugins("measure")] and "rkhs" in valid
 
 
-class NoOptions:
+class NoOptions(fbia.MeasureBase):
+    Options = BaseModel  # type: ignore[assignment]  # a schema, not fbia.PluginOptions
+
     def residuals(self, simulated, observation): ...
 
     def distance(self, simulated, observation): ...
 
 
-class NoMethods(fbia.Configurable):
+class NoMethods(fbia.MeasureBase):
     class Options(fbia.PluginOptions):
         pass
 
@@ -128,6 +131,74 @@ def test_class_without_options_or_methods_is_rejected(cls, rule):
     plugin = plugin_module("sloppy", register_measures=registers("measure", ("bad", cls)))
     with pytest.raises(fbia.PluginError, match=rf"^plugin 'sloppy': {rule}"):
         Registry.load(entry_points=False, extra=[plugin])
+
+
+class OffBaseMeasure(fbia.Configurable):
+    """A measure as fbia took it before issue 48: options and methods, not the base."""
+
+    class Options(fbia.PluginOptions):
+        pass
+
+    def residuals(self, simulated, observation): ...
+
+    def distance(self, simulated, observation): ...
+
+
+class OffBaseModel:
+    class Options(fbia.PluginOptions):
+        pass
+
+    def parameter_names(self): ...
+
+    def solve(self, parameters, coordinates, workdir): ...
+
+
+class OffBaseIterator(fbia.Configurable):
+    class Options(fbia.PluginOptions):
+        pass
+
+    def steps(self, problem, evaluator): ...
+
+
+@pytest.mark.parametrize(
+    ("kind", "cls", "base"),
+    [
+        ("measure", OffBaseMeasure, "fbia.MeasureBase"),
+        ("forward_model", OffBaseModel, "fbia.ForwardModelBase"),
+        ("iterator", OffBaseIterator, "fbia.IteratorBase"),
+    ],
+    ids=["measure", "forward_model", "iterator"],
+)
+def test_a_class_off_its_kinds_base_is_refused_in_one_line(kind, cls, base):
+    """The framework calls the base's optional members directly (issue 48 item 3), so the
+    registry refuses a class that does not derive from it, naming plugin, kind and base."""
+    plugin = plugin_module("offbase", **{KINDS[kind]: registers(kind, ("bad", cls))})
+    with pytest.raises(fbia.PluginError) as info:
+        Registry.load(entry_points=False, extra=[plugin])
+    assert str(info.value) == (
+        f"plugin 'offbase': {kind} 'bad': class {cls.__qualname__} does not derive from {base}"
+    )
+
+
+def test_a_class_off_its_base_is_exit_2_in_the_cli(fbia_installer, tmp_path, capsys):
+    """An installed plugin whose class is off its base: every command that loads the registry
+    says so in one line and exits with 2."""
+    from fbia.studies.cli import main
+
+    (tmp_path / "fbia_offbase.py").write_text(
+        "import fbia\n\n\n"
+        "class Lax(fbia.Configurable):\n"
+        "    def residuals(self, simulated, observation): ...\n\n"
+        "    def distance(self, simulated, observation): ...\n\n\n"
+        "@fbia.hookimpl\n"
+        "def register_measures(register):\n"
+        '    register("lax", Lax)\n'
+    )
+    fbia_installer.install("fbia-offbase", "0.0.1", {"offbase": "fbia_offbase"}, tmp_path)
+    assert main(["plugins"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("measure 'lax': class Lax does not derive from fbia.MeasureBase")
+    assert "\n" not in err
 
 
 def test_misspelled_hook_fails_loudly():

@@ -186,8 +186,9 @@ def test_points_placed_where_the_interface_moved_along_its_normal(m2, exact):
 
 
 def test_displacement_placement_needs_the_undeformed_interface(m2):
-    class NoRest:
+    class NoRest(fbia.ForwardModelBase):  # the base's undeformed(): none
         def __init__(self, model):
+            super().__init__()
             self.model = model
 
         def parameter_names(self):

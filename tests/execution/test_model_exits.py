@@ -68,7 +68,7 @@ def test_a_real_ctrl_c_during_a_serial_run_still_stops_the_batch(tmp_path):
     assert seen == ["ok"]
 
 
-class _CatchingModel(fbia.Configurable):
+class _CatchingModel(fbia.ForwardModelBase):
     """Turns whatever it catches, Ctrl-C included, into a failed run."""
 
     dim = 2

@@ -22,7 +22,7 @@ import fbia
 __version__ = "1.2.3"
 
 
-class ExampleBumpForwardModel(fbia.Configurable):
+class ExampleBumpForwardModel(fbia.ForwardModelBase):
     """A closed-form bump whose height scales with the inflow rate."""
 
     class Options(fbia.PluginOptions):
@@ -58,7 +58,7 @@ class ExampleBumpForwardModel(fbia.Configurable):
         return fbia.Solution.from_pairs(pairs, diagnostics={"amplitude": a})
 
 
-class ExampleBoundingBoxMeasure(fbia.Configurable):
+class ExampleBoundingBoxMeasure(fbia.MeasureBase):
     """Differences of the lower and upper corners of the bounding boxes [mm]."""
 
     class Options(fbia.PluginOptions):

@@ -65,11 +65,7 @@ def test_forward_model_failure_is_a_forward_model_error(entry, tmp_path):
 def test_measure_conforms(entry):
     cls = entry.factory
     measure = default_registry().create("measure", entry.name, ft.example_options(cls))
-    values = ft.check_measure(
-        measure,
-        dims=getattr(cls, "dims", (2, 3)),
-        mesh_dependent=bool(getattr(cls, "mesh_dependent", False)),
-    )
+    values = ft.check_measure(measure)  # in its dims, by its mesh_dependent
     assert all(v["farther"] > v["simulated"] > 0.0 for v in values.values())
 
 
@@ -99,7 +95,7 @@ def test_every_kind_has_a_registered_plugin():
 X = np.linspace(0.0, 1.0, 17)
 
 
-class GoodModel(fbia.Configurable):
+class GoodModel(fbia.ForwardModelBase):
     """y = a (q / 100) x (1 - x) [mm]; fails (ForwardModelError) for a > 1 mm."""
 
     class Options(fbia.PluginOptions):
@@ -253,7 +249,7 @@ def test_failing_run_moves_the_first_parameter_out_of_the_example_point():
     assert lo < 0.55 < hi and not lo <= 0.5 <= hi
 
 
-class CentroidMeasure(fbia.Configurable):
+class CentroidMeasure(fbia.MeasureBase):
     """Difference of the length/area-weighted centroids [mm]: a crude but honest measure."""
 
     class Options(fbia.PluginOptions):

@@ -197,10 +197,11 @@ class TestUncertainParameters:
             it.run(make_problem())
 
 
-class BuggyBelow300:
+class BuggyBelow300(fbia.ForwardModelBase):
     """The analytic model with a bug: ``solve`` raises ValueError (not ForwardModelError)."""
 
     def __init__(self):
+        super().__init__()
         self.inner = fbia.forward_model("analytic_mound_2d")
 
     def parameter_names(self):

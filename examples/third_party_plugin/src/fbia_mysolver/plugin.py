@@ -38,7 +38,7 @@ INPUT_FILE = "mysolver_input.json"
 LOG_FILE = "mysolver.log"
 
 
-class MySolverForwardModel(fbia.Configurable):
+class MySolverForwardModel(fbia.ForwardModelBase):
     """Runs an external solver per forward evaluation (see the module docstring)."""
 
     class Options(fbia.PluginOptions):
