@@ -6,6 +6,7 @@ iterator's books; a plugin is pickled by its options when it says so."""
 from __future__ import annotations
 
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ import fbia
 from fbia.core.iteration import RunBook, drive
 from fbia.core.protocols import missing_methods, required_methods
 from fbia.testing import tiny_problem
-from fbia.testing.contracts import contracts
+from fbia.testing.contracts import contract_tables, contracts
 
 
 def test_the_contracts_are_read_from_the_protocols_and_the_bases():
@@ -45,6 +46,16 @@ def test_the_contracts_are_read_from_the_protocols_and_the_bases():
     assert defaults["mesh_dependent"] == "False"
     assert {m.name: m.default for m in read["iterator"]}["result_type"] == "Result"
     assert all(m.doc for members in read.values() for m in members)  # each one documented
+
+
+def test_the_docs_member_tables_are_rendered_from_the_contracts():
+    text = (ROOT / "docs" / "plugins.md").read_text(encoding="utf-8")
+    found = re.search(r"<!-- contracts: begin [^>]*-->\n(.*)\n<!-- contracts: end -->", text, re.S)
+    assert found, "docs/plugins.md has no generated member tables"
+    assert found.group(1).strip() == contract_tables(), (
+        "docs/plugins.md's member tables are stale; paste the output of python -c 'from "
+        "fbia.testing.contracts import contract_tables; print(contract_tables())'"
+    )
 
 
 class _Minimal(fbia.ForwardModelBase):
