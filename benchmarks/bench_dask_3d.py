@@ -89,12 +89,19 @@ costs nothing measurable, and the 2-worker figures scatter (1.4-1.7x) with which
 which point (one isolated batch had a run of 4.2 s with 3 Jacobians).
 
 At the recommended 3-D settings (``--recommended``: order 3, duct 0.2 mm, dome 0.15 mm,
-``mesh_motion_layer = 0.15``, one thread per worker; 2026-11-30, idle, load 1.7), 8 runs:
-serial 18.0 s (2.25 s a run), 1 worker 17.8 s, 2 workers 13.8 s: 1.30x faster than serial
-against issue 47's 1.6x (not met; 2-D flow cell in the same session 1.33x).  The heavier run
-did not change the ratio (coarse dome: 1.27x), so Dask's cost per task is not the cause;
-the earlier measured causes stand (each worker's chain of warm states half as dense, so more
-Jacobians; the runs 10-30 % slower side by side, cause not found).
+``mesh_motion_layer = 0.15``, one thread per worker; 2026-11-30, idle), 8 runs, three
+sessions: 2 workers 1.30x, 0.65x and (the same batch by hand) 1.34x faster than serial
+(18.0-18.3 s), against issue 47's 1.6x: not met.  Measured cause, from the runs' own
+diagnostics (printed since): the fresh Jacobians.  Serially the 8 warm runs assemble 3 (a run
+with one takes ~4 s, one of chord steps ~1.1-1.4 s); with 2 workers 5 and, in the 0.65x
+session, 8 -- each worker's chain of warm states is half as dense, and which worker gets
+which point decides how many runs find no usable factorisation.  The runs themselves are not
+slower side by side on an idle machine (Jacobian runs 3.9-4.6 s against 3.9-4.1 s; 1.8-2.1 s
+assembly per Jacobian in both), and the machine does 2.13x the work with two processes (the
+pure-Python probe at the end): the "runs slow each other by 10-30 %" of earlier sessions was
+other load on the VM.  What would reach 1.6x: keeping each worker's chain dense (give each
+worker neighbouring points, e.g. contiguous chunks of the batch sorted in parameter space),
+not a faster run.
 """
 
 from __future__ import annotations
