@@ -99,9 +99,18 @@ which point decides how many runs find no usable factorisation.  The runs themse
 slower side by side on an idle machine (Jacobian runs 3.9-4.6 s against 3.9-4.1 s; 1.8-2.1 s
 assembly per Jacobian in both), and the machine does 2.13x the work with two processes (the
 pure-Python probe at the end): the "runs slow each other by 10-30 %" of earlier sessions was
-other load on the VM.  What would reach 1.6x: keeping each worker's chain dense (give each
-worker neighbouring points, e.g. contiguous chunks of the batch sorted in parameter space),
-not a faster run.
+other load on the VM.  Tried and not kept: submitting the batch along a
+greedy nearest-neighbour path through input space (so that each free worker takes a point
+near its last): 2 workers 40.5, 29.3 and 14.8 s with 9, 6 and 5 Jacobians against 18.6-21.7 s
+serially -- no fewer Jacobians, and the 2-worker wall time scatters 3x between identical
+batches.  So point spacing is not the whole cause.  Found, by logging the runs: some batches had
+a *cold* run (no warm start, 3 Jacobians, 17-25 s among warm runs of 1-5 s): the Dask worker
+had rebuilt its copy of the scattered problem between tasks, the isolated runner saw another
+object and reloaded the problem in its helper, whose model then had neither warm states nor a
+factorisation.  Since then the runner compares the problem's pickled bytes when the object
+differs (``IsolatedRunner._load``): three batches measured after, no cold run, 2 workers
+20.0 / 14.6 / 13.8 s against 24.3 / 22.7 / 18.7 s serially (1.22x, 1.55x, 1.36x; the serial
+batch itself scatters by 30 % on this VM), 3-5 Jacobians against 3.  Still below 1.6x.
 """
 
 from __future__ import annotations

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import hashlib
 import os
 import pickle
 import signal
@@ -200,6 +201,7 @@ class IsolatedRunner:
         self._jobs: int | None = None
         self._answers: int | None = None
         self._problem: Evaluable | None = None
+        self._digest: bytes | None = None  # of the problem the helper holds
 
     @property
     def pid(self) -> int | None:
@@ -221,7 +223,7 @@ class IsolatedRunner:
             os.close(job_r)
             os.close(res_w)
         self._jobs, self._answers = job_w, res_r
-        self._problem = None
+        self._problem, self._digest = None, None
         send(job_w, ("init", list(sys.path)))
 
     def _load(self, problem: Evaluable) -> str | None:
@@ -230,6 +232,14 @@ class IsolatedRunner:
         if self._proc is not None and self._problem is problem:
             return None
         blob = pickle.dumps(run_view(problem), protocol=pickle.HIGHEST_PROTOCOL)
+        digest = hashlib.sha256(blob).digest()
+        if self._proc is not None and digest == self._digest:
+            # the same problem in another object (a Dask worker may rebuild its copy of the
+            # scattered problem between tasks): the helper keeps its model, with the warm
+            # states and the run process's factorisation.  Reloading it there made a cold run
+            # of 17-25 s among warm ones of 1-5 s (3-D dome, benchmarks/bench_dask_3d.py).
+            self._problem = problem
+            return None
         for _attempt in (1, 2):  # a helper that died between runs is replaced once
             if self._proc is None:
                 self._start()
@@ -247,7 +257,7 @@ class IsolatedRunner:
         if answer[1] is not None:
             self.stop()
             return str(answer[1])
-        self._problem = problem
+        self._problem, self._digest = problem, digest
         return None
 
     def run(
@@ -349,7 +359,7 @@ class IsolatedRunner:
                 with contextlib.suppress(OSError):
                     os.close(fd)
         self._jobs = self._answers = None
-        self._problem = None
+        self._problem, self._digest = None, None
         if proc is not None:
             # closing its job pipe makes the helper kill its child and exit; SIGKILL to its
             # process group covers a helper that does not answer

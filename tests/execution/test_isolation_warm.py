@@ -51,3 +51,45 @@ def test_isolated_runs_are_meshed_once_and_warm_start_even_after_a_time_out(tmp_
     assert all(d["setup_time"] < 0.1 * first.time for d in (d0, d1, d3))
     # the parent process never ran the model: the warm states lived in the helper only
     assert problem.model.warm_state() == []
+
+
+def test_an_equal_problem_in_another_object_keeps_the_helpers_warm_model(tmp_path):
+    """A Dask worker may rebuild its copy of the scattered problem between tasks: the runner
+    sees another object of the same problem.  The helper keeps its model (warm states, the run
+    process and its factorisation) instead of loading the problem afresh, which made a cold
+    run among warm ones (``benchmarks/bench_dask_3d.py``); a different problem is loaded."""
+    import pickle
+
+    from fbia.execution.isolation import run_view
+
+    truth = fbia.forward_model("ale_fsi", **COARSE)
+    obs = fbia.synthetic_observations(
+        truth, {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0
+    )
+
+    def make(noise: float) -> fbia.InverseProblem:
+        return fbia.InverseProblem(
+            model=fbia.forward_model("ale_fsi", **COARSE),
+            measure=fbia.measure("cpp"),
+            observations=obs,
+            parameters=[fbia.Parameter("E", bounds=(100, 800))],
+            fixed={"nu": 0.3},
+            noise_std=noise,
+        )
+
+    # a Dask worker's copies of the scattered problem: each one rebuilt from the same bytes
+    scattered = pickle.dumps(run_view(make(0.001)))
+    with IsolatedRunner() as runner:
+
+        def run(p: object, k: int) -> tuple[fbia.Evaluation, int | None]:
+            out = runner.run(p, {"E": 350.0 + k}, str(tmp_path / f"{k}"), k)
+            return out.record, runner.pid
+
+        first, helper = run(pickle.loads(scattered), 0)
+        same, helper_same = run(pickle.loads(scattered), 1)  # equal, another object
+        other, _ = run(run_view(make(0.002)), 2)  # another problem: loaded afresh, cold
+    assert first.ok and same.ok and other.ok
+    assert first.diagnostics["warm_start"] is False
+    assert same.diagnostics["warm_start"] is True and helper_same == helper
+    assert same.diagnostics["newton_iterations"] < first.diagnostics["newton_iterations"]
+    assert other.diagnostics["warm_start"] is False
