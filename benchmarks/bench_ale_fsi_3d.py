@@ -53,8 +53,9 @@ and back-substitutions (~0.15 s each: 13 chord steps to the 1e-10 tolerance), me
 forms (~2.5 s).  Tried and not kept: without Pardiso's matching (iparm 13 = 0) the
 continuation failed; Anderson acceleration of the chord steps (depth 3: the same 16 Newton
 iterations; depth 8: 14) gains less than it complicates; a lower quadrature order in the fluid
-(bonus_intorder -1 or -2: the same rule) cut the assembly by 20-30 % but moved the displacement
-by 0.09 %; NGSolve's compiled coefficient functions need ``ngscxx``, absent from the wheels.
+(bonus_intorder -1 or -2: the same rule) cut one assembly from 1.15 s to 0.74-1.02 s (single
+timings on a noisy VM) but moved the displacement by +0.09 % when the moving elements had it;
+NGSolve's compiled coefficient functions need ``ngscxx``, absent from the wheels.
 Earlier (before these changes): the duct at 0.3 mm was 18 s but +0.7 % / +1.15 %; order 4
 there -0.3 % / +0.14 % but 69 s, 4.5 GB.  Under load (5 on 2 cores) two threads were slower
 than one; they pay on free cores only.

@@ -67,13 +67,14 @@ Measured 2026-11-30 (issue 47), ``--dome``, 2 free cores, the dome now with
 (``benchmarks/bench_ale_fsi_3d.py``): forward 34 runs 41.5 s (42.2 s in a second run), tangents
 6 runs 32.3 s (30.8 s) of which the tangents 15.7 s (14.9 s); the same optima (errors from the
 truth -0.0021 / -0.0003 Pa in E).  Issue 47's target for the tangent row is 20 s: not met.
-Where the time goes (the runs' diagnostics): each run assembles one Jacobian (1.0-1.3 s) and
-factorises it (0.75 s), takes 4-16 chord steps (~0.15 s each), and its tangents assemble the
-Jacobian again at the converged state (1.0-1.3 s) and refine 6-24 back-substitutions against
-it (2.2-2.9 s a run for the tangents).  Factorising afresh for the tangents instead (2
-refinements) gave 28.0 s against 30.9 s in one pair of runs, within this VM's scatter: not
-kept.  NGSolve's compiled coefficient functions (``realcompile``) would speed the assembly
-but need ``ngscxx``, which the pip wheels do not ship.
+Where the time goes (the runs' diagnostics): runs 1-4 each assemble one Jacobian (1.0-1.3 s)
+and factorise it (0.75 s), runs 5-6 none; each takes 4-16 chord steps (~0.15 s each), and its
+tangents assemble the Jacobian again at the converged state (1.0-1.3 s) and refine 6-24
+back-substitutions against it (1.6-2.9 s a run for the tangents).  Factorising afresh for the
+tangents instead (2 refinements) gave 28.0 s against 30.9 s in one pair of runs, then 35.3
+and 31.3 s against 30.8 and 31.3 s in two interleaved pairs (after the products ran on both
+threads): not kept.  NGSolve's compiled coefficient functions (``realcompile``) would speed
+the assembly but need ``ngscxx``, which the pip wheels do not ship.
 """
 
 from __future__ import annotations

@@ -183,7 +183,9 @@ class AleFsiProblem:
             if el.mat == "interface":
                 on_interface[[v.nr for v in el.vertices]] = True
         if not on_interface.any():
-            raise ForwardModelError("motion_layer: the mesh has no interface", "bad_mesh")
+            raise ForwardModelError(
+                "mesh_motion_layer: the mesh has no interface boundary", "bad_mesh"
+            )
         from scipy.spatial import cKDTree
 
         points = np.array([v.point for v in mesh.vertices], dtype=float)

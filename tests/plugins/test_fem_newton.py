@@ -167,12 +167,16 @@ def test_direct_solver_threads_give_pardiso_ngsolves_thread_count() -> None:
 @pytest.mark.parametrize("ordering", [None, "metis"])
 def test_the_fill_reducing_ordering_gives_the_same_solution(ordering: str | None) -> None:
     """Pardiso with nested dissection (``ordering = "metis"``, the 3-D choice of ale_fsi) or
-    NGSolve's minimum degree: the same Newton solution to the tolerance."""
+    NGSolve's minimum degree: the same Newton solution to the tolerance, and the ordering
+    reaches Pardiso (its iparm[1]: 2 METIS, 0 minimum degree)."""
     from fbia.plugins.fem.newton import sparse_direct_solver
 
     direct = sparse_direct_solver()
     system = Cubic()
-    rep = NewtonSolver(system, 1e-10, 12, direct, ordering=ordering, threads=2).solve()
+    newton = NewtonSolver(system, 1e-10, 12, direct, ordering=ordering, threads=2)
+    rep = newton.solve()
+    if direct == "pardiso":  # NGSolve's wrapper keeps Pardiso's iparm array as _params
+        assert newton.inverse._params[1] == (2 if ordering == "metis" else 0)
     anchor = Cubic()
     NewtonSolver(anchor, 1e-10, 12, "umfpack").solve()
     assert rep.converged
