@@ -22,14 +22,17 @@ plane-strain limit; inflow rate per unit depth, mm^2/s).  Both modes, probes (x,
 VTU output (tetrahedra) work in 3-D as in 2-D; ``"colony_3d"`` takes a user's colony surface
 (:mod:`~fbia.plugins.ale_fsi.colony3d`) and ``mesh_file`` a 3-D tetrahedral mesh.
 
-Recommended 3-D settings (``dome_3d``; ``benchmarks/bench_ale_fsi_3d.py`` prints the table):
-``order = 3, interface_mesh_size = 0.15, mesh_size = 0.2, curved = True, threads = 2,
-mesh_motion_layer = 0.15`` -- 40 k unknowns, 1.4 GB, 14.5-16 s wall on two free cores; the
-largest displacement within 1 % of both references: -0.86 % from the finest run (order 3,
-duct 0.15 mm, 84 k unknowns) and -0.41 % from the limit of orders 2, 3, 4 on the 0.15/0.3 mm
-mesh (Aitken), which differ by 0.45 % themselves.  The motion layer keeps the ALE mesh fixed
-beyond one interface element of the dome: without it (the whole fluid mesh moving) 57 k
-unknowns, 2.5 GB, 27-30 s, and a displacement 0.02 % apart.  With ``mesh_size = 0.3`` (33 k
+Recommended 3-D settings (``dome_3d``; :data:`~fbia.plugins.ale_fsi.options.RECOMMENDED_3D`,
+``benchmarks/bench_ale_fsi_3d.py`` prints the table): ``order = 3, interface_mesh_size = 0.15,
+mesh_size = 0.2, curved = True, threads = 2, mesh_motion_layer = 0.15, mesh_motion_order = 1``
+-- 32 k unknowns, 1.3 GB, 14.5-16 s wall on two free cores (2026-11-30; the same runs
+without ``mesh_motion_order`` 16.5-19.5 s); the largest displacement within 1 % of both
+references: -0.87 % from the finest run (order 3, duct 0.15 mm, 84 k unknowns) and -0.42 %
+from the limit of orders 2, 3, 4 on the 0.15/0.3 mm mesh (Aitken), which differ by 0.45 %
+themselves.  The motion layer keeps the ALE mesh fixed beyond one interface element of the
+dome, and ``mesh_motion_order = 1`` makes it piecewise linear inside the fluid (the interface
+keeps order 3): without both (the whole fluid mesh moving at order 3) 57 k unknowns, 2.5 GB,
+27-30 s, and a displacement 0.03 % apart.  With ``mesh_size = 0.3`` (33 k
 unknowns, 18 s before the layer) the displacement is +0.7 % / +1.15 % from them; order 4
 there (81 k, 69 s, 4.5 GB) is -0.3 % / +0.14 %.
 The error of order 2 comes from the duct (the flow), not from the dome: order 2 is +0.5 % /

@@ -7,7 +7,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
@@ -47,9 +49,10 @@ class AleFsiOptions(PluginOptions):
         "flow_cell",
         description="flow_cell: the 2-D cell; dome_3d: a 3-D duct with a spherical-cap "
         "biofilm (inflow_rate in mm^3/s; for its displacement to 1 %: order 3, mesh_size "
-        "0.2, interface_mesh_size 0.15, curved, threads 2, mesh_motion_layer 0.15 -- see "
-        "benchmarks/bench_ale_fsi_3d.py); ridge_3d: the 2-D cell extruded over "
-        "channel_width between symmetry walls (plane strain); colony_3d: the dome_3d duct "
+        "0.2, interface_mesh_size 0.15, curved, threads 2, mesh_motion_layer 0.15, "
+        "mesh_motion_order 1 -- see benchmarks/bench_ale_fsi_3d.py); ridge_3d: the 2-D cell "
+        "extruded over channel_width between symmetry walls (plane strain); colony_3d: the "
+        "dome_3d duct "
         "with the colony of colony_surface [-]",
     )
     channel_width: float = Field(1.0, gt=0, description="3-D duct width / ridge depth W [mm]")
@@ -137,6 +140,15 @@ class AleFsiOptions(PluginOptions):
         "sparser Jacobian; the solution changes at the size of the discretisation error). "
         "It must take the interface's displacement: a fold fails the run. Default: the "
         "whole fluid moves [mm]",
+    )
+    mesh_motion_order: int | None = Field(
+        None,
+        ge=1,
+        description="polynomial order of the ALE mesh displacement inside the fluid: 1 fixes "
+        "its edge and face unknowns away from the biofilm at zero, a piecewise-linear mesh "
+        "motion (the interface keeps the full order); at order 3 in 3-D about 18 % fewer "
+        "unknowns, the solution changes at the size of the discretisation error. Default: "
+        "order [-]",
     )
     mesh_stiffening: float = Field(
         1.0, ge=0, description="exponent of the Jacobian-based mesh stiffening [-]"
@@ -247,6 +259,15 @@ class AleFsiOptions(PluginOptions):
         return self
 
     @model_validator(mode="after")
+    def _motion_order(self) -> AleFsiOptions:
+        if self.mesh_motion_order not in (None, 1, self.order):
+            raise ValueError(
+                f"mesh_motion_order must be 1 or the order ({self.order}), "
+                f"got {self.mesh_motion_order}"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _probe_dimension(self) -> AleFsiOptions:
         # a mesh file's dimension is known only once it is read (AleFsiForwardModel checks)
         if self.mesh_file is None:
@@ -259,6 +280,22 @@ class AleFsiOptions(PluginOptions):
         return self
 
 
+#: The recommended 3-D settings (``dome_3d`` and ``colony_3d``): the largest displacement of
+#: the dome within 1 % of both references of ``benchmarks/bench_ale_fsi_3d.py``, which measures
+#: them; the docs, the benchmarks and the slow test take them from here.
+RECOMMENDED_3D: Mapping[str, Any] = MappingProxyType(
+    {
+        "order": 3,
+        "interface_mesh_size": 0.15,
+        "mesh_size": 0.2,
+        "curved": True,
+        "threads": 2,
+        "mesh_motion_layer": 0.15,
+        "mesh_motion_order": 1,
+    }
+)
+
+
 def solver_settings(o: AleFsiOptions) -> Any:
     """The solver's :class:`~fbia.plugins.ale_fsi.forms.SolverSettings` from the plugin's
     options (the one place they are mapped; ``growth`` uses it too)."""
@@ -267,5 +304,9 @@ def solver_settings(o: AleFsiOptions) -> Any:
     return settings_from(
         o,
         SolverSettings,
-        {"min_quality": "min_element_quality", "motion_layer": "mesh_motion_layer"},
+        {
+            "min_quality": "min_element_quality",
+            "motion_layer": "mesh_motion_layer",
+            "motion_order": "mesh_motion_order",
+        },
     )

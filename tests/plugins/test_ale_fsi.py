@@ -409,3 +409,23 @@ def test_synthetic_points_where_the_flow_cell_moved(model, tmp_path):
     pts = obs.measurement_points.points
     near = np.argmin(np.linalg.norm(gamma.vertices[None] - pts[:, None], axis=2), axis=1)
     assert len(pts) == 10 and (u_n[near] >= 0.5 * u_n.max()).all()
+
+
+def test_csr_positions_finds_the_entries_asked_for_and_refuses_others():
+    """The positions of given (row, column) entries in a CSR pattern, in the order asked, as
+    a brute-force lookup finds them; an entry outside the pattern is an error."""
+    import scipy.sparse as sp
+
+    from fbia.plugins.ale_fsi.forms import csr_positions
+
+    rng = np.random.default_rng(3)
+    pattern = sp.random(200, 150, density=0.08, format="csr", random_state=rng)
+    pattern.sort_indices()
+    ptr, cols = pattern.indptr.astype(np.int64), pattern.indices.astype(np.int64)
+    rows_of = np.repeat(np.arange(200, dtype=np.int64), np.diff(ptr))
+    pick = rng.choice(len(cols), size=300, replace=False)  # some rows asked for, some not
+    got = csr_positions(ptr, cols, (200, 150), rows_of[pick], cols[pick])
+    assert np.array_equal(got, pick)
+    absent = next(c for c in range(150) if c not in set(cols[ptr[7] : ptr[8]]))
+    with pytest.raises(RuntimeError, match="sparsity pattern"):
+        csr_positions(ptr, cols, (200, 150), np.array([7]), np.array([absent]))
