@@ -7,8 +7,9 @@ dolfin-adjoint's tangent linear model; Nocedal & Wright 2006, sec. 8.2 on the co
 * **dR/dp** for the material inputs: the residual is *linear* in each region's Lamé
   parameters (μ, λ) for both laws -- Saint Venant-Kirchhoff (thesis eq. 2.15)
   ``S = λ tr(E) I + 2μ E`` and neo-Hooke (eq. 2.18) ``S = μ (I - C^-1) + λ ln J C^-1`` --, so
-  ``dR/dμ_r = R(μ_r + δ) - R(μ_r)`` divided by δ is exact up to rounding; the chain rule of
-  eq. 2.16 gives E_r and ν_r.  For the **inflow rate** (quasi-static coordinate or input) the
+  ``dR/dμ_r = R(μ_r + δ) - R(μ_r)`` divided by δ is exact up to rounding, and only the
+  solid's terms of R (``solid_residual``) enter the difference; the chain rule of eq. 2.16
+  gives E_r and ν_r.  For the **inflow rate** (quasi-static coordinate or input) the
   inflow's Dirichlet values move by ``g = dU_D/dq`` (the profile of a unit rate) and the free
   dofs follow from ``J_ff dU_f = -(J g)_f``.
 * **dR/dU** is assembled at the converged state.  Newton's last factorisation is of a nearby
@@ -91,7 +92,7 @@ def vertex_tangents(
     dirichlet: dict[str, NDArray[np.float64]] = {}
     materials = material_inputs(solver.solids)
     derivs: dict[tuple[str, str], NDArray[np.float64]] = {}
-    r0 = _residual(solver)
+    r0 = _solid_residual(solver)
     for name in names:
         if name == "inflow_rate":
             g = np.asarray(solver.load_direction(), dtype=float)
@@ -134,23 +135,25 @@ def _mult(solver: Any, x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.array(out.FV().NumPy(), copy=True)
 
 
-def _residual(solver: Any) -> NDArray[np.float64]:
+def _solid_residual(solver: Any) -> NDArray[np.float64]:
     res = solver.vector.CreateVector()
-    solver.residual(res)
+    solver.solid_residual(res)
     return np.array(res.FV().NumPy(), copy=True)
 
 
 def _residual_derivative(
     solver: Any, region: str, which: str, r0: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """dR/dμ_r or dR/dλ_r: the residual is linear in each (module docstring)."""
+    """dR/dμ_r or dR/dλ_r: the residual is linear in each (module docstring), and only the
+    solid's terms depend on them, so their difference alone is taken (in 2-D a tenth of a
+    residual's cost, and no cancellation of the fluid's terms)."""
     param = solver.lame_parameter(region, which)
     value = float(param.Get())
     mu = float(solver.lame_parameter(region, "mu").Get())
     delta = abs(value) if value != 0.0 else mu
     try:
         param.Set(value + delta)
-        r1 = _residual(solver)
+        r1 = _solid_residual(solver)
     finally:
         param.Set(value)
     return (r1 - r0) / delta
