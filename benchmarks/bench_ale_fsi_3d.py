@@ -76,7 +76,11 @@ nonlinear form instead of a matrix of its own (-170 MB, but each residual 50 ms 
 duct graded from 0.2 mm around the dome to 0.3-0.4 mm away from it (33-36 k unknowns with the
 full-order motion, no faster: the dome fills 0.8 of the 2 mm duct); splitting the ALE fluid
 integrand into four integrators with the cofactor matrix (the Jacobian 20 % cheaper to
-assemble, the residual twice as dear).
+assemble, the residual twice as dear); the Stokes terms of the fixed fluid (beyond the layer)
+as one matrix assembled once on the velocity and pressure spaces (4.1 M entries, +90 MB),
+only the convection linearised each time: one run -0.3 to -0.6 s on one thread, the dome
+calibration of ``bench_lm_tangents.py --dome`` 20.7-27.3 s against 24.9-26.7 s in four
+interleaved pairs -- no gain above the noise.
 
 Earlier (before these changes): the duct at 0.3 mm was 18 s but +0.7 % / +1.15 %; order 4
 there -0.3 % / +0.14 % but 69 s, 4.5 GB.  Under load (5 on 2 cores) two threads were slower

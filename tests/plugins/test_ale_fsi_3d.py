@@ -208,6 +208,56 @@ def test_linear_mesh_motion_keeps_the_solution_with_fewer_unknowns(dome, tmp_pat
     _assert_mirror_symmetric(model)
 
 
+def test_the_jacobian_with_the_layer_is_the_derivative_of_the_residual(tmp_path):
+    """With the motion layer (and the linear mesh motion) the Newton system is put together
+    from parts: the linearised nonlinear form (the moving and the fixed fluid, the solid), the
+    mesh motion's matrix added at its positions in the Jacobian's pattern, and the interface
+    row sums.  Their sum must be the derivative of the residual: at a loaded state, J x against
+    central differences of the residual along random x (free dofs, a step of 1e-6 of the
+    state's size: truncation and round-off ~1e-8; the test fails when the mesh motion's
+    matrix is left out), and the residual against its parts summed by hand (the fluid form
+    the drag is computed with, the solid's terms, the mesh motion, the interface sums)."""
+    model = AleFsiForwardModel(
+        **DOME, warm_start=False, mesh_motion_layer=0.15, mesh_motion_order=1
+    )
+    model.solve(MATERIAL, [{"inflow_rate": 100.0}], tmp_path)
+    solver = model.solver
+    free = solver.free_mask
+    state = solver.state()
+    scales = solver.scales()
+    solver.assemble_jacobian()
+    r = solver.vector.CreateVector()
+    x, jx = solver.vector.CreateVector(), solver.vector.CreateVector()
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        dx = np.where(free, rng.standard_normal(len(free)) * scales, 0.0)
+        x.FV().NumPy()[:] = dx
+        solver.matrix.Mult(x, jx)
+        h = 1e-6
+        sides = []
+        for sign in (1.0, -1.0):
+            solver.set_state(state + sign * h * dx)
+            solver.residual(r)
+            sides.append(np.array(r.FV().NumPy(), copy=True))
+        solver.set_state(state)
+        fd = (sides[0] - sides[1]) / (2.0 * h)
+        got = jx.FV().NumPy()
+        assert np.abs(got - fd)[free].max() <= 1e-6 * np.abs(fd)[free].max()
+    # the residual equals the one with the whole fixed-fluid integrand
+    solver.residual(r)
+    split = np.array(r.FV().NumPy(), copy=True)
+    whole = solver.vector.CreateVector()
+    solver._fluid_form.Apply(solver.gfu.vec, whole)
+    solid = solver.vector.CreateVector()
+    solver.solid_residual(solid)
+    whole.data += solid
+    solver._motion.mat.MultAdd(1.0, solver.gfu.vec, whole)
+    w = whole.FV().NumPy()
+    src, dst = solver._iface_rows
+    w[dst] += w[src]
+    assert np.abs(split - w).max() <= 1e-10 * np.abs(w).max()
+
+
 def test_mesh_motion_order_is_one_or_the_order():
     with pytest.raises(fbia.ConfigError, match="mesh_motion_order"):
         AleFsiForwardModel(**DOME, order=3, mesh_motion_order=2)
