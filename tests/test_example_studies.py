@@ -14,7 +14,8 @@ from _paths import ROOT
 from fbia.studies.study_sources import read_sources
 
 EXAMPLES = ROOT / "examples"
-#: the most of the example files' content lines that may stand in three or more of them
+#: the most of the example files' content lines that may stand in three or more of them: the
+#: lowest reached (60.5 %), not the issue's 35 % (test_the_example_studies_share_few_lines)
 MAX_SHARE = 0.61
 
 
@@ -123,6 +124,20 @@ def test_shared_share_counts_lines_in_three_or_more_files(tmp_path: Path) -> Non
 
 
 def test_the_example_studies_share_few_lines() -> None:
+    """Issue 48 item 2 asks for at most 35 %. The files reach 60.5 % (1094 of 1808 lines, in 47
+    studies and 10 bases; 65.3 % before, 1356 of 2075), and MAX_SHARE keeps them there.
+
+    What stops it from going lower is the layout of a TOML study, not settings said twice:
+    the table headers (``[study]`` in every file, ``[[parameters]]`` per parameter,
+    ``[[paper.values]]`` per published number, ...) are 417 of the shared lines, 23 % of all
+    lines, and the ``[paper]`` tables' own lines another 327: each study's published values
+    are its own array of tables, which a variant replaces whole, so its ``kind = ...``,
+    ``unit = "Pa"``, ``quantity = ...`` lines repeat those of other studies by design.
+    These two alone are 41 % of all lines. Writing the arrays of tables as inline tables, one
+    line each, would lower the number without saying anything fewer times, and was not done.
+    Besides, ``examples/flow_cell/*.toml`` stay whole (125 shared lines): each is a complete
+    study of its own kind (analytic, FEM, Bayesian, from data files, unknown noise) that the
+    README and the tests copy as a template, and they share little but the truth."""
     shared, total = shared_share(study_files())
     share = shared / total
     assert share <= MAX_SHARE, f"{shared} of {total} lines stand in 3+ files: {share:.1%}"
