@@ -4,7 +4,6 @@ what is merged, what is refused with one line, what the result records."""
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 
 import pytest
@@ -39,8 +38,9 @@ def test_tables_merge_key_by_key_and_arrays_are_replaced_whole():
 
 def test_the_measures_variants_read_as_the_files_they_replaced():
     """examples/paper_b/measures: study_ray.toml and study_rkhs.toml extend study_cpp.toml and
-    differ from it in the lines that did before (the whole tables as they were written out)."""
-    cpp = tomllib.loads((EXAMPLES / "paper_b/measures/study_cpp.toml").read_text())
+    differ from it in the lines that did before (study_cpp.toml merged with ../base_2d.toml,
+    the tables as they were written out before the bases)."""
+    cpp = read_sources(EXAMPLES / "paper_b/measures/study_cpp.toml").raw
     for name, measure in (("ray", {"name": "ray"}), ("rkhs", None)):
         merged = read_sources(EXAMPLES / f"paper_b/measures/study_{name}.toml").raw
         assert merged["study"]["name"] == f"paper_b_measures_{name}"
