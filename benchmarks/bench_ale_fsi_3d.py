@@ -66,7 +66,9 @@ scattered by 30 % that day: the layer-only row took 14.3-19.5 s):
     3 0.150  0.200   True   2  0.15   3   39614   0.0262506  -0.86    14.3    24.8   1428
     3 0.150  0.200   True   2  0.15   1   32297   0.0262476  -0.87    14.6    25.1   1274
 
-and in the pairs 14.7 / 15.8 / 14.9 s against 19.5 / 16.6 / 19.3 s (the solve part 6.9-7.2 s
+(the same ``--target`` later on the idle VM: 13.2 s, 1275 MB, against 16.1 s with the
+full-order mesh motion and 29.7 s without the layer) and in the pairs 14.7 / 15.8 / 14.9 s
+against 19.5 / 16.6 / 19.3 s (the solve part 6.9-7.2 s
 against 8.7-10.8 s, assembly the same 5.7-6.8 s).  The 10 s target is still not met; what is
 left (cProfile, 13.7 s): three Jacobian assemblies 4.3 s, Pardiso 4.0 s (analysis with the
 first factorisation 2.3 s), 17 residuals 1.0-1.8 s, meshing 0.8 s, imports 0.9 s.  Tried the

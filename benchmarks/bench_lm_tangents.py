@@ -80,7 +80,11 @@ Measured 2026-11-30 (later), ``--dome`` with ``mesh_motion_order = 1`` added to 
 recommended settings (``RECOMMENDED_3D``), against the same file before it, back to back on 2
 cores (a background job paused): tangents 33.9 s (of which the tangents 15.7 s) against
 35.0 s (16.6 s), the same optimum.  The calibration is bound by assembly (a Jacobian per run
-and one per tangent pair), which the linear mesh motion does not change.
+and one per tangent pair), which the linear mesh motion does not change.  Later the same day,
+idle (the solid's terms alone for dR/dmu, dR/dlambda): forward 34 runs 35.9 s, tangents 6 runs
+25.1 s (tangents 10.7 s), the same optima; the 20 s target is not met.  Interleaved pairs of
+the tangent calibration alone, before and after the solid-residual change: 25.6 / 27.7 s
+against 25.6 / 29.0 s (tangents 12.3 / 12.0 against 11.5 / 11.7 s).
 """
 
 from __future__ import annotations

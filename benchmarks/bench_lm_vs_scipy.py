@@ -89,6 +89,18 @@ options), why fbia's forward differences take twice scipy's runs, in two parts:
   inside the bounds) or the step that reaches it.  Not changed: a default of 1e-6 holds only
   for models converged far below 1e-6 relative (ale_fsi's Newton is; Paper A's eq. 21 step is
   chosen for noisy ones), so a cost-based "auto" would need the model to state its accuracy.
+
+Measured 2026-11-30 at 181e30d+ (idle, a background job paused): fbia 100 runs 11.25 s, scipy
+296 runs 8.33 s, **1.35x (not met)**, the same optima; black 2.56 s against 0.76 s.  The
+tangents' dR/dmu and dR/dlambda now difference the solid's terms alone: in interleaved pairs
+1.32x / 1.26x before, 1.29x / 1.26x after -- not visible in 2-D, where a red start's 8 runs
+(0.79 s) spend 0.28 s assembling 11 Jacobians (8 for the tangents, 26 ms each), 0.15 s in 161
+back-substitutions (95 refinement sweeps) and 0.12 s in residuals.  Tried and not kept: GMRes
+(NGSolve's ``GMResSolver``, fields weighted by their size) instead of the refinement sweeps,
+83 iterations against 95 sweeps on the red start, no faster.  Black's failed run (E = 100 Pa)
+is 0.4 s of a warm Newton that diverges over 5 Jacobians and 1.3-2.5 s of the continuation from
+rest that reaches 80.9 of 100 mm^2/s before its corrector stalls; what would remove it is
+still the step to the bound or a cheaper failure.
 """
 
 from __future__ import annotations
