@@ -111,6 +111,12 @@ factorisation.  Since then the runner compares the problem's pickled bytes when 
 differs (``IsolatedRunner._load``): three batches measured after, no cold run, 2 workers
 20.0 / 14.6 / 13.8 s against 24.3 / 22.7 / 18.7 s serially (1.22x, 1.55x, 1.36x; the serial
 batch itself scatters by 30 % on this VM), 3-5 Jacobians against 3.  Still below 1.6x.
+
+With ``mesh_motion_order = 1`` in the recommended settings (2026-11-30, later; a background
+job stopped, yet the machine did only 1.69x with two processes): serial 19.7 s (0 fresh
+Jacobians: the warm-up run's factorisation served the whole chain), 1 worker 24.5 s (3), 2
+workers 14.8 s (5; 2.3-2.5 s of assembly each at one thread) -- 1.33x faster than serial, 1.66x
+than one worker.  The gap to 1.6x is still the fresh Jacobians of the workers' thinner chains.
 """
 
 from __future__ import annotations
