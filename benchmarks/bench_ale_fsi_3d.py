@@ -68,11 +68,13 @@ scattered by 30 % that day: the layer-only row took 14.3-19.5 s):
 
 (the same ``--target`` later on the idle VM: 13.2 s, 1275 MB, against 16.1 s with the
 full-order mesh motion and 29.7 s without the layer) and in the pairs 14.7 / 15.8 / 14.9 s
-against 19.5 / 16.6 / 19.3 s (the solve part 6.9-7.2 s
-against 8.7-10.8 s, assembly the same 5.7-6.8 s).  The 10 s target is still not met; what is
-left (cProfile, 13.7 s): three Jacobian assemblies 4.3 s, Pardiso 4.0 s (analysis with the
-first factorisation 2.3 s), 17 residuals 1.0-1.8 s, meshing 0.8 s, imports 0.9 s.  Tried the
-same day and not kept: Pardiso's parallel METIS (``iparm[1] = 3``) and two-level
+against 19.5 / 16.6 / 19.3 s (the solve part 6.9-7.2 s against 8.7-10.8 s, assembly the
+same 5.7-6.8 s).  The 10 s target is still not met (once, in a fast hour of the VM,
+``--target`` gave 11.3 s against 14.1 s and 26.9 s).  What is left (cProfile of one run,
+10.9 s in that hour): three Jacobian assemblies 3.3 s, Pardiso 2.8 s (analysis with the first
+factorisation 1.6 s) and 0.5 s of NGSolve's free-dof matrix around it, the mesh motion's CSR
+positions 1.2 s (once), 17 residuals 0.9 s, forms 0.8 s, meshing 0.8 s, imports ~0.9 s.
+Tried the same day and not kept: Pardiso's parallel METIS (``iparm[1] = 3``) and two-level
 factorisation (``iparm[23] = 1``), within the noise; the mesh motion as a term of the
 nonlinear form instead of a matrix of its own (-170 MB, but each residual 50 ms dearer); a
 duct graded from 0.2 mm around the dome to 0.3-0.4 mm away from it (33-36 k unknowns with the
