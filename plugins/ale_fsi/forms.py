@@ -473,21 +473,36 @@ class AleFsiProblem:
         return out
 
     def _csr_positions(self) -> dict[str, Any]:
-        """Where the mesh-motion entries and the interface row sums go in the Jacobian's CSR."""
+        """Where the mesh-motion entries and the interface row sums go in the Jacobian's CSR.
+
+        Only the entries that couple two free dofs: the factorisation (and every product the
+        solvers take, zero on the fixed dofs) reads no other, and with the linear mesh motion
+        most of the motion's entries are in the fluid's fixed edge and face unknowns (the 3-D
+        dome's recommended settings: 1.5 M of 6.4 M entries kept; with the pattern's column
+        indices read in place, the positions 0.34 s instead of 1.2 s)."""
         if self._positions is None:
             mat = self.form.mat
-            cols, ptr = (np.asarray(a, dtype=np.int64) for a in mat.CSR()[1:])
+            free = self._free_np
+            # the column indices as NGSolve stores them (int32: a copy of 21.6 M as int64 alone
+            # took 0.17 s), the row pointers as int64
+            _, cols, ptr = (np.asarray(a) for a in mat.CSR())
+            ptr = ptr.astype(np.int64)
             shape = (mat.height, mat.width)
-            mcols, mptr = (np.asarray(a, dtype=np.int64) for a in self._motion.mat.CSR()[1:])
+            _, mcols, mptr = (np.asarray(a) for a in self._motion.mat.CSR())
+            mptr = mptr.astype(np.int64)
             mrows = np.repeat(np.arange(self._motion.mat.height, dtype=np.int64), np.diff(mptr))
-            pos = {"motion": csr_positions(ptr, cols, shape, mrows, mcols)}
+            keep = np.flatnonzero(free[mrows] & free[mcols])
+            pos = {"motion_entries": keep}
+            pos["motion"] = csr_positions(ptr, cols, shape, mrows[keep], mcols[keep])
             if not self.transient:
                 src_rows, dst_rows = self._iface_rows
                 counts = ptr[src_rows + 1] - ptr[src_rows]
                 starts = np.repeat(ptr[src_rows] - np.cumsum(counts) + counts, counts)
                 src = starts + np.arange(int(counts.sum()), dtype=np.int64)
-                pos["iface_src"] = src
                 dst = np.repeat(dst_rows, counts)
+                to_free = free[cols[src]]
+                src, dst = src[to_free], dst[to_free]
+                pos["iface_src"] = src
                 pos["iface_dst"] = csr_positions(ptr, cols, shape, dst, cols[src])
             self._positions = pos
         return self._positions
@@ -515,7 +530,7 @@ class AleFsiProblem:
             self.form.AssembleLinearization(self.gfu.vec)
         pos = self._csr_positions()
         data = self.form.mat.AsVector().FV().NumPy()
-        data[pos["motion"]] += self._motion.mat.AsVector().FV().NumPy()
+        data[pos["motion"]] += self._motion.mat.AsVector().FV().NumPy()[pos["motion_entries"]]
         if not self.transient:
             data[pos["iface_dst"]] += data[pos["iface_src"]]
 
@@ -589,7 +604,7 @@ class AleFsiProblem:
 
 def csr_positions(
     ptr: NDArray[np.int64],
-    cols: NDArray[np.int64],
+    cols: NDArray[np.integer[Any]],
     shape: tuple[int, int],
     rows: NDArray[np.int64],
     wanted: NDArray[np.int64],
