@@ -5,6 +5,7 @@ fatal; a session stopped during them writes its result with what they had made."
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -50,3 +51,62 @@ def test_a_stop_during_the_extras_keeps_what_they_had_made(study_file, monkeypat
     assert record["discrepancy"] and "interfaces" in record["files"]
     assert all(Path(p).is_file() for p in record["files"]["interfaces"])
     assert "evaluations plot" not in record["files"]  # after the stop: never made
+
+
+def test_the_interfaces_at_x_are_the_stored_run_not_a_repeat(study_file, monkeypatch):
+    """The interfaces and the discrepancy at the result's x come from the stored run at x
+    (issue 47: a repeat in the study's process was a cold start of a 3-D model, ~20 s, when
+    workers made the runs): no forward run beyond the iterator's, and the simulated interface
+    written is the one the store holds for x, bit for bit."""
+    import fbia
+    from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
+    from fbia.storage.store import StudyStore
+
+    solves = []
+    solve = AnalyticMound2DForwardModel.solve
+
+    def counted(self, *args, **kwargs):
+        solves.append(1)
+        return solve(self, *args, **kwargs)
+
+    monkeypatch.setattr(AnalyticMound2DForwardModel, "solve", counted)
+    study = load_study("study.toml")
+    result = run_study(study, echo=_quiet)
+    assert result.success and len(solves) == result.nfev
+    record = _record(Path("out"))
+    (written,) = [p for p in record["files"]["interfaces"] if "simulated" in p and ".csv" in p]
+
+    with StudyStore(Path("out/store.sqlite")) as store:
+        store.bind(study.problem)
+        stored = store.solution(store.key(result.x))
+    assert stored is not None
+    (coordinate,) = study.problem.coordinates()
+    got = fbia.Interface.read(written)
+    assert got.vertices.tobytes() == stored.interface(coordinate).vertices.tobytes()
+
+
+def test_a_result_x_that_was_not_run_is_run_once_more(study_file, monkeypatch):
+    """A result's x that no run was made at (a posterior mean, an x moved after the runs) is
+    run once more for its interfaces, as before."""
+    from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
+
+    LM = LevenbergMarquardtIterator
+
+    solves = []
+    solve = AnalyticMound2DForwardModel.solve
+    finish = LM.steps
+
+    def counted(self, *args, **kwargs):
+        solves.append(1)
+        return solve(self, *args, **kwargs)
+
+    def moved(self, problem, evaluator):  # the iterator's result with x off every run
+        result = yield from finish(self, problem, evaluator)
+        return replace(result, x={k: v * (1 + 1e-6) for k, v in result.x.items()})
+
+    monkeypatch.setattr(AnalyticMound2DForwardModel, "solve", counted)
+    monkeypatch.setattr(LM, "steps", moved)
+    result = run_study(load_study("study.toml"), echo=_quiet)
+    assert len(solves) == result.nfev + 1
+    record = _record(Path("out"))
+    assert record["discrepancy"] and any("simulated" in p for p in record["files"]["interfaces"])
