@@ -214,6 +214,26 @@ class BatchEvaluator:
             self.listener.batch_finished()
         return [done[i] for i, _ in requests]
 
+    def run_aside(
+        self, problem: Evaluable, x: Mapping[str, float], workdir: str | Path
+    ) -> RunOutcome:
+        """One run at ``x`` on the executor, outside the books: not numbered, stored, logged
+        or told to the listeners, its folder ``workdir`` kept.  For what a study writes beside
+        its result (the interfaces at a result's ``x`` that no run was made at, e.g. a
+        posterior mean): on a worker that has run the study's batches, the model is warm,
+        where a run in the study's process would be its first (a 3-D ``ale_fsi`` run: ~20 s
+        cold against a few seconds warm).  Pass the problem the batches were run with: an
+        executor's workers are made for one problem."""
+        got: list[RunOutcome] = []
+
+        def keep(outcome: RunOutcome) -> Evaluation:
+            got.append(outcome)
+            return outcome.record
+
+        job = (self.count, Path(workdir), {str(n): float(v) for n, v in x.items()})
+        self.executor.run(problem, [job], keep)
+        return got[0]
+
     def _reuse(self, ev: Evaluation) -> Evaluation:
         """A record that did not run now (stored, or a copy of one earlier in the batch)."""
         self.reused.add(ev.index)

@@ -19,6 +19,7 @@ from ..core.errors import ConfigError, Terminated
 from ..core.iteration import drive
 from ..core.observation import Solution
 from ..core.problem import Evaluation, InverseProblem, Result
+from ..execution.evaluator import BatchEvaluator
 from ..execution.executors import ExecutorSpec, evaluator_for
 from ..storage.output_folder import OutputLock, clear_runs
 from ..storage.store import StudyStore
@@ -315,15 +316,32 @@ def _run_stored(
         evaluator = evaluator_for(
             executor, out, store=store, listener=listener, retry_failed=retry_failed
         )
+    except BaseException as exc:  # bad executor settings: the session ends with the error
+        _save_partial(session, log, exc)
+        raise
+    # the evaluator stays open for the extras: a result's x that no run was made at is run on
+    # a worker that is warm (BatchEvaluator.run_aside)
+    with evaluator:
         try:
             session = session.with_evaluator(evaluator.describe())
             result = _evaluate(session, executor.kind, evaluator, log)
-        finally:
-            evaluator.close()
-    except BaseException as exc:  # Ctrl-C or an error: keep what was computed, then re-raise
-        _save_partial(session, log, exc)
-        raise
-    store.end_session("done")
+        except BaseException as exc:  # Ctrl-C or an error: keep what was computed, re-raise
+            _save_partial(session, log, exc)
+            raise
+        store.end_session("done")
+        return _after_the_runs(session, result, log, listener, evaluator)
+
+
+def _after_the_runs(
+    session: _Session,
+    result: Result,
+    log: EvaluationLog,
+    listener: RunProgress,
+    evaluator: BatchEvaluator,
+) -> Result:
+    """The stages after the iterator's runs: check the result, save it, add the extra files,
+    save it again, report."""
+    study, out, echo = session.study, session.out, session.echo
     log.close()
     totals = listener.totals
     echo(
@@ -336,7 +354,7 @@ def _run_stored(
     # the result is written with what they had made.
     outputs = RunOutputs()
     try:
-        for made in _extras(session, result, log):
+        for made in _extras(session, result, log, evaluator):
             outputs = made
     except BaseException:
         session.finish(result, outputs, quiet=True)
@@ -470,7 +488,9 @@ def _oct_verdict(study: Study, result: Result) -> Result:
     return replace(result, status="unreliable", message=f"{result.message}; {'; '.join(notes)}")
 
 
-def _extras(session: _Session, result: Result, log: EvaluationLog) -> Iterator[RunOutputs]:
+def _extras(
+    session: _Session, result: Result, log: EvaluationLog, evaluator: BatchEvaluator
+) -> Iterator[RunOutputs]:
     """The files beside the result, made one after the other: the interfaces and discrepancy
     at the result's x (the stored run at x, or one more forward run where x was not run, e.g.
     a posterior mean), the iterator's own plots, the evaluations plot.
@@ -493,7 +513,7 @@ def _extras(session: _Session, result: Result, log: EvaluationLog) -> Iterator[R
         best = (
             Evaluation(index=0, x=dict(result.x), solution=stored)
             if stored is not None
-            else problem.evaluate(dict(result.x), workdir=out / "best", keep_solution=True)
+            else _run_at(evaluator, problem, result.x, out / "best")
         )
         if best.ok and best.solution is not None:
             solution = best.solution
@@ -547,6 +567,19 @@ def _stored_solution(
         return None
     fields = {k: Path(v) for k, v in run.artifacts.items() if Path(v).exists()}
     return replace(solution, fields=fields)
+
+
+def _run_at(
+    evaluator: BatchEvaluator, problem: InverseProblem, x: Mapping[str, float], workdir: Path
+) -> Evaluation:
+    """A run at ``x`` outside the study's books (``BatchEvaluator.run_aside``), its record
+    with the solution (interfaces and field files) the worker sent back."""
+    outcome = evaluator.run_aside(problem, x, workdir)
+    ev = outcome.record
+    if ev.ok and outcome.interfaces is not None:
+        fields = {k: Path(v) for k, v in outcome.artifacts.items()}
+        ev = replace(ev, solution=Solution(dict(outcome.interfaces), fields, ev.diagnostics))
+    return ev
 
 
 def _announce_resume(

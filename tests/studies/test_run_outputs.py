@@ -110,3 +110,34 @@ def test_a_result_x_that_was_not_run_is_run_once_more(study_file, monkeypatch):
     assert len(solves) == result.nfev + 1
     record = _record(Path("out"))
     assert record["discrepancy"] and any("simulated" in p for p in record["files"]["interfaces"])
+
+
+def test_with_worker_processes_that_run_is_made_by_a_worker(study_file, monkeypatch):
+    """With worker processes, the run at a result's x that no run was made at goes to a worker
+    (warm: it has run the study's batches; issue 47), not to the study's own process, where
+    the model would make its first, cold run (a 3-D ale_fsi run: ~20 s against ~3 s)."""
+    from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
+
+    here = []
+    solve = AnalyticMound2DForwardModel.solve
+    finish = LevenbergMarquardtIterator.steps
+
+    def counted(self, *args, **kwargs):
+        here.append(1)
+        return solve(self, *args, **kwargs)
+
+    def moved(self, problem, evaluator):
+        result = yield from finish(self, problem, evaluator)
+        return replace(result, x={k: v * (1 + 1e-6) for k, v in result.x.items()})
+
+    monkeypatch.setattr(AnalyticMound2DForwardModel, "solve", counted)
+    monkeypatch.setattr(LevenbergMarquardtIterator, "steps", moved)
+    text = (
+        Path("study.toml").read_text().replace('kind = "serial"', 'kind = "processes"\nworkers = 1')
+    )
+    Path("study.toml").write_text(text)
+    result = run_study(load_study("study.toml"), echo=_quiet)
+    assert result.nfev > 0 and here == []  # every run, the last one included, on the worker
+    record = _record(Path("out"))
+    assert record["discrepancy"] and any("simulated" in p for p in record["files"]["interfaces"])
+    assert record["executor"]["kind"] == "processes"
