@@ -125,6 +125,43 @@ def test_colonies_a_height_field_or_the_duct_cannot_take_are_config_errors(tmp_p
         AleFsiForwardModel(geometry="colony_3d")
 
 
+def test_a_grading_netgen_cannot_mesh_falls_back_to_the_next_one(tmp_path, monkeypatch, caplog):
+    """Netgen's volume mesher finishes a segmented colony's foot at some gradings and not at
+    others, without a pattern (examples/oct_3d's segmented rest domes at 0.2 / 0.15 mm): the
+    gradings of FALLBACK_GRADINGS are tried in turn, the sizes kept, the one used logged; when
+    none meshes, one ConfigError names the file and every grading tried.  Netgen's failure is
+    made here (it is not reproducible on a small surface); the meshes are netgen's own."""
+    import netgen.occ
+
+    from fbia.plugins.ale_fsi import colony3d
+
+    cap = cap_surface(n=16).write(tmp_path / "cap.ply")
+    real = netgen.occ.OCCGeometry.GenerateMesh
+    asked: list[float] = []
+
+    def fails_at(bad: set[float]):
+        def generate(self, *args, **kwargs):
+            asked.append(kwargs["grading"])
+            if kwargs["grading"] in bad:
+                raise Exception("Meshing failed! (too many attempts in domain 2)")
+            return real(self, *args, **kwargs)
+
+        return generate
+
+    monkeypatch.setattr(netgen.occ.OCCGeometry, "GenerateMesh", fails_at({0.3, 0.25}))
+    with caplog.at_level("WARNING", logger=colony3d.__name__):
+        mesh = colony3d.build_colony_cell(cap, mesh_size=0.3, interface_mesh_size=0.15)
+    assert asked == [0.3, 0.25, 0.35] and mesh.ne > 0
+    assert "at grading 0.35, not at grading 0.3" in caplog.text and str(cap) in caplog.text
+    asked.clear()
+    every = {0.3, *colony3d.FALLBACK_GRADINGS}
+    monkeypatch.setattr(netgen.occ.OCCGeometry, "GenerateMesh", fails_at(every))
+    with pytest.raises(fbia.ConfigError, match="could not mesh the colony cell") as err:
+        colony3d.build_colony_cell(cap, mesh_size=0.3, interface_mesh_size=0.15)
+    assert sorted(asked) == sorted(every) and str(cap) in str(err.value)
+    assert all(f"grading {g:g}" in str(err.value) for g in every)
+
+
 def test_a_3d_mesh_file_with_two_solid_regions(tmp_path):
     """The dome_3d mesh, its solid cut at x = 0.8 mm into solid_1 (upstream) and solid_2,
     written as gmsh 2.2: read back, the model has E_1, nu_1, E_2, nu_2; with one material it

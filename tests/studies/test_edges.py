@@ -329,7 +329,7 @@ def test_a_colony_of_too_few_triangles_is_refused_at_validate(
 def test_what_netgen_prints_when_meshing_fails_goes_into_fbias_line(tmp_path, monkeypatch, capfd):
     """Issue 44 item 6's "library lines before fbia's own": netgen wrote "Meshing of domain 2
     failed ..." to the process's stderr before fbia's line (the one-triangle colony, let
-    through here)."""
+    through here), one failure per grading netgen was given (``FALLBACK_GRADINGS``)."""
     pytest.importorskip("ngsolve")
     from fbia.plugins.ale_fsi import colony3d
 
@@ -339,10 +339,11 @@ def test_what_netgen_prints_when_meshing_fails_goes_into_fbias_line(tmp_path, mo
     assert main(["forward", "study.toml"]) == 2
     lines = capfd.readouterr().err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("fbia: error: study.toml: [synthetic]: ")
-    assert lines[0].endswith(
-        "netgen could not mesh the colony cell: Meshing failed! (Meshing of domain 2 failed "
-        "with error: Stop meshing since too many attempts in domain 2)"
-    )
+    assert (
+        "netgen could not mesh the colony cell: grading 0.3: Meshing failed! (Meshing of domain "
+        "2 failed with error: Stop meshing since too many attempts in domain 2) | grading 0.25: "
+    ) in lines[0]
+    assert all(f"| grading {g:g}: " in lines[0] for g in colony3d.FALLBACK_GRADINGS)
 
 
 # -- 7. fbia schema: bounds JSON Schema validators apply ---------------------------------------
