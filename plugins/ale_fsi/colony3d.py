@@ -256,10 +256,12 @@ def _gaps_under_overhangs(
 
 
 #: Netgen's mesh gradings tried in turn after the one asked for, when netgen cannot mesh the
-#: colony cell with it.  Whether netgen's volume mesher finishes the thin wedge of a segmented
-#: colony's foot changes with the grading, without a pattern (measured on three segmented
-#: rest domes at 0.2 / 0.15 mm: each meshed at some of 0.2-0.4 and failed at others, one at
-#: 0.2 only); the sizes asked for are kept, and the grading used is logged.
+#: colony cell with it.  Whether netgen's volume mesher finishes a segmented colony changes
+#: with the grading, without a pattern (measured on three segmented rest domes at 0.2 / 0.15
+#: mm: each meshed at some of 0.2-0.4 and failed at others; the cause is not measured,
+#: perhaps the thin wedge at the colony's foot); the sizes asked for are kept, and the
+#: grading used is logged.  Deterministic in a fresh process (netgen's state after a failed
+#: attempt changes the next one's outcome).
 FALLBACK_GRADINGS = (0.25, 0.35, 0.2, 0.4)
 
 
