@@ -86,6 +86,21 @@ only the convection linearised each time: one run -0.3 to -0.6 s on one thread, 
 calibration of ``bench_lm_tangents.py --dome`` 20.7-27.3 s against 24.9-26.7 s in four
 interleaved pairs -- no gain above the noise.
 
+Measured 2026-11-30 (a slower hour of the VM: the same code took 13.2 s in a fast one), after
+the Jacobian takes only the mesh-motion and interface entries between two free dofs (1.5 M of
+the motion's 6.4 M; the positions 0.34 s instead of 1.2 s, the pattern's int32 columns read
+in place): three interleaved pairs of single runs 14.1 / 14.5 / 14.7 s before, 14.4 / 13.7 /
+12.9 s after (mean -0.8 s, the assembly column -1.0 s), peak memory 1.26 GB -> 1.12 GB, the
+displacement the same to 1e-16; ``--target`` in that hour 14.8 s, 1087 MB (16.0 s with the
+full-order motion, 32.4 s with the whole fluid moving).  Still over 10 s; Newton on this run
+takes 3 Jacobians (at rest; after the Stokes step, scaled update 1.15; after a Newton step of
+0.6, where the chord's 0.53 is over the 0.1 a chord may take) and 13 chord steps to 1e-10.
+Tried and not kept: chord updates up to 1.0 instead of 0.1 (11 Newton iterations instead of
+16, still 3 Jacobians: 12.5 s against 13-14 s, one run, not a pair); ``newton_tol`` 1e-6
+instead of 1e-10 (10 iterations instead of 16, the displacement the same to 1e-8, ~0.6 s
+saved in one run), not made a recommended setting: a calibration's forward differences
+(step 1e-3 relative) would carry the solver's error, not measured there.
+
 Earlier (before these changes): the duct at 0.3 mm was 18 s but +0.7 % / +1.15 %; order 4
 there -0.3 % / +0.14 % but 69 s, 4.5 GB.  Under load (5 on 2 cores) two threads were slower
 than one; they pay on free cores only.
