@@ -53,16 +53,11 @@ def test_a_stop_during_the_extras_keeps_what_they_had_made(study_file, monkeypat
     assert "evaluations plot" not in record["files"]  # after the stop: never made
 
 
-def test_the_interfaces_at_x_are_the_stored_run_not_a_repeat(study_file, monkeypatch):
-    """The interfaces and the discrepancy at the result's x come from the stored run at x
-    (issue 47: a repeat in the study's process was a cold start of a 3-D model, ~20 s, when
-    workers made the runs): no forward run beyond the iterator's, and the simulated interface
-    written is the one the store holds for x, bit for bit."""
-    import fbia
+def _solves_here(monkeypatch) -> list[int]:
+    """The model's solves in this process (one entry each), counted from now on."""
     from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
-    from fbia.storage.store import StudyStore
 
-    solves = []
+    solves: list[int] = []
     solve = AnalyticMound2DForwardModel.solve
 
     def counted(self, *args, **kwargs):
@@ -70,6 +65,29 @@ def test_the_interfaces_at_x_are_the_stored_run_not_a_repeat(study_file, monkeyp
         return solve(self, *args, **kwargs)
 
     monkeypatch.setattr(AnalyticMound2DForwardModel, "solve", counted)
+    return solves
+
+
+def _x_off_every_run(monkeypatch) -> None:
+    """LM's result with its x moved off every run (as a posterior mean is)."""
+    finish = LevenbergMarquardtIterator.steps
+
+    def moved(self, problem, evaluator):
+        result = yield from finish(self, problem, evaluator)
+        return replace(result, x={k: v * (1 + 1e-6) for k, v in result.x.items()})
+
+    monkeypatch.setattr(LevenbergMarquardtIterator, "steps", moved)
+
+
+def test_the_interfaces_at_x_are_the_stored_run_not_a_repeat(study_file, monkeypatch):
+    """The interfaces and the discrepancy at the result's x come from the stored run at x
+    (issue 47: a repeat in the study's process was a cold start of a 3-D model, ~20 s, when
+    workers made the runs): no forward run beyond the iterator's, and the simulated interface
+    written is the one the store holds for x, bit for bit."""
+    import fbia
+    from fbia.storage.store import StudyStore
+
+    solves = _solves_here(monkeypatch)
     study = load_study("study.toml")
     result = run_study(study, echo=_quiet)
     assert result.success and len(solves) == result.nfev
@@ -88,24 +106,8 @@ def test_the_interfaces_at_x_are_the_stored_run_not_a_repeat(study_file, monkeyp
 def test_a_result_x_that_was_not_run_is_run_once_more(study_file, monkeypatch):
     """A result's x that no run was made at (a posterior mean, an x moved after the runs) is
     run once more for its interfaces, as before."""
-    from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
-
-    LM = LevenbergMarquardtIterator
-
-    solves = []
-    solve = AnalyticMound2DForwardModel.solve
-    finish = LM.steps
-
-    def counted(self, *args, **kwargs):
-        solves.append(1)
-        return solve(self, *args, **kwargs)
-
-    def moved(self, problem, evaluator):  # the iterator's result with x off every run
-        result = yield from finish(self, problem, evaluator)
-        return replace(result, x={k: v * (1 + 1e-6) for k, v in result.x.items()})
-
-    monkeypatch.setattr(AnalyticMound2DForwardModel, "solve", counted)
-    monkeypatch.setattr(LM, "steps", moved)
+    solves = _solves_here(monkeypatch)
+    _x_off_every_run(monkeypatch)
     result = run_study(load_study("study.toml"), echo=_quiet)
     assert len(solves) == result.nfev + 1
     record = _record(Path("out"))
@@ -116,22 +118,8 @@ def test_with_worker_processes_that_run_is_made_by_a_worker(study_file, monkeypa
     """With worker processes, the run at a result's x that no run was made at goes to a worker
     (warm: it has run the study's batches; issue 47), not to the study's own process, where
     the model would make its first, cold run (a 3-D ale_fsi run: ~20 s against ~3 s)."""
-    from fbia.plugins.analytic.mound_2d import AnalyticMound2DForwardModel
-
-    here = []
-    solve = AnalyticMound2DForwardModel.solve
-    finish = LevenbergMarquardtIterator.steps
-
-    def counted(self, *args, **kwargs):
-        here.append(1)
-        return solve(self, *args, **kwargs)
-
-    def moved(self, problem, evaluator):
-        result = yield from finish(self, problem, evaluator)
-        return replace(result, x={k: v * (1 + 1e-6) for k, v in result.x.items()})
-
-    monkeypatch.setattr(AnalyticMound2DForwardModel, "solve", counted)
-    monkeypatch.setattr(LevenbergMarquardtIterator, "steps", moved)
+    here = _solves_here(monkeypatch)
+    _x_off_every_run(monkeypatch)
     text = (
         Path("study.toml").read_text().replace('kind = "serial"', 'kind = "processes"\nworkers = 1')
     )
