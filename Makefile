@@ -66,10 +66,13 @@ test-slow: $(STAMP)
 # every study runs on its own [executor], so `kind = "dask"` spreads it over a cluster. Then
 # docs/reproductions.md.
 REPRODUCE ?= $(sort $(wildcard examples/paper_*/*/study*.toml examples/growth/study*.toml))
+# REPRODUCE_FLAGS: options of each fbia run, e.g. --fresh after the model's code changed (a
+# store of runs made by other code is refused, exit status 2)
+REPRODUCE_FLAGS ?=
 reproduce: $(STAMP)
 	@# exit status 3 (not trustworthy) and 4 (no result) are findings the summary reports;
 	@# anything else (an error, bad input, an interruption) stops the loop
-	@for f in $(REPRODUCE); do echo "== $$f"; $(BIN)/fbia run $$f; s=$$?; \
+	@for f in $(REPRODUCE); do echo "== $$f"; $(BIN)/fbia run $(REPRODUCE_FLAGS) $$f; s=$$?; \
 	  if [ $$s -ne 0 ] && [ $$s -ne 3 ] && [ $$s -ne 4 ]; then exit $$s; fi; done
 	$(BIN)/fbia reproductions docs/reproductions.md $(sort $(wildcard examples/paper_*)) examples/growth
 
