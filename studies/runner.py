@@ -556,8 +556,9 @@ def _stored_solution(
     where its folder is kept), None if the store has no successful run there with every
     state's interface.  The result's own run instead of a repeat of it: the same interfaces
     the iterator compared, and no cold start of the model in this process when the runs were
-    made by workers (a 3-D ``ale_fsi`` run: ~20 s against ~3 s warm)."""
-    store.bind(problem)
+    made by workers (a 3-D ``ale_fsi`` run: ~20 s against ~3 s warm).  The store is read under
+    the binding its runs were made under (the session's, or the iterator's problem, e.g. LM's
+    with tangents, which keys runs as ``problem`` does), not bound again."""
     key = store.key({str(n): float(v) for n, v in x.items()})
     run = store.lookup([key]).get(key)
     if run is None or not run.record.ok:
@@ -565,8 +566,7 @@ def _stored_solution(
     solution = store.solution(key)
     if solution is None or not solution.covers(problem.coordinates()):
         return None
-    fields = {k: Path(v) for k, v in run.artifacts.items() if Path(v).exists()}
-    return replace(solution, fields=fields)
+    return replace(solution, fields={k: Path(v) for k, v in run.artifacts.items()})
 
 
 def _run_at(

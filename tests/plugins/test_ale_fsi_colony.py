@@ -148,6 +148,11 @@ def test_a_grading_netgen_cannot_mesh_falls_back_to_the_next_one(tmp_path, monke
 
         return generate
 
+    monkeypatch.setattr(netgen.occ.OCCGeometry, "GenerateMesh", fails_at(set()))
+    with caplog.at_level("WARNING", logger=colony3d.__name__):
+        colony3d.build_colony_cell(cap, mesh_size=0.3, interface_mesh_size=0.15)
+    assert asked == [0.3] and "grading" not in caplog.text  # meshed as asked: no word of it
+    asked.clear()
     monkeypatch.setattr(netgen.occ.OCCGeometry, "GenerateMesh", fails_at({0.3, 0.25}))
     with caplog.at_level("WARNING", logger=colony3d.__name__):
         mesh = colony3d.build_colony_cell(cap, mesh_size=0.3, interface_mesh_size=0.15)
