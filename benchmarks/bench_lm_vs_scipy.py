@@ -101,6 +101,23 @@ back-substitutions (95 refinement sweeps) and 0.12 s in residuals.  Tried and no
 is 0.4 s of a warm Newton that diverges over 5 Jacobians and 1.3-2.5 s of the continuation from
 rest that reaches 80.9 of 100 mm^2/s before its corrector stalls; what would remove it is
 still the step to the bound or a cheaper failure.
+
+A cheaper failure, measured 2026-11-30 (a background job paused; this VM's speed moved by
+~40 % within minutes, so interleaved pairs).  Near 81 mm^2/s the continuation's corrector
+steps diverge, and each assembled three Jacobians before giving up.  Logging each step's
+updates (black's failed run and E = 50 and 30 Pa from rest) showed that in every step that
+failed, the chord update right after a fresh Newton step was not smaller than that step's
+update (ratios 0.8-470), and in every step that converged it was at most 0.5 of it.
+``ArclengthContinuation.max_chord_ratio`` (1, Deuflhard's natural monotonicity test) now ends a
+corrector step there.  The continuation takes the same path and fails at the same rate
+(80.88, 54.36, 38.78 mm^2/s), with 19 instead of 32, 25 instead of 35 and 26 instead of 36
+Jacobians.  Black's failed run: 1.27 / 1.97 / 1.16 s against 1.87 / 2.34 / 1.73 s before
+(medians of three, three interleaved pairs: 0.7x).  The 3-D dome's failed run at E = 108.74
+Pa (recommended settings) takes the same path to its limit point at 93.22 mm^2/s with 24
+instead of 31 factorisations (73.9 s against 77.5 s, one pair).  The whole benchmark, twice in
+a slower hour: fbia 100 runs 18.79 / 18.66 s, scipy 296 runs 15.97 / 16.51 s, **1.18x / 1.13x
+(not met)**, the same optima; black 2.52x / 2.09x, cyan (no failed run: its first steps go to
+the nu bound and back, 0.13-0.37 s a run) 1.56x / 2.01x, the other nine 0.83-1.24x.
 """
 
 from __future__ import annotations

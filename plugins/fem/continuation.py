@@ -1,5 +1,6 @@
-"""Arclength continuation of a steady problem in a load parameter (Rheinboldt's local
-parametrisation), on top of :class:`~fbia.plugins.fem.newton.NewtonSolver`.
+"""Arclength continuation of a steady problem in a load parameter (the local
+parametrisation of Rheinboldt & Burkardt 1983), on top of
+:class:`~fbia.plugins.fem.newton.NewtonSolver`.
 
 The problem (:class:`LoadedSystem`) adds to a :class:`~fbia.plugins.fem.newton.NonlinearSystem`
 a scalar load (``ale_fsi``: the inflow rate) that enters through Dirichlet values: its
@@ -68,6 +69,16 @@ class ArclengthContinuation:
     unit
         The load's unit, for messages.
     """
+
+    #: A corrector ends, its step too long, when the chord update right after a fresh Newton
+    #: step is at least this multiple of that step's update: Deuflhard's natural monotonicity
+    #: test (Deuflhard 2004, ch. 3), the chord update being his simplified Newton correction,
+    #: and his continuation's cue to shorten the step (ch. 5).  On ``ale_fsi``'s failed runs
+    #: every corrector step that ended so also failed under the older rule alone (a third
+    #: fresh Newton step that does not halve the update), after two more Jacobians; the
+    #: corrector steps that converged had ratios of 0.5 at most
+    #: (``benchmarks/bench_lm_vs_scipy.py``).
+    max_chord_ratio: float = 1.0
 
     def __init__(
         self,
@@ -214,9 +225,11 @@ class ArclengthContinuation:
         ``a = J^-1 R`` and ``b = J^-1 dR/dmu``, ``dy = -a - dmu b``.  As in :meth:`newton`,
         after the first step the factorised Jacobian is tried again (chord step) and kept if
         the update contracts by 4x.  Converged at a scaled update below 1e-8 (the point at the
-        requested rate is then solved by :meth:`newton` to the full tolerance).  A fresh
-        Newton step that does not halve the update means the step was too long.  Returns (fresh
-        Jacobians, dy/dmu at the solution); raises NewtonFailure.
+        requested rate is then solved by :meth:`newton` to the full tolerance).  The step was
+        too long, and the corrector gives up at once, when the chord update right after a fresh
+        Newton step is not smaller than that step's update (:attr:`max_chord_ratio`), or when
+        a third fresh Newton step does not halve the update.  Returns (fresh Jacobians, dy/dmu
+        at the solution); raises NewtonFailure.
         """
         free_np = self.system.free_mask
         x_np = self.system.vector.FV().NumPy()
@@ -227,6 +240,7 @@ class ArclengthContinuation:
         du = self.system.vector.CreateVector()
         norms: list[float] = []
         jacobians = 0
+        fresh_last = False  # whether norms[-1] is a fresh Jacobian's update
         self.solver.chord_ok = False
 
         def update(fresh: bool) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
@@ -258,6 +272,12 @@ class ArclengthContinuation:
             if it > 1:  # chord step with the last factorisation
                 dy, dmu, b, norm = update(fresh=False)
                 accepted = norm <= min(0.25 * norms[-1], 0.1)
+                if fresh_last and norm >= self.max_chord_ratio * norms[-1]:
+                    raise NewtonFailure(
+                        f"{where}: the continuation step does not converge (a chord update of "
+                        f"{norm:.2g} after a Newton update of {norms[-1]:.2g})",
+                        "newton_divergence",
+                    )
             if not accepted:
                 if jacobians >= self.solver.max_jacobians // 2:
                     break
@@ -273,6 +293,7 @@ class ArclengthContinuation:
                         "newton_divergence",
                     )
             norms.append(norm)
+            fresh_last = not accepted
             y0, mu0 = x_np[free_np].copy(), mu
             for _ in range(6):
                 x_np[free_np] = y0 + dy

@@ -258,6 +258,38 @@ def test_a_limit_point_is_reported_and_the_branch_below_it_solves(tmp_path):
     assert states[1]["min_det_f_solid"] < states[0]["min_det_f_solid"] - 0.1
 
 
+def test_a_failed_run_ends_its_corrector_steps_early(tmp_path, monkeypatch):
+    # E = 100 Pa cannot carry 100 mm^2/s on the default mound either (the first LM step from
+    # Table 1's black start reaches it): the continuation fails near 81 mm^2/s.  Its corrector
+    # steps near there diverge; the monotonicity test ends each after one Jacobian instead of
+    # three (ArclengthContinuation.max_chord_ratio), the continuation taking the same path
+    # and failing at the same rate
+    from fbia.plugins.fem.continuation import ArclengthContinuation
+    from fbia.plugins.fem.newton import NewtonSolver
+
+    factorised = [0]
+    factorise = NewtonSolver.factorise
+
+    def counted(self, *args, **kwargs):
+        factorised[0] += 1
+        return factorise(self, *args, **kwargs)
+
+    monkeypatch.setattr(NewtonSolver, "factorise", counted)
+    outcome = {}
+    for ratio in (ArclengthContinuation.max_chord_ratio, float("inf")):
+        monkeypatch.setattr(ArclengthContinuation, "max_chord_ratio", ratio)
+        factorised[0] = 0
+        model = AleFsiForwardModel(**COARSE, warm_start=False)
+        with pytest.raises(fbia.ForwardModelError) as info:
+            model.solve({"E": 100.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
+        where = re.search(r"continuation failed at ([0-9.]+) mm\^2/s", str(info.value))
+        outcome[ratio] = (info.value.reason, float(where.group(1)), factorised[0])
+    (reason, rate, jacobians), (reason_before, rate_before, jacobians_before) = outcome.values()
+    assert reason == reason_before == "newton_divergence"
+    assert 70.0 < rate == rate_before < 90.0
+    assert jacobians <= 0.75 * jacobians_before  # measured: 28 against 42
+
+
 def test_bad_geometry_is_a_config_error():
     with pytest.raises(fbia.ConfigError, match="floor"):
         AleFsiForwardModel(outline=[(0.5, 0.1), (0.8, 0.4), (1.1, 0.0)]).build_mesh()
