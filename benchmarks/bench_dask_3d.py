@@ -117,6 +117,30 @@ job stopped, yet the machine did only 1.69x with two processes): serial 19.7 s (
 Jacobians: the warm-up run's factorisation served the whole chain), 1 worker 24.5 s (3), 2
 workers 14.8 s (5; 2.3-2.5 s of assembly each at one thread) -- 1.33x faster than serial, 1.66x
 than one worker.  The gap to 1.6x is still the fresh Jacobians of the workers' thinner chains.
+
+That was not the cause: the anchor had a head start.  Measured 2026-11-30 (a background job
+paused), logging each run's Newton updates: with *one* worker, whose runs go in the serial
+order, the batch also assembled 3 Jacobians against the serial anchor's 0 (20.3 against 18.1
+s).  The serial runs used the model that had made the synthetic observation at E = 400 Pa, so
+its store held two states near 400 Pa where a worker's model held one (its cold warm-up run).
+Whether a warm run assembles a Jacobian hinges on its first chord update against the 0.1 a
+chord may take on trust (``ChordRule.costly_jacobian``).  At E = 354 Pa that update was 0.098
+in the anchor, which then converged on chord steps, and 0.11 in a fresh model, which assembled a
+Jacobian; the same at 308 Pa (0.097 against 0.13).  The same serial batch on a fresh model: 3
+Jacobians, 18.5 and 21.6 s.  So the observation is now made by a model of its own, and the
+anchor's model starts as each worker's does.  Two runs, each with 3 Jacobians serially, with 1
+worker and with 2 workers:
+
+    3-D dome   serial 22.3 s   1 worker 17.7 s   2 workers 14.3 s   1.56x faster than serial
+    3-D dome   serial 17.8 s   1 worker 19.3 s   2 workers 14.0 s   1.28x faster than serial
+
+Not met (1.6x).  What is left is that runs side by side are slower: the runs' own times add
+up to 26.5 and 25.0 s with 2 workers against 22.3 and 17.8 s serially.  Assembly takes 3.06
+and 2.72 s a Jacobian side by side, against 2.46 and 2.12 s alone (+25 %).  The machine itself
+scales: two pure-Python loops do 2.27x and 1.99x the work of one, two single-threaded numpy
+copies of 200 MB arrays 1.9-2.0x (385 copies in 4 s side by side, 189 and 204 alone).  So
+neither the cores nor memory bandwidth explain it.  Dask's own processes took ~10 % of a core
+in an earlier measurement.  Cause not found.
 """
 
 from __future__ import annotations
@@ -148,13 +172,18 @@ COORDINATE = {"inflow_rate": 100.0}  # mm^3/s in 3-D, mm^2/s in 2-D
 
 
 def _problem(options: dict[str, Any]) -> fbia.InverseProblem:
-    model = fbia.forward_model("ale_fsi", threads=1, **options)
+    """The problem, its model a fresh instance that has not run: the observation is made by
+    another, so the serial anchor starts as each worker does (its one warm-up run cold)."""
     observed = fbia.synthetic_observations(
-        model, {"E": 400.0, "nu": 0.3}, [COORDINATE], 0.0, seed=0
+        fbia.forward_model("ale_fsi", threads=1, **options),
+        {"E": 400.0, "nu": 0.3},
+        [COORDINATE],
+        0.0,
+        seed=0,
     )
     parameters = [fbia.Parameter("E", (100.0, 800.0))]
     return fbia.InverseProblem(
-        model=model,
+        model=fbia.forward_model("ale_fsi", threads=1, **options),
         measure=fbia.measure("cpp"),
         observations=observed,
         parameters=parameters,
