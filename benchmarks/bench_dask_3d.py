@@ -153,6 +153,13 @@ In the third 3-D pair the runs' own times were 20.3 s with 2 workers against 18.
 (3 Jacobians each): 2 workers could have finished in 10.2 s and took 12.2 s.  The 2 s are
 Dask's and the isolation's cost per run and the imbalance of 8 runs of unequal length (a run
 with a Jacobian takes 4-6 s, one without 1.5-2.5 s) over two workers.
+
+Tried, not kept (measured, no code changed): chord updates taken on trust up to 0.3 instead
+of 0.1 (``fbia.plugins.fem.newton.CHORD_MAX_UPDATE``), on the same serial batch with a fresh
+model (one thread, two interleaved pairs): no Jacobian in the 8 runs instead of 3, but 20.4 and
+16.1 s against 17.7 and 19.3 s.  Without a fresh Jacobian the factorisation stays at the
+warm-up run's state, and the runs after it need more chord steps (2.5-3.8 s a run against
+1.0-1.3 s).
 """
 
 from __future__ import annotations
