@@ -193,16 +193,16 @@ COORDINATE = {"inflow_rate": 100.0}  # mm^3/s in 3-D, mm^2/s in 2-D
 def _problem(options: dict[str, Any]) -> fbia.InverseProblem:
     """The problem, its model a fresh instance that has not run: the observation is made by
     another, so the serial anchor starts as each worker does (its one warm-up run cold)."""
+
+    def fresh() -> Any:
+        return fbia.forward_model("ale_fsi", threads=1, **options)
+
     observed = fbia.synthetic_observations(
-        fbia.forward_model("ale_fsi", threads=1, **options),
-        {"E": 400.0, "nu": 0.3},
-        [COORDINATE],
-        0.0,
-        seed=0,
+        fresh(), {"E": 400.0, "nu": 0.3}, [COORDINATE], 0.0, seed=0
     )
     parameters = [fbia.Parameter("E", (100.0, 800.0))]
     return fbia.InverseProblem(
-        model=fbia.forward_model("ale_fsi", threads=1, **options),
+        model=fresh(),
         measure=fbia.measure("cpp"),
         observations=observed,
         parameters=parameters,
