@@ -2,11 +2,16 @@
 
 The studies of the page whose fresh run takes under a minute on 2 cores (their README's
 measured times) run again from an empty store, and each one's verdict (rows that agree of
-rows judged), status and forward-run count must be the page's row.  A disagreement names the
-study and both values: the page is stale (regenerate it: ``make reproduce``) or the code
-changed a result (say so on the page).  The page's own marks (:func:`fbia.studies.
-paper_report.code_changes`: which rows were made by code that has changed since) say which
-rows to expect there.
+rows judged) and status must be the page's row.  A disagreement names the study and both
+values: the page is stale (regenerate it: ``make reproduce``) or the code changed a result
+(say so on the page).  The page's own marks (:func:`fbia.studies.paper_report.code_changes`:
+which rows were made by code that has changed since) say which rows to expect there.
+
+The forward-run count is not compared: it moves with the rounding of the linear algebra.
+Measured with the same code (cd5cc8b) on 2026-11-30, ``study_sigma_1e-3.toml`` took 603 runs,
+618 under ``MKL_CBWR=COMPATIBLE``, and 600 in the environment that made the page's row, with
+the same verdict in all three (Paper A's LM stops where err_grad meets eps_grad, near
+round-off, and a failed run's recovery follows another path).
 """
 
 from __future__ import annotations
@@ -37,13 +42,13 @@ ROW = re.compile(
 )
 
 
-def page_rows() -> dict[str, tuple[str, str, int]]:
-    """The Studies table of the page: study -> (agree, status, forward runs)."""
+def page_rows() -> dict[str, tuple[str, str]]:
+    """The Studies table of the page: study -> (agree, status)."""
     rows = {}
     for line in PAGE.read_text(encoding="utf-8").splitlines():
         m = ROW.match(line)
         if m:
-            rows[m["study"]] = (m["agree"], m["status"].strip(), int(m["nfev"]))
+            rows[m["study"]] = (m["agree"], m["status"].strip())
     return rows
 
 
@@ -61,8 +66,8 @@ def test_a_quick_study_run_today_gives_the_pages_row(study: str, tmp_path: Path)
     main(["run", str(study_file), "--output", str(out)])
     record = PaperRecord.read(out / "paper.json")
     good, judged = verdict(record.rows)
-    now = (f"{good} / {judged}", record.status, record.nfev)
+    now = (f"{good} / {judged}", record.status)
     assert now == page_rows()[study], (
-        f"{study}: the page says (agree, status, runs) = {page_rows()[study]}, a run today "
+        f"{study}: the page says (agree, status) = {page_rows()[study]}, a run today "
         f"gives {now}: regenerate docs/reproductions.md (make reproduce) or say why it moved"
     )
