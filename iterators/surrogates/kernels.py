@@ -28,7 +28,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .mean import SQRT3
+from .mean import FASTMATH, SQRT3
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -37,7 +37,7 @@ with warnings.catch_warnings():
     from paramz.transformations import Logexp
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=FASTMATH, cache=True)
 def product_kernel(a: Any, bt: Any, variance: float) -> Any:  # pragma: no cover - compiled
     """k(a_i, b_k) for inputs scaled by sqrt(3) / l, a (n, d) and b^T (d, m), C-contiguous:
     the row loop runs in parallel (also the cross-covariances of :mod:`.gp`)."""
@@ -59,7 +59,7 @@ def product_kernel(a: Any, bt: Any, variance: float) -> Any:  # pragma: no cover
     return out
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=FASTMATH, cache=True)
 def _product_grad(a: Any, bt: Any, w: Any) -> Any:  # pragma: no cover - compiled
     """sum_ik w_ik r_ij^2 / (1 + r_ij) per dimension j (r = |a_i - b_k| in scaled inputs)."""
     n, d = a.shape

@@ -44,6 +44,14 @@ SQRT3 = math.sqrt(3.0)
 EXP_FREE_RANGE = 300.0
 #: particles per parallel block of the compiled loops
 BLOCK = 32
+#: numba's fast-math flags of the compiled loops (here and in :mod:`.kernels`): every one
+#: but ``reassoc``.  With ``reassoc`` LLVM may reorder the sums, and a parallel loop's sums
+#: came out in another order when numba loaded it from its cache than when it compiled it
+#: (numba 0.68, measured 2026-11-30: the 2-D mean of a 965-run GP at 3000 points differed in
+#: the last bits, and a gp_smc posterior's MAP moved 400.08 -> 399.86 Pa between a study's
+#: first run and its rerun from the store).  Without it a run gives the same bits compiled or
+#: cached, at the same speed (``tests/iterators/surrogates/test_compiled_loops.py``).
+FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 
 
 @dataclass(frozen=True)
@@ -113,7 +121,7 @@ def fused_kernels() -> Any:
     """(product_means, single_mean), JIT-compiled."""
     import numba
 
-    @numba.njit(fastmath=True, cache=True)
+    @numba.njit(fastmath=FASTMATH, cache=True)
     def product_rows(xs, xt_t, ep_s, em_s, ep_t, em_t, alpha, start, stop, out, p, e):
         """out[i] = sum_k alpha_k prod_j (1 + r_j) exp(-sum_j r_j), i in [start, stop)."""
         d = xs.shape[1]
@@ -149,7 +157,7 @@ def fused_kernels() -> Any:
                 acc3 += alpha[k] * p3[k] * e3[k]
             out[i0], out[i1], out[i2], out[i3] = acc0, acc1, acc2, acc3
 
-    @numba.njit(fastmath=True, cache=True)
+    @numba.njit(fastmath=FASTMATH, cache=True)
     def product_rows_exp(xs, xt_t, alpha, start, stop, out, p, e):
         """product_rows with one exp per pair: any scaled inputs."""
         d = xs.shape[1]
@@ -170,7 +178,7 @@ def fused_kernels() -> Any:
                 acc += alpha[k] * p0[k] * np.exp(-e0[k])
             out[i] = acc
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    @numba.njit(parallel=True, fastmath=FASTMATH, cache=True)
     def product_means(xs, xt_t, ep_s, em_s, ep_t, em_t, alpha, wide, block):
         """The product-kernel means of C GPs: xs, ep_s, em_s (C, M, d); xt_t, ep_t, em_t
         (C, d, n); alpha (C, n); wide (C,): the loop with exps; out (C, M)."""
@@ -192,7 +200,7 @@ def fused_kernels() -> Any:
                     )  # fmt: skip
         return out
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    @numba.njit(parallel=True, fastmath=FASTMATH, cache=True)
     def single_mean(xs, xt_t, alpha, block):
         m, d = xs.shape
         n = xt_t.shape[1]
