@@ -186,10 +186,19 @@ _DIED = (
 class PoolExecutor:
     """Runs the jobs concurrently on a local pool of worker processes.
 
+    Run k of a batch goes to worker k mod ``workers``, each worker taking its runs in the
+    batch's order: what a worker has run before (a model's warm starts from its own earlier
+    states) is then the same in every run of a study, and so are the results, bit for bit.
+    Any free worker taking the next run (``concurrent.futures``' pool) balanced the load
+    better but made the results depend on which run finished first: two fresh runs of
+    Paper B's 1000-run design on 2 workers differed by up to 1e-8 in their residuals and by
+    Monte Carlo amounts in the posterior (CHANGELOG, issue 48).
+
     A run that kills its worker process (``os._exit``, a segfault, the OOM killer) becomes a
-    failed record; the rest of the batch is completed and the executor stays usable.  With
-    ``isolate`` (or a ``timeout``) every worker runs its runs in a child process of its own,
-    so a crash or a time-out costs that child only and the pool is never broken.
+    failed record; it costs the runs of no other worker, the dead worker's runs that had not
+    started are run on a new one, and the executor stays usable.  With ``isolate`` (or a
+    ``timeout``) every worker runs its runs in a child process of its own, so a crash or a
+    time-out costs that child only and the worker is never lost.
 
     Parameters
     ----------
@@ -221,29 +230,42 @@ class PoolExecutor:
             )
         self.workers = n
         self.start_method = start_method
-        self._pool: ProcessPoolExecutor | None = None
+        #: one single-process pool per worker (None: not started, or lost with its process)
+        self._lanes: list[ProcessPoolExecutor | None] = [None] * n
         self._pool_problem: Evaluable | None = None
 
     @property
     def slots(self) -> int:
         return self.workers
 
-    def _pool_for(self, problem: Evaluable) -> ProcessPoolExecutor:
-        if self._pool is None or self._pool_problem is not problem:
+    def _lanes_for(self, problem: Evaluable) -> list[ProcessPoolExecutor]:
+        """The workers for ``problem``: all new for another problem; a lost one replaced."""
+        if self._pool_problem is not problem:
             self._shutdown()
-            self._pool = ProcessPoolExecutor(
-                max_workers=self.workers,
-                mp_context=multiprocessing.get_context(self.start_method),
-                initializer=_init_worker,
-                initargs=(
-                    run_view(problem),
-                    os.getpid(),
-                    self.start_method != "forkserver",
-                    self.workers,
-                ),
-            )
             self._pool_problem = problem
-        return self._pool
+        for k, lane in enumerate(self._lanes):
+            if lane is None:
+                self._lanes[k] = ProcessPoolExecutor(
+                    max_workers=1,
+                    mp_context=multiprocessing.get_context(self.start_method),
+                    initializer=_init_worker,
+                    initargs=(
+                        run_view(problem),
+                        os.getpid(),
+                        self.start_method != "forkserver",
+                        self.workers,
+                    ),
+                )
+        return [lane for lane in self._lanes if lane is not None]
+
+    def worker_processes(self) -> list[multiprocessing.process.BaseProcess]:
+        """The worker processes running now (one per worker that has started)."""
+        return [
+            proc
+            for lane in self._lanes
+            if lane is not None
+            for proc in list((getattr(lane, "_processes", None) or {}).values())
+        ]
 
     def run(self, problem: Evaluable, jobs: Sequence[Job], finish: Finish) -> dict[int, Evaluation]:
         done: dict[int, Evaluation] = {}
@@ -251,31 +273,20 @@ class PoolExecutor:
             todo = list(jobs)
             while todo:
                 lost = self._round(problem, todo, done, finish)
-                if not lost:
-                    break
-                # A worker died and took the pool down with every run under way.  Runs that
-                # had not started are submitted again.  If one run had started, it is the one
-                # that died; if several had, each is repeated alone to tell the run that kills
-                # its process from those that were only in the same pool.  The broken pool's
-                # other workers are stopped, not waited for (see _shutdown).
-                self._shutdown(kill=True)
-                suspects = [j for j in lost if (j[1] / _STARTED).exists()]
-                if not suspects:
+                # A worker died.  A worker runs one run at a time, so the run it had started is
+                # the one that killed it; its runs that had not started go to a new worker in
+                # the next round.  If none had started, the worker could not start (or died
+                # between runs): its runs fail rather than kill worker after worker.
+                started = [j for j in lost if (j[1] / _STARTED).exists()]
+                for job in started:
+                    done[job[0]] = _died(job, _DIED, finish)
+                if lost and not started:
                     for job in lost:
                         done[job[0]] = _died(
-                            job, "the worker pool broke before this run started", finish
+                            job, "the worker process died before this run started", finish
                         )
                     break
-                if len(suspects) == 1:
-                    done[suspects[0][0]] = _died(suspects[0], _DIED, finish)
-                else:
-                    for job in suspects:
-                        if self._round(problem, [job], done, finish):
-                            self._shutdown(kill=True)
-                            done[job[0]] = _died(
-                                job, f"{_DIED}; it died again when repeated alone", finish
-                            )
-                todo = [j for j in lost if j not in suspects]
+                todo = [j for j in lost if j not in started]
         except BaseException:  # Ctrl-C or a bug: stop the workers instead of waiting for them
             self._shutdown(kill=True)
             raise
@@ -284,18 +295,22 @@ class PoolExecutor:
     def _round(
         self, problem: Evaluable, jobs: Sequence[Job], done: dict[int, Evaluation], finish: Finish
     ) -> list[Job]:
-        """Submit ``jobs``; record each as it finishes; return those lost to a dead worker."""
-        pool = self._pool_for(problem)
+        """Submit ``jobs`` (job k to worker k mod ``workers``); record each as it finishes;
+        return those lost with a worker that died, whose process is then let go."""
+        lanes = self._lanes_for(problem)
         futures: dict[Future[RunOutcome], Job] = {}
         lost: list[Job] = []
-        with workers_ignore_sigint():  # the pool starts its processes on submit
-            for k, (i, wd, x) in enumerate(jobs):
+        with workers_ignore_sigint():  # a pool starts its process on the first submit
+            for k, job in enumerate(jobs):
+                i, wd, x = job
                 try:
-                    fut = pool.submit(_run_in_worker, x, str(wd), i, self.timeout, self.isolate)
-                except BrokenProcessPool:  # a worker died while the batch was being submitted:
-                    lost = list(jobs[k:])  # these never started and run in the next round
-                    break
-                futures[fut] = (i, wd, x)
+                    fut = lanes[k % len(lanes)].submit(
+                        _run_in_worker, x, str(wd), i, self.timeout, self.isolate
+                    )
+                except BrokenProcessPool:  # this worker died while the batch was submitted:
+                    lost.append(job)  # the run did not start; the next round runs it
+                    continue
+                futures[fut] = job
         for fut in as_completed(futures):
             i, wd, x = job = futures[fut]
             try:
@@ -307,21 +322,18 @@ class PoolExecutor:
                 message = f"{type(exc).__name__}: {exc}"
                 outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
             done[i] = finish(outcome)
+        for k, lane in enumerate(self._lanes):
+            if lane is not None and getattr(lane, "_broken", False):
+                _stop(lane, kill=True)
+                self._lanes[k] = None
         return sorted(lost)
 
     def _shutdown(self, kill: bool = False) -> None:
-        if self._pool is not None:
-            if kill or getattr(self._pool, "_broken", False):
-                # The standard library has no public way to stop running workers before
-                # Python 3.14 (ProcessPoolExecutor.terminate_workers).  A broken pool's
-                # workers are stopped too: CPython 3.11 can start a worker while it marks the
-                # pool broken (a submit racing the worker's death), terminates only the
-                # workers it knew of, then waits for the new one forever in shutdown().
-                for proc in list(getattr(self._pool, "_processes", {}).values()):
-                    proc.terminate()
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-            self._pool_problem = None
+        for k, lane in enumerate(self._lanes):
+            if lane is not None:
+                _stop(lane, kill)
+                self._lanes[k] = None
+        self._pool_problem = None
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -334,6 +346,19 @@ class PoolExecutor:
 
     def close(self) -> None:
         self._shutdown()
+
+
+def _stop(pool: ProcessPoolExecutor, kill: bool) -> None:
+    """Shut a worker's pool down; with ``kill`` (or broken) its process is terminated first."""
+    if kill or getattr(pool, "_broken", False):
+        # The standard library has no public way to stop running workers before Python 3.14
+        # (ProcessPoolExecutor.terminate_workers).  A broken pool's worker is stopped too:
+        # CPython 3.11 can start a worker while it marks the pool broken (a submit racing the
+        # worker's death), terminates only the workers it knew of, then waits for the new one
+        # forever in shutdown().
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _died(job: Job, message: str, finish: Finish) -> Evaluation:

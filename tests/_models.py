@@ -77,6 +77,12 @@ class ToyMoundForwardModel(fbia.ForwardModelBase):
         odd_diagnostics: bool = Field(
             False, description="diagnostics with NaN, inf and objects JSON does not know"
         )
+        pause_below: float = Field(-math.inf, description="E below which to sleep 0.6 s [Pa]")
+        history: bool = Field(
+            False,
+            description="diagnostics 'earlier': the E of every earlier run of this model "
+            "object (what a warm-starting model's result depends on) [-]",
+        )
 
     def parameter_names(self) -> Sequence[str]:
         return ("E", "nu", "inflow_rate")
@@ -88,6 +94,10 @@ class ToyMoundForwardModel(fbia.ForwardModelBase):
         nu = parameters.get("nu", 0.3)
         if self.options.delay:
             time.sleep(self.options.delay)
+        if E < self.options.pause_below:
+            time.sleep(0.6)
+        earlier = self.__dict__.setdefault("_earlier", [])
+        earlier.append(E)
         fault = injected_fault(E, nu, self.options.fault_rate)
         if fault == "fail":
             raise fbia.ForwardModelError(f"injected failure at E = {E}")
@@ -138,6 +148,8 @@ class ToyMoundForwardModel(fbia.ForwardModelBase):
                 curve[len(curve) // 2, 1] = np.nan  # a diverged solve
             pairs.append((c, fbia.Interface.polyline(curve)))
         diagnostics: dict[str, Any] = {"E": E}
+        if self.options.history:
+            diagnostics["earlier"] = earlier[:-1]
         if self.options.odd_diagnostics:
             diagnostics.update(
                 nan=np.float64("nan"),
