@@ -115,11 +115,14 @@ def test_a_run_that_kills_its_worker_fails_alone_and_the_pool_carries_on(pool):
     assert again[1].distance == 0.0
 
 
-def test_run_k_of_a_batch_runs_on_worker_k_mod_workers_after_its_earlier_runs():
-    """What a worker ran before decides a warm-starting model's result (issue 48): run k of
-    a batch goes to worker k mod 2, in the batch's order, however long the runs take (the
-    first one here takes 0.6 s, the others none: any free worker taking the next run gave
-    worker 1 the runs 1-6).  So two evaluators give the same records, batch after batch."""
+def test_each_run_goes_to_the_worker_its_place_in_the_batch_fixes_after_its_earlier_runs():
+    """What a worker ran before decides a warm-starting model's result (issue 48): each run of
+    a batch goes to the worker ``workers_of_runs`` fixes by its place in the batch, each
+    worker taking its runs in the batch's order, however long they take (the first run here
+    takes 0.6 s, the others none: any free worker taking the next run gave the other worker
+    the runs 1-6).  So two evaluators give the same records, batch after batch."""
+    from fbia.execution.local_executors import workers_of_runs
+
     problem = toy_problem(history=True, pause_below=150.0)
     batches = [
         [{"E": E, "nu": 0.3} for E in (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 250.0)],
@@ -130,14 +133,30 @@ def test_run_k_of_a_batch_runs_on_worker_k_mod_workers_after_its_earlier_runs():
         with fbia.ProcessPoolEvaluator(workers=2, start_method="spawn") as ev:
             got = [[r.diagnostics["earlier"] for r in ev.evaluate(problem, b)] for b in batches]
         histories.append(got)
-    first = [p["E"] for p in batches[0]]
-    assert histories[0][0] == [first[k % 2 : k : 2] for k in range(len(first))]
-    worker_of_last = {0: first[0::2], 1: first[1::2]}  # the second batch continues on them
-    second = [p["E"] for p in batches[1]]
-    assert histories[0][1] == [
-        worker_of_last[k % 2] + second[k % 2 : k : 2] for k in range(len(second))
-    ]
-    assert histories[1] == histories[0]
+    ran: dict[int, list[float]] = {0: [], 1: []}  # E of each worker's runs so far
+    expected = []
+    for batch in batches:
+        workers = workers_of_runs(len(batch), 2)
+        assert sorted(set(workers)) == [0, 1]
+        expected.append([])
+        for w, p in zip(workers, batch, strict=True):
+            expected[-1].append(list(ran[w]))
+            ran[w].append(p["E"])
+    assert histories[0] == expected
+    assert histories[1] == expected
+
+
+def test_workers_of_runs_share_a_batch_evenly_and_break_its_patterns():
+    from fbia.execution.local_executors import workers_of_runs
+
+    for n, w in [(1, 2), (7, 2), (1000, 2), (10, 3), (5, 8)]:
+        got = workers_of_runs(n, w)
+        assert got == workers_of_runs(n, w)  # fixed by n
+        counts = [got.count(k) for k in range(w)]
+        assert max(counts) - min(counts) <= 1 and sum(counts) == n
+    # a Sobol design alternates between halves of its first input: no worker gets one half
+    halves = [workers_of_runs(1000, 2)[k] for k in range(1, 1000, 2)]
+    assert 200 < halves.count(0) < 300
 
 
 def test_injected_faults_with_a_time_out_leave_the_pool_working(pool):
@@ -278,8 +297,7 @@ def test_a_worker_that_dies_while_the_batch_is_submitted_costs_only_its_own_run(
     """Issue 14, defect 2: submitting the rest of a batch after a worker died raised
     BrokenProcessPool out of evaluate.  Submissions are slowed down here so that the run that
     kills its worker (E = 780 Pa, submitted second, to worker 1) dies before the batch is
-    submitted: worker 1's next run (the fourth) is refused at submission and runs on a new
-    worker."""
+    submitted: its worker's next run is refused at submission and runs on a new worker."""
     import time as _time
 
     real_lanes_for = pool.executor._lanes_for
