@@ -168,8 +168,9 @@ class AleFsiOptions(PluginOptions):
     )
     warm_start: bool = Field(
         True,
-        description="start from the nearest converged state of an earlier run of this "
-        "model object (same mesh) [-]",
+        description="start from the converged states of earlier runs of this model object "
+        "(same mesh): the nearest one, moved to first order by its tangents or, without "
+        "them, along the affine interpolant of the nearest states at the same inflow [-]",
     )
     probes: list[Probe] = Field(
         default_factory=list,

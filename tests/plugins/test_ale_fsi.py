@@ -491,3 +491,62 @@ def test_csr_positions_finds_the_entries_asked_for_and_refuses_others():
     absent = next(c for c in range(150) if c not in set(cols[ptr[7] : ptr[8]]))
     with pytest.raises(RuntimeError, match="sparsity pattern"):
         csr_positions(ptr, cols, (200, 150), np.array([7]), np.array([absent]))
+
+
+def _stored(E: float, nu: float, rate: float, state: list[float]):
+    return ({"E": E, "nu": nu}, rate, np.array(state, dtype=float), {})
+
+
+def test_secant_prediction_is_the_affine_interpolant_of_the_nearest_states():
+    from fbia.plugins.ale_fsi.model import _secant
+
+    # states linear in E and nu: the prediction is exact, inside and (a little) outside
+    def u(E: float, nu: float) -> list[float]:
+        return [E / 100.0, 2.0 * nu - E / 400.0]
+
+    store = [_stored(E, nu, 100.0, u(E, nu)) for E, nu in [(300, 0.3), (350, 0.3), (300, 0.2)]]
+    store.append(_stored(320.0, 0.3, 60.0, [9.0, 9.0]))  # another rate: not used
+    for E, nu in [(325.0, 0.25), (360.0, 0.3), (310.0, 0.32)]:
+        assert np.allclose(_secant(store, {"E": E, "nu": nu}, 100.0), u(E, nu))
+    # one input moved: the secant through the two nearest states
+    line = [_stored(E, 0.3, 100.0, u(E, 0.3)) for E in (300.0, 350.0, 500.0)]
+    assert np.allclose(_secant(line, {"E": 330.0, "nu": 0.3}, 100.0), u(330.0, 0.3))
+
+
+def test_secant_prediction_refuses_what_it_cannot_span_or_would_extrapolate_far():
+    from fbia.plugins.ale_fsi.model import _secant
+
+    one = [_stored(300.0, 0.3, 100.0, [1.0])]
+    assert _secant(one, {"E": 320.0, "nu": 0.3}, 100.0) is None  # one state: no secant
+    line = [_stored(E, 0.3, 100.0, [E]) for E in (300.0, 350.0)]
+    assert _secant(line, {"E": 320.0, "nu": 0.25}, 100.0) is None  # nu never moved
+    assert _secant(line, {"E": 320.0, "nu": 0.3}, 60.0) is None  # no state at that rate
+    # from the nearest state (350) along the span to 300: weight -2 at 450, -4 at 550
+    assert _secant(line, {"E": 450.0, "nu": 0.3}, 100.0) is not None
+    assert _secant(line, {"E": 550.0, "nu": 0.3}, 100.0) is None  # too far out
+    twins = [_stored(300.0, 0.3, 100.0, [1.0]), _stored(300.0, 0.3, 100.0, [1.0])]
+    assert _secant(twins, {"E": 320.0, "nu": 0.3}, 100.0) is None  # no span in E
+
+
+def test_a_warm_run_between_two_states_starts_from_their_secant(tmp_path, monkeypatch):
+    """Two runs without tangents, then one between them: started from the secant through
+    their states it takes fewer Newton steps than from the nearest state, to the same
+    interface."""
+    import fbia.plugins.ale_fsi.model as ale_model
+
+    coords = [{"inflow_rate": 100.0}]
+    iterations, interfaces = {}, {}
+    for kind in ("nearest", "secant"):
+        if kind == "nearest":
+            monkeypatch.setattr(ale_model, "_secant", lambda *a: None)
+        else:
+            monkeypatch.undo()
+        m = AleFsiForwardModel(**COARSE)
+        for E in (300.0, 350.0):
+            m.solve({"E": E, "nu": 0.3}, coords, tmp_path)
+        sol = m.solve({"E": 325.0, "nu": 0.3}, coords, tmp_path)
+        assert sol.diagnostics["warm_start"] is True
+        iterations[kind] = sol.diagnostics["newton_iterations"]
+        interfaces[kind] = sol.interface(coords[0]).vertices
+    assert iterations["secant"] < iterations["nearest"], iterations
+    assert np.abs(interfaces["secant"] - interfaces["nearest"]).max() < 1e-9  # mm
