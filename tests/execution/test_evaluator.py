@@ -241,6 +241,21 @@ def test_a_run_that_kills_its_worker_costs_no_other_workers_run(tmp_path):
     assert records[2].distance == 0.0
 
 
+def test_workers_that_cannot_start_fail_their_runs_once_and_say_so(monkeypatch, tmp_path):
+    """No run started, so no run is to blame: each fails with that reason, once, instead of
+    the batch starting worker after worker (fork: the children take the patched start-up)."""
+    import fbia.execution.local_executors as local
+
+    def cannot_start(*args):
+        raise RuntimeError("no worker today")
+
+    monkeypatch.setattr(local, "_init_worker", cannot_start)
+    with fbia.ProcessPoolEvaluator(workers=2, start_method="fork", workdir=tmp_path) as ev:
+        records = ev.evaluate(PROBLEM, POINTS)
+    assert [r.status for r in records] == ["failed"] * len(POINTS)
+    assert {r.message for r in records} == {"the worker process died before this run started"}
+
+
 def test_serial_on_record_sees_every_record_in_order():
     seen: list[tuple[int, str]] = []
     with fbia.SerialEvaluator(on_record=lambda r: seen.append((r.index, r.status))) as ev:
