@@ -37,6 +37,16 @@ interfaces (``host``, ``interface``, ...) are refused, and so are values the job
 run: a ``job_extra_directives`` entry is a flag of the batch system's allow-list
 (``--partition=short``), never ``--export=ALL,LD_PRELOAD=...``.
 
+Each run of a batch goes to the worker its place in the batch fixes
+(:func:`~fbia.execution.local_executors.workers_of_runs`, as in the process pool; workers in
+the order of their names), and each worker takes its runs in the batch's order: a warm-starting
+model's last digits depend on the runs its process made before, so a study gives the same
+bits on the same number of single-threaded workers.  A run goes to another worker only if its
+own has left the cluster.  The local cluster runs without Dask's work stealing, which would
+move queued runs to an idle worker; a scheduler reached at an ``address`` steals unless its
+configuration says ``distributed.scheduler.work-stealing: false``, and then the numbers agree
+to the model's tolerance, not bit for bit.
+
 Every run is a task that evaluates in a child process of the worker
 (:mod:`fbia.execution.isolation`, ``isolate = True`` by default here): a time-out kills that
 child, not the worker, and a run that crashes its process costs the child only, instead of
@@ -63,7 +73,7 @@ from ..core.problem import Evaluable, Evaluation
 from .cluster_options import check_cluster_options
 from .evaluator import BatchEvaluator, Job
 from .isolation import RunOutcome, isolation_mode, run_isolated_or_here, run_view
-from .local_executors import workers_ignore_sigint
+from .local_executors import workers_ignore_sigint, workers_of_runs
 from .resources import check_workers
 
 __all__ = ["CLUSTERS", "JOBQUEUE_CLUSTERS", "DaskEvaluator", "DaskExecutor"]
@@ -227,6 +237,8 @@ class DaskExecutor:
         from distributed import KilledWorker, as_completed
 
         data = self._problem_on_cluster(problem)
+        lanes = self._lanes()
+        lane = workers_of_runs(len(jobs), len(lanes)) if lanes else [0] * len(jobs)
         futures = {
             self.client.submit(
                 _task,
@@ -238,8 +250,13 @@ class DaskExecutor:
                 self.isolate,
                 pure=False,
                 key=f"fbia-eval-{self._token}-{i}",
+                # the worker its place in the batch fixes, in the batch's order (module
+                # docstring); another worker only if that one is gone
+                workers=[lanes[lane[k]]] if lanes else None,
+                allow_other_workers=True,
+                priority=len(jobs) - k,
             ): (i, wd, x)
-            for i, wd, x in jobs
+            for k, (i, wd, x) in enumerate(jobs)
         }
         done: dict[int, Evaluation] = {}
         try:
@@ -264,6 +281,16 @@ class DaskExecutor:
             self.client.cancel(list(futures), force=True)
             raise
         return done
+
+    def _lanes(self) -> list[str]:
+        """The workers' addresses in the order of their names (a LocalCluster's 0, 1, ...,
+        kept by a worker its nanny restarts), or of their addresses: worker ``w`` of
+        :func:`~fbia.execution.local_executors.workers_of_runs` is ``lanes[w]``."""
+        try:
+            workers = self.client.scheduler_info(n_workers=-1)["workers"]
+        except (OSError, TimeoutError):  # the scheduler is gone: the batch will tell
+            return []
+        return sorted(workers, key=lambda a: (str(workers[a].get("name", "")), a))
 
     def describe(self) -> dict[str, Any]:
         import dask
@@ -397,11 +424,14 @@ def _local_cluster(distributed: Any, workers: int | None, options: Mapping[str, 
     # serve while they run, and _close_http_servers closes them once the cluster is up.
     # Dask reads these routes from its configuration only; the nannies pass it on to the
     # worker processes.
-    routes: dict[str, list[str]] = {}
+    config: dict[str, Any] = {}
     if not dashboard:
-        routes = {f"distributed.{role}.http.routes": [] for role in ("scheduler", "worker")}
+        config = {f"distributed.{role}.http.routes": [] for role in ("scheduler", "worker")}
+    # No work stealing: each run stays on the worker DaskExecutor.run gives it (its scheduler
+    # runs in this process and reads this when it starts)
+    config["distributed.scheduler.work-stealing"] = False
     try:
-        with dask.config.set(routes), workers_ignore_sigint():  # Ctrl-C reaches the study,
+        with dask.config.set(config), workers_ignore_sigint():  # Ctrl-C reaches the study,
             return distributed.LocalCluster(**settings)  # which stops them
     except TypeError as exc:
         raise ConfigError(f"bad cluster_options for the local cluster: {exc}") from None
