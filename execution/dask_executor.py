@@ -37,15 +37,15 @@ interfaces (``host``, ``interface``, ...) are refused, and so are values the job
 run: a ``job_extra_directives`` entry is a flag of the batch system's allow-list
 (``--partition=short``), never ``--export=ALL,LD_PRELOAD=...``.
 
-Each run of a batch goes to the worker its place in the batch fixes
+On the local cluster each run of a batch goes to the worker its place in the batch fixes
 (:func:`~fbia.execution.local_executors.workers_of_runs`, as in the process pool; workers in
-the order of their names), and each worker takes its runs in the batch's order: a warm-starting
-model's last digits depend on the runs its process made before, so a study gives the same
-bits on the same number of single-threaded workers.  A run goes to another worker only if its
-own has left the cluster.  The local cluster runs without Dask's work stealing, which would
-move queued runs to an idle worker; a scheduler reached at an ``address`` steals unless its
-configuration says ``distributed.scheduler.work-stealing: false``, and then the numbers agree
-to the model's tolerance, not bit for bit.
+the order of their names), each worker getting its next run when its last is done, so in the
+batch's order: a warm-starting model's last digits depend on the runs its process made
+before, so a study gives the same bits on the same number of single-threaded workers.  A run
+goes to another worker only if its own has left the cluster, and the local cluster runs
+without Dask's work stealing.  On a scheduler at an ``address`` or a batch-system cluster,
+whose workers come and go, every run of a batch is submitted at once for any free worker:
+there the numbers agree to the model's tolerance, not bit for bit.
 
 Every run is a task that evaluates in a child process of the worker
 (:mod:`fbia.execution.isolation`, ``isolate = True`` by default here): a time-out kills that
@@ -63,6 +63,7 @@ import os
 import shutil
 import time
 import uuid
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -234,13 +235,22 @@ class DaskExecutor:
         return self._scattered[1]
 
     def run(self, problem: Evaluable, jobs: Sequence[Job], finish: Finish) -> dict[int, Evaluation]:
+        """Run ``jobs``: on the local cluster each worker its own runs (:meth:`_lanes`), one
+        at a time in the batch's order; on other clusters every run at once, for any free
+        worker (module docstring)."""
         from distributed import KilledWorker, as_completed
 
         data = self._problem_on_cluster(problem)
         lanes = self._lanes()
-        lane = workers_of_runs(len(jobs), len(lanes)) if lanes else [0] * len(jobs)
-        futures = {
-            self.client.submit(
+        queues: list[deque[Job]] = [deque() for _ in lanes or [""]]
+        for k, job in zip(workers_of_runs(len(jobs), len(queues)), jobs, strict=True):
+            queues[k].append(job)
+        futures: dict[Any, tuple[Job, int]] = {}
+
+        def submit(w: int) -> Any:
+            job = queues[w].popleft()
+            i, wd, x = job
+            fut = self.client.submit(
                 _task,
                 data,
                 x,
@@ -250,18 +260,24 @@ class DaskExecutor:
                 self.isolate,
                 pure=False,
                 key=f"fbia-eval-{self._token}-{i}",
-                # the worker its place in the batch fixes, in the batch's order (module
-                # docstring); another worker only if that one is gone
-                workers=[lanes[lane[k]]] if lanes else None,
-                allow_other_workers=True,
-                priority=len(jobs) - k,
-            ): (i, wd, x)
-            for k, (i, wd, x) in enumerate(jobs)
-        }
+                # another worker only if this one has left the cluster
+                **({"workers": [lanes[w]], "allow_other_workers": True} if lanes else {}),
+            )
+            futures[fut] = (job, w)
+            return fut
+
+        # a worker's next run is submitted when its last one is done: a Dask worker starts
+        # the first task that reaches it, and the scheduler may pass on two submissions in
+        # either order
+        if lanes:
+            first = [submit(w) for w in range(len(lanes)) if queues[w]]
+        else:
+            first = [submit(0) for _ in range(len(jobs))]
         done: dict[int, Evaluation] = {}
         try:
-            for fut in as_completed(futures):
-                i, wd, x = futures[fut]
+            running = as_completed(first)
+            for fut in running:
+                (i, wd, x), w = futures.pop(fut)
                 try:
                     outcome = fut.result()
                 except KilledWorker:
@@ -277,15 +293,21 @@ class DaskExecutor:
                     outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
                 fut.release()
                 done[i] = finish(outcome)
+                if lanes and queues[w]:
+                    running.add(submit(w))
         except BaseException:  # Ctrl-C or a bug: stop the tasks instead of waiting for them
             self.client.cancel(list(futures), force=True)
             raise
         return done
 
     def _lanes(self) -> list[str]:
-        """The workers' addresses in the order of their names (a LocalCluster's 0, 1, ...,
-        kept by a worker its nanny restarts), or of their addresses: worker ``w`` of
-        :func:`~fbia.execution.local_executors.workers_of_runs` is ``lanes[w]``."""
+        """On the local cluster fbia started, the workers' addresses in the order of their
+        names (0, 1, ..., which the nanny keeps for a worker it restarts): worker ``w`` of
+        :func:`~fbia.execution.local_executors.workers_of_runs` is ``lanes[w]``.  Empty for a
+        scheduler at an address or a batch-system cluster, whose workers come and go (a
+        SLURM job starts when the queue lets it): there any free worker takes the next run."""
+        if self.cluster_kind != "local":
+            return []
         try:
             workers = self.client.scheduler_info(n_workers=-1)["workers"]
         except (OSError, TimeoutError):  # the scheduler is gone: the batch will tell
