@@ -101,6 +101,17 @@ instead of 1e-10 (10 iterations instead of 16, the displacement the same to 1e-8
 saved in one run), not made a recommended setting: a calibration's forward differences
 (step 1e-3 relative) would carry the solver's error, not measured there.
 
+Since ``RECOMMENDED_3D`` sets ``newton_tol = 1e-6`` (CHANGELOG), the recommended row runs at
+that tolerance (until 2026-11-30, late, it ran at the default 1e-10 whatever the settings
+said).  ``--target`` then, on 2 cores shared with four niced reproduction jobs (load 7.4):
+11.1 s, 1086 MB, 10 Newton iterations and 3 Jacobians, 0.87 % / 0.42 % from the references.
+Where the 11 s go (one such run, instrumented): meshing and forms ~1.1 s; the Jacobians at
+rest, after the Stokes step (scaled update 1.15) and after a Newton step of 0.6 (the chord's
+0.53 over the 0.1 a chord may take), 4.4-4.9 s of assembly; Pardiso's analysis with the first
+factorisation 2.5-2.9 s, two refactorisations 0.5-0.7 s each; 7 chord steps to 1e-6.  Chord
+updates up to 1.0 again (as above): 8 iterations, still 3 Jacobians (the chord steps slow to a
+contraction of 0.6 and the third Jacobian comes one step later), 10.1 s against 9.7 s.
+
 Earlier (before these changes): the duct at 0.3 mm was 18 s but +0.7 % / +1.15 %; order 4
 there -0.3 % / +0.14 % but 69 s, 4.5 GB.  Under load (5 on 2 cores) two threads were slower
 than one; they pay on free cores only.
