@@ -95,6 +95,18 @@ back, on 2 cores shared with a reproduction job (the seconds are inflated by the
 counts are firm): 99.2 s with the head start, 134.7 s without (1.36x); the first run 17.2
 against 41.6 s; the other five runs the same Jacobians (1, 1, 1, 0, 0) and the same optimum
 (to 1e-9 Pa).  The 20 s target is further off than the figures above said.
+
+Tried 2026-11-30 (late) and not kept: the tangents refactorise when the sweeps a refinement
+still needs, at the contraction its last sweep showed, would cost more than a refactorisation
+(timed by ``NewtonSolver``) and two sweeps per solve.  The tangent calibration alone, two
+interleaved pairs on 2 cores shared with four niced reproduction jobs: 57 sweeps and 2
+refactorisations against 96 sweeps and none, the same 6 runs, 38 Newton iterations and 6
+Jacobians (the fresh factorisation did not shorten the next runs), the same optimum to 1e-12
+Pa; wall 40.1 / 36.0 s against 39.2 / 38.0 s, tangents 14.8 / 14.0 s against 14.5 / 15.5 s --
+no gain above the scatter.  In one state of that calibration a refinement sweep took 54 ms
+(product 21 ms, back-substitution 23 ms), 14 sweeps per solve with the last run's
+factorisation, the assembly 1.1 s; preconditioned GMRes (scipy) instead of the sweeps needed
+12 products per solve to 1e-7 (9-10 to 1e-5): no fewer than the sweeps.
 """
 
 from __future__ import annotations
