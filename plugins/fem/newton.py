@@ -16,7 +16,7 @@ The iteration (what ``ale_fsi`` needs, stiff coupled systems solved to a toleran
   starts after a converged one (a warm start) takes the old factorisation's first update if
   it is below 2.5e-4 (:class:`ChordRule`, the default).  Where a fresh Jacobian costs tens of
   chord steps (:meth:`ChordRule.costly_jacobian`) chord steps go on while the updates halve,
-  and a warm start's first update is taken up to 0.1 on trust: the second update measures its
+  and a warm start's first update is taken up to 0.3 on trust: the second update measures its
   contraction, and if it is larger than the first the first is undone before the fresh
   Jacobian.  Measured on ``ale_fsi``'s 3-D dome (order 3, 2 threads), a fresh Jacobian costs
   1.7 + 5.7 s (assembly, factorisation), a chord step ~0.1 s; with the default rule its LM
@@ -60,8 +60,15 @@ __all__ = [
     "sparse_direct_solver",
 ]
 
-#: A chord update larger than this (scaled) is never taken.
+#: A chord update larger than this (scaled) is not taken, but for a warm start's first one
+#: under :meth:`ChordRule.costly_jacobian` (:data:`COSTLY_WARM_UPDATE`).
 CHORD_MAX_UPDATE = 0.1
+#: The first update of a warm start taken on trust under :meth:`ChordRule.costly_jacobian`:
+#: on the 3-D dome (recommended settings) the first chord updates of warm runs lie near 0.1
+#: (0.097-0.13 measured), so at 0.1 a worker whose earlier states lie farther apart than a
+#: serial run's assembled a Jacobian (2-3 s) where chord steps (~0.07 s each) converge
+#: (benchmarks/bench_dask_3d.py; CHANGELOG, issue 47).
+COSTLY_WARM_UPDATE = 0.3
 
 
 @dataclass(frozen=True)
@@ -81,9 +88,9 @@ class ChordRule:
 
     @classmethod
     def costly_jacobian(cls) -> ChordRule:
-        """Chord steps while the updates halve; a warm first update up to the largest chord
-        update, undone if the next one is larger."""
-        return cls(contraction=0.5, warm_update=CHORD_MAX_UPDATE, undo_worse=True)
+        """Chord steps while the updates halve; a warm first update up to
+        :data:`COSTLY_WARM_UPDATE`, undone if the next one is larger."""
+        return cls(contraction=0.5, warm_update=COSTLY_WARM_UPDATE, undo_worse=True)
 
 
 @dataclass
@@ -302,10 +309,10 @@ class NewtonSolver:
 
     def _chord_taken(self, norm: float, previous: float | None) -> bool:
         """Whether a chord update is taken (module docstring)."""
+        if previous is None:  # a warm start's first update
+            return norm <= self.chord.warm_update
         if norm > CHORD_MAX_UPDATE:
             return False
-        if previous is None:
-            return norm <= self.chord.warm_update
         return norm <= self.chord.contraction * previous
 
     @staticmethod

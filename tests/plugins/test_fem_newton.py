@@ -108,6 +108,23 @@ def test_a_warm_start_may_take_the_old_factorisation_farther_from_the_solution()
     assert all(np.max(np.abs(e)) < 1e-9 for e in states)  # the solution, to the tolerance
 
 
+def test_a_costly_jacobians_warm_start_takes_a_first_update_up_to_0_3_on_trust() -> None:
+    """A 4 % change of the state (first update 0.2, over the 0.1 any later chord update may
+    take): under ``ChordRule.costly_jacobian`` it is taken and the solve converges on chord
+    steps (the 3-D dome's warm runs have first updates near 0.1, issue 47), the default rule
+    assembles a Jacobian; both reach the solution to the tolerance."""
+    for rule, jacobians in ((ChordRule(), 1), (ChordRule.costly_jacobian(), 0)):
+        system = Cubic()
+        solver = NewtonSolver(system, 1e-10, 12, "umfpack", chord=rule)
+        solver.solve()
+        solution = system.gfu.vec.FV().NumPy().copy()
+        system.gfu.vec.FV().NumPy()[:] *= 1.04
+        rep = solver.solve()
+        assert rep.converged and rep.jacobians == jacobians
+        assert 0.15 < rep.norms[0] < 0.25
+        assert np.max(np.abs(system.gfu.vec.FV().NumPy() - solution)) < 1e-9
+
+
 class Recording(Cubic):
     """Cubic that records the state at each Jacobian assembly."""
 
