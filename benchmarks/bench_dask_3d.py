@@ -160,6 +160,20 @@ model (one thread, two interleaved pairs): no Jacobian in the 8 runs instead of 
 16.1 s against 17.7 and 19.3 s.  Without a fresh Jacobian the factorisation stays at the
 warm-up run's state, and the runs after it need more chord steps (2.5-3.8 s a run against
 1.0-1.3 s).
+
+Since the secant warm start and the 1e-6 tolerance of the recommended settings (CHANGELOG)
+the serial batch assembles no Jacobian, but the 2 workers still did: 4 in each of two
+``--two-only`` runs (2026-11-30, late, 2 cores shared with four reproduction jobs at nice 19,
+load 6-7: 0.89x and 0.62x serial's speed, 22.3 and 24.3 s of runs against 8.2-10.1 s).  Their
+chains of warm states are half as dense, so their warm runs' first chord updates exceed the
+0.1 taken on trust.  Taking a warm start's *first* update up to 0.3 (``COSTLY_WARM_UPDATE``;
+later chord updates stay below 0.1, and a first update is undone as before when the next is
+larger) removed them: no Jacobian in any batch with 0.2, 0.3 or 0.5, and with 0.3 (kept)
+``--repeat 3`` twice gave medians of 1.21x (1.43 / 1.08 / 1.21) and 1.53x (1.25 / 1.88 /
+1.53), the runs 8.3-9.1 s of their own time side by side against 6.5-8.6 s serially (the
+machine did 1.86x the work of one process with two that hour).  The earlier trial's chord
+runs of 2.5-3.8 s are gone: the secant starts them closer.  Issue 47's 1.6x is not claimed
+from a loaded machine; measure it idle.
 """
 
 from __future__ import annotations
