@@ -410,7 +410,8 @@ class AleFsiForwardModel(ForwardModelBase):
         when tangents are asked for) for first-order warm starts of later runs; without
         tangents the first order comes from the nearest states (:func:`_secant`): on the 3-D
         dome the nearest state alone lies 0.04-0.08 from the solution in Newton's scaled norm,
-        near the 0.1 a chord update may take on trust, their secant 0.003-0.006 (CHANGELOG).
+        near the 0.1 a chord update could then take on trust, their secant 0.003-0.006
+        (CHANGELOG).
         """
         order = sorted(range(len(levels)), key=lambda i: abs(levels[i]))
         iterations = [0] * len(levels)
