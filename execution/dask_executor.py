@@ -242,7 +242,8 @@ class DaskExecutor:
 
         data = self._problem_on_cluster(problem)
         lanes = self._lanes()
-        queues: list[deque[Job]] = [deque() for _ in lanes or [""]]
+        # one queue per worker, or a single one that every free worker takes from
+        queues: list[deque[Job]] = [deque() for _ in range(max(len(lanes), 1))]
         for k, job in zip(workers_of_runs(len(jobs), len(queues)), jobs, strict=True):
             queues[k].append(job)
         futures: dict[Any, tuple[Job, int]] = {}

@@ -260,6 +260,32 @@ def toy_problem(**model_options: Any) -> fbia.InverseProblem:
     )
 
 
+#: Two batches for the worker-assignment tests of the process pool and Dask (issue 48): the
+#: first run (E = 100 Pa, below ``pause_below = 150``) takes 0.6 s longer than the others.
+HISTORY_BATCHES = [
+    [{"E": E, "nu": 0.3} for E in (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 250.0)],
+    [{"E": E, "nu": 0.1} for E in (350.0, 450.0, 120.0)],
+]
+
+
+def expected_histories(
+    batches: Sequence[Sequence[Mapping[str, float]]], workers: int
+) -> list[list[list[float]]]:
+    """What each run of ``batches`` reports as its process's earlier runs (the toy model's
+    ``history`` option) when run k of a batch of n goes to ``workers_of_runs(n, workers)[k]``
+    and each worker takes its runs in the batch's order."""
+    from fbia.execution.local_executors import workers_of_runs
+
+    ran: dict[int, list[float]] = {w: [] for w in range(workers)}  # E of each worker's runs
+    expected: list[list[list[float]]] = []
+    for batch in batches:
+        expected.append([])
+        for w, p in zip(workers_of_runs(len(batch), workers), batch, strict=True):
+            expected[-1].append(list(ran[w]))
+            ran[w].append(p["E"])
+    return expected
+
+
 #: A 4 x 4 grid (what GridIterator(n=4) evaluates on E in [100, 760] Pa, nu in [-0.8, 0.5])
 #: where ``fault_rate = 0.2`` injects 4 faults (25 %): one failure, one hang, two exits.
 FAULT_BOUNDS = ((100.0, 760.0), (-0.8, 0.5))

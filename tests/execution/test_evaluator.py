@@ -20,7 +20,14 @@ import time
 
 import numpy as np
 import pytest
-from _models import FAULT_GRID, check_injected_faults, toy_curve, toy_problem
+from _models import (
+    FAULT_GRID,
+    HISTORY_BATCHES,
+    check_injected_faults,
+    expected_histories,
+    toy_curve,
+    toy_problem,
+)
 
 import fbia
 from fbia.storage.store import StudyStore
@@ -124,24 +131,16 @@ def test_each_run_goes_to_the_worker_its_place_in_the_batch_fixes_after_its_earl
     from fbia.execution.local_executors import workers_of_runs
 
     problem = toy_problem(history=True, pause_below=150.0)
-    batches = [
-        [{"E": E, "nu": 0.3} for E in (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 250.0)],
-        [{"E": E, "nu": 0.1} for E in (350.0, 450.0, 120.0)],
-    ]
     histories = []
     for _ in range(2):
         with fbia.ProcessPoolEvaluator(workers=2, start_method="spawn") as ev:
-            got = [[r.diagnostics["earlier"] for r in ev.evaluate(problem, b)] for b in batches]
+            got = [
+                [r.diagnostics["earlier"] for r in ev.evaluate(problem, b)] for b in HISTORY_BATCHES
+            ]
         histories.append(got)
-    ran: dict[int, list[float]] = {0: [], 1: []}  # E of each worker's runs so far
-    expected = []
-    for batch in batches:
-        workers = workers_of_runs(len(batch), 2)
-        assert sorted(set(workers)) == [0, 1]
-        expected.append([])
-        for w, p in zip(workers, batch, strict=True):
-            expected[-1].append(list(ran[w]))
-            ran[w].append(p["E"])
+    for batch in HISTORY_BATCHES:
+        assert sorted(set(workers_of_runs(len(batch), 2))) == [0, 1]
+    expected = expected_histories(HISTORY_BATCHES, 2)
     assert histories[0] == expected
     assert histories[1] == expected
 
