@@ -127,6 +127,18 @@ shared with a reproduction job: with the head start fbia 100 runs 14.48 s, scipy
 s (1.11x); without it the same 100 and 296 runs, 16.68 s against 14.00 s (**1.19x, not met**),
 the same optima.  The runs and the optima do not depend on the head start; its effect on the
 ratio is inside this VM's scatter (per start 0.62-3.34x in the second run).
+
+Measured 2026-12-01 (session i; 2 cores shared with three reproduction jobs at nice 19, one run
+of each, back to back), after robust mode's step to a far bound went halfway to it
+(``trust_region.step_back``) and a rejected trial shrank the region below its own length:
+before, fbia 100 runs 13.12 s, scipy 296 runs 10.63 s, **1.23x**, black 11 runs 3.06 s (its
+failed run at the E bound); after, fbia 100 runs 12.85 s, scipy 296 runs 11.61 s, **1.11x
+(not met)**, black 9 runs 1.00 s (1000 -> 550 Pa, no failed run), cyan 10 instead of 11 runs,
+gray 12 instead of 11 and brown 9 instead of 8, the same optima (0.001 std. errors apart at
+most).  With the step-back alone (MINPACK's shrink from min(radius, 10 plen)): 99 runs, 1.14x.
+No failed run is left in any start; what remains is the cost of a run with its tangent
+(0.1-0.2 s here against scipy's 0.03-0.04 s for a chord-step difference run) times fbia's 7-12
+iterations, against scipy's 21-32 runs.
 """
 
 from __future__ import annotations

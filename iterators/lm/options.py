@@ -44,7 +44,8 @@ class LMOptions(PluginOptions):
     mode: Literal["robust", "paper"] = Field(
         "robust",
         description="'robust': improved algorithm (declines steps that increase the "
-        "residual, projects steps onto the bounds, survives failed runs); 'paper': Paper A "
+        "residual, projects steps onto near bounds and goes halfway to far ones, survives failed "
+        "runs); 'paper': Paper A "
         "exactly as published",
     )
     alpha: float | dict[str, float] = Field(

@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 
 from .chains import SUCCESS, FloatArray, LMChain, Outcome
 from .finite_differences import central_stencil, perturbed
-from .trust_region import lm_step, predicted_reduction, within_bounds
+from .trust_region import lm_step, predicted_reduction, step_back, within_bounds
 
 #: A step is taken (robust mode) when the actual reduction of ‖r‖² is at least this fraction of
 #: the reduction the linear model predicts (MINPACK's 1e-4).
@@ -261,10 +261,13 @@ class RobustChain(LMChain):
             rr = float(r @ r)
             while True:  # find a step that reduces ‖r‖
                 full, self.mu = lm_step(J, r, D, free, radius=radius, mu_guess=self.mu)
-                p = within_bounds(x, full, r, J, self.lower, self.upper)
+                # a step towards a far bound goes halfway to it (trust_region.NEAR_BOUND)
+                asked = step_back(x, full, self.lower, self.upper)
+                p = within_bounds(x, asked, r, J, self.lower, self.upper)
                 pnorm = float(np.linalg.norm(D * p))
-                # a step cut by the bounds is judged by the length the model asked for
-                plen = float(np.linalg.norm(D * full))
+                # a step cut by the bounds is judged by the length the model asked for, or
+                # that of the stepped-back step
+                plen = float(np.linalg.norm(D * asked))
                 pred, dirder = predicted_reduction(J, r, p, D, self.mu, exact=p is full)
                 xt = x + p
                 rt: FloatArray | None = None
@@ -295,7 +298,10 @@ class RobustChain(LMChain):
                     elif 0.1 * math.sqrt(float(rt @ rt)) >= math.sqrt(rr):
                         shrink = 0.1
                     shrink = min(max(shrink, 0.1), 0.5)
-                    radius = shrink * (min(radius, plen / 0.1) if plen > 0 else radius)
+                    # shorter than this trial (MINPACK's min(radius, plen / 0.1) asks a
+                    # rejected Gauss-Newton step, or one stepped back from a far bound, again
+                    # until the region shrinks below it: the same point, the same verdict)
+                    radius = shrink * (min(radius, plen) if plen > 0 else radius)
                 elif self.mu == 0.0 or ratio >= 0.75:
                     radius = plen / 0.5
                 if ratio >= GAIN_MIN:

@@ -127,14 +127,27 @@ class TestFailingRegion:
     """The forward model fails ('mesh distortion') for 40 Pa <= E <= 250 Pa."""
 
     def test_robust_mode_declines_the_failed_step_and_converges(self):
-        problem = make_problem(failure_region={"E": (40.0, 250.0)})
+        # the first step from 1000 Pa goes halfway to the E bound (50 Pa): 525 Pa, which fails;
+        # so does the step after the next (507 Pa)
+        problem = make_problem(failure_region={"E": (500.0, 600.0)})
         result = fbia.iterator("levenberg_marquardt", x0={"E": 1000.0, "nu": 0.4}).run(problem)
         assert result.success, result.message
         assert result.x["E"] == pytest.approx(400.0, abs=1e-3)
         assert result.n_failed >= 1
         failed = [e for e in result.evaluations if not e.ok]
-        assert all(40.0 <= e.x["E"] <= 250.0 and e.status == "failed" for e in failed)
+        assert all(500.0 <= e.x["E"] <= 600.0 and e.status == "failed" for e in failed)
         assert any(h["note"] == "rejected: run failed" for h in result.history)
+
+    def test_robust_mode_does_not_step_onto_a_far_bound(self):
+        """The Gauss-Newton step from 1000 Pa leaves the box below E = 50 Pa; projected onto
+        the bound it landed in the soft region where the model fails (the flow cell's black
+        start, issue 47).  It now goes halfway to the bound and never tries the region."""
+        problem = make_problem(failure_region={"E": (40.0, 250.0)})
+        result = fbia.iterator("levenberg_marquardt", x0={"E": 1000.0, "nu": 0.4}).run(problem)
+        assert result.success, result.message
+        assert result.x["E"] == pytest.approx(400.0, abs=1e-3)
+        assert result.n_failed == 0
+        assert min(e.x["E"] for e in result.evaluations) > 250.0
 
     def test_paper_mode_ends_without_result(self):
         problem = make_problem(failure_region={"E": (40.0, 250.0)})
@@ -146,12 +159,33 @@ class TestFailingRegion:
         assert result.info["x_last"]["E"] < 250.0
 
     def test_robust_mode_stops_at_a_failure_band_it_cannot_cross(self):
-        # the model fails for 600 <= E <= 900 Pa, between the start (1000) and the optimum
-        problem = make_problem(failure_region={"E": (600.0, 900.0)})
+        # the model fails for 100 <= E <= 900 Pa, the optimum (400 Pa) among them
+        problem = make_problem(failure_region={"E": (100.0, 900.0)})
         result = fbia.iterator("levenberg_marquardt", x0={"E": 1000.0, "nu": 0.4}).run(problem)
         assert result.status == "damping_limit" and not result.success
         assert "run failed" in result.message
         assert 900.0 < result.x["E"] < 901.0  # the best point, at the edge of the band
+
+    def test_robust_mode_may_step_past_a_failure_band(self):
+        # the model fails for 600 <= E <= 900 Pa, between the start (1000) and the optimum: the
+        # first step, halfway to the E bound (525 Pa), lands past the band (until issue 47 the
+        # fit ended at its edge, 900 Pa, at the damping limit)
+        problem = make_problem(failure_region={"E": (600.0, 900.0)})
+        result = fbia.iterator("levenberg_marquardt", x0={"E": 1000.0, "nu": 0.4}).run(problem)
+        assert result.success and result.n_failed == 0
+        assert result.x["E"] == pytest.approx(400.0, abs=1e-3)
+
+
+def test_robust_mode_never_asks_for_a_point_it_has_run():
+    """A declined trial shrinks the trust region below its own length: MINPACK's rule
+    (min(radius, plen / 0.1)) asks a declined Gauss-Newton step again, unchanged, until the
+    region is shorter than it; on this noisy cpp problem 45 of the 575 runs of the eleven
+    starts were such repeats (issue 47)."""
+    problem = make_problem("cpp", noise_std=1e-3, points=81)
+    result = fbia.iterator("levenberg_marquardt", x0=STARTS).run(problem)
+    assert result.success, result.message
+    points = [tuple(e.x.values()) for e in result.evaluations]
+    assert len(points) == len(set(points)) == result.nfev
 
 
 class TestUncertainParameters:
@@ -197,7 +231,7 @@ class TestUncertainParameters:
             it.run(make_problem())
 
 
-class BuggyBelow300(fbia.ForwardModelBase):
+class BuggyBelow550(fbia.ForwardModelBase):
     """The analytic model with a bug: ``solve`` raises ValueError (not ForwardModelError)."""
 
     def __init__(self):
@@ -208,14 +242,14 @@ class BuggyBelow300(fbia.ForwardModelBase):
         return self.inner.parameter_names()
 
     def solve(self, parameters, coordinates, workdir):
-        if parameters["E"] < 300.0:
+        if parameters["E"] < 550.0:  # the first step from 1000 Pa lands at 525 Pa
             raise ValueError("index out of range")
         return self.inner.solve(parameters, coordinates, workdir)
 
 
 def test_a_plugin_bug_ends_the_analysis_and_is_reported():
     problem = make_problem()
-    problem.model = BuggyBelow300()
+    problem.model = BuggyBelow550()
     result = fbia.iterator("levenberg_marquardt", x0={"E": 1000.0, "nu": 0.4}).run(problem)
     assert result.status == "plugin_error" and not result.success
     assert "ValueError: index out of range" in result.message

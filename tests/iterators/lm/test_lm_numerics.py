@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fbia.iterators.lm.finite_differences import central_factor, central_stencil, forward_steps
-from fbia.iterators.lm.trust_region import lm_step, predicted_reduction
+from fbia.iterators.lm.trust_region import lm_step, predicted_reduction, step_back
 
 T = np.linspace(0.0, 2.0, 7)
 
@@ -96,3 +96,19 @@ def test_predicted_reduction_of_the_lm_step_has_no_cancellation():
     pred, _ = predicted_reduction(J, r, p, D, mu, exact=True)
     model_value = np.sum((J @ p) ** 2) + 2 * mu * np.sum((D * p) ** 2)
     assert pred > 0 and pred == pytest.approx(model_value / (r @ r), rel=1e-12)
+
+
+def test_a_step_across_a_far_bound_goes_halfway_a_near_one_is_left_to_the_projection():
+    """step_back: a step that would cross a bound from farther than a tenth of the range stops
+    halfway to it (in its own direction); from nearer, or inside the box, or with no bound,
+    the step itself is returned (within_bounds then projects or shortens it)."""
+    lower, upper = np.array([100.0, -1.0]), np.array([1500.0, 0.5])
+    x, p = np.array([1000.0, 0.0]), np.array([-1800.0, 0.3])  # E would reach -800 Pa
+    np.testing.assert_allclose(x + step_back(x, p, lower, upper), [550.0, 0.075])
+    near = np.array([200.0, 0.0])  # 100 Pa from the bound: under a tenth of 1400 Pa
+    assert step_back(near, p, lower, upper) is p
+    inside = np.array([-300.0, 0.1])
+    assert step_back(x, inside, lower, upper) is inside
+    assert step_back(x, p, np.array([-np.inf, -1.0]), np.array([np.inf, 0.5])) is p
+    up = np.array([0.0, 1.4])  # nu would reach 1.4 from 0.0: halfway to 0.5
+    np.testing.assert_allclose(x + step_back(x, up, lower, upper), [1000.0, 0.25])
