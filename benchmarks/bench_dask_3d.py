@@ -174,6 +174,17 @@ larger) removed them: no Jacobian in any batch with 0.2, 0.3 or 0.5, and with 0.
 machine did 1.86x the work of one process with two that hour).  The earlier trial's chord
 runs of 2.5-3.8 s are gone: the secant starts them closer.  Issue 47's 1.6x is not claimed
 from a loaded machine; measure it idle.
+
+Measured idle 2026-12-01 (session i, 2 free cores, load 1.3-1.9 from the benchmark itself),
+``--recommended --repeat 3 --two-only``: serial 6.4 / 6.7 / 6.5 s (no Jacobian), 2 workers
+5.1 / 4.7 / 17.0 s, **median 1.26x (1.26, 1.44, 0.38; not met: 1.6x)**.  Two findings: (1) the
+third 2-worker batch assembled 3 fresh Jacobians (20.4 s of runs, 2.3 s of assembly each),
+the first two none: the warm-limit change of 87a6bc0 did not remove them in every batch; why
+this batch's warm starts lay farther is not measured; (2) without a Jacobian the runs take
+9.5 and 8.4 s of their own time side by side against 6.4-6.7 s serially (30-45 % slower),
+while two single-threaded processes do 1.99x the work of one in the machine check: the
+sparse direct solver's back-substitutions side by side slow each other (memory bandwidth is
+the candidate, not measured).
 """
 
 from __future__ import annotations
