@@ -184,7 +184,14 @@ this batch's warm starts lay farther is not measured; (2) without a Jacobian the
 9.5 and 8.4 s of their own time side by side against 6.4-6.7 s serially (30-45 % slower),
 while two single-threaded processes do 1.99x the work of one in the machine check: the
 sparse direct solver's back-substitutions side by side slow each other (memory bandwidth is
-the candidate, not measured).
+the candidate, not measured).  The 3 Jacobians are those of one cold run (a cold run at the
+recommended settings takes 10 Newton iterations and 3 Jacobians), as if one worker had got no
+warm-up run.  Not reproduced: three more 2-worker batches of fresh clusters (`_batch`, the
+same points, separate and shared work folders) gave the same 0 Jacobians and Newton
+iterations run for run, and 12 fresh local clusters all listed both workers at once
+(`_lanes`).  Cause not found; next to check: which worker ran each warm-up run in such a
+batch (the run records of fbia.log), and whether a listed worker that is not yet running lets
+the scheduler place its pinned run on the other (``allow_other_workers``).
 """
 
 from __future__ import annotations
