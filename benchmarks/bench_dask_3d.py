@@ -192,6 +192,37 @@ iterations run for run, and 12 fresh local clusters all listed both workers at o
 (`_lanes`).  Cause not found; next to check: which worker ran each warm-up run in such a
 batch (the run records of fbia.log), and whether a listed worker that is not yet running lets
 the scheduler place its pinned run on the other (``allow_other_workers``).
+
+Measured idle 2026-12-01 (session j), where a 2-worker batch's time goes.  (1) The cold run:
+fresh clusters in a loop (`_batch`'s warm-up and batch, the log of each run's worker), 4 of 10
+batches had one, each time the first run of a worker after that worker's own warm-up run
+(``warm_start`` false, 3 Jacobians, 12-14 s): the worker's model had lost its warm states,
+not the scheduler placed the run elsewhere.  A run process starts cold only from a helper
+that loaded the problem anew, and one debug loop caught a worker's runner, its helper
+running, handed a copy of the problem that pickled to other bytes than the one its helper
+held -- which reloads the helper.  Since then Dask scatters the problem as the bytes the study
+pickled and their digest (``PackedProblem``), and a worker compares digests, never its own
+pickle of a copy.  0 cold runs in 10 fresh clusters after; but before it other loops had 0 in
+29 (the rate moves with the hour, like this VM's speed), so the counts alone do not prove it.
+(2) The kernels side by side: two processes each holding the dome (one thread), timing 30
+back-substitutions, residuals and products with the Jacobian and 3 assemblies and
+refactorisations, alone and both at once: back-substitution 23-26 ms alone, 28-31 ms side by
+side (+15-25 %); residual 73-75 against 75-79 ms; product 30-32 against 32 ms; assembly
+1.9-2.0 s either way.  A chord step (a residual and a back-substitution, ~100 ms) costs ~5 %
+more side by side, not the 30-45 % above.  (3) The runs, serial against 2 workers on the same
+8 points: 49 against 57 Newton iterations, 8.1 against 8.9 s of the runs' own time (0.166
+against 0.156 s an iteration): what the runs lose side by side is the 16 % more chord steps of
+warm starts from each worker's half-dense chain of states.  (4) The lanes: the two workers'
+runs took 3.7 and 5.3 s of their own time (the batch 5.3 s): the fixed assignment that keeps a
+study's bits the same on the same workers (``workers_of_runs``) leaves one worker idle 1.6 s.
+Without the imbalance this batch would take 4.5 s (1.8x); with it, 1.53x.  So the 1.6x needs
+fewer chord steps per warm start or a balanced assignment, not faster kernels.  After the
+change, ``--recommended --repeat 3 --two-only`` twice (the runs' Newton iterations printed
+since): medians **1.37x** (1.42, 1.37, 1.11; the machine check did 1.71x that hour) and
+**1.54x** (1.75, 1.54, 1.35), not met; no cold run in the six 2-worker batches, each with 57
+Newton iterations against the serial batch's 49; the 2-worker batches took 4.5-5.8 s, the
+serial ones 6.4-8.0 s for the same 49 iterations (0.131-0.164 s each, side by side
+0.146-0.154 s): the ratio moves with this VM's speed during the serial batch.
 """
 
 from __future__ import annotations
@@ -266,13 +297,18 @@ def _batch(
 
 
 def _where(records: list[Any]) -> str:
-    """Where a batch's time went: the runs' own wall times, their fresh Jacobians and the
-    assembly time per Jacobian (the same work alone and side by side)."""
+    """Where a batch's time went: the runs' own wall times, their Newton iterations (a warm
+    start from a farther state takes more) and the time per iteration (the same work alone and
+    side by side), their fresh Jacobians and the assembly time per Jacobian."""
     own = sum(r.time for r in records)
+    its = sum(int(r.diagnostics.get("newton_iterations", 0)) for r in records)
     jac = sum(int(r.diagnostics.get("jacobians", 0)) for r in records)
     asm = sum(float(r.diagnostics.get("assembly_time", 0.0)) for r in records)
     per = f"{asm / jac:.2f} s assembly per Jacobian" if jac else "no Jacobian"
-    return f"runs' own time {own:.1f} s, {jac} fresh Jacobians, {per}"
+    per_it = f" ({own / its:.3f} s each)" if its else ""
+    return (
+        f"runs' own time {own:.1f} s, {its} Newton iterations{per_it}, {jac} fresh Jacobians, {per}"
+    )
 
 
 #: a pure-Python loop that counts for a given number of seconds of wall time

@@ -52,7 +52,10 @@ Every run is a task that evaluates in a child process of the worker
 child, not the worker, and a run that crashes its process costs the child only, instead of
 the worker and every other task on it (Dask would also retry a task whose worker died, three
 times by default).  The problem is
-scattered to the workers once; each task sends back only the record.
+scattered to the workers once, as the bytes of its pickle and their digest
+(:class:`~fbia.execution.isolation.PackedProblem`: the digest, not the object a worker holds,
+tells a worker's runner that a task's problem is the one its helper has loaded); each task
+sends back only the record.
 """
 
 from __future__ import annotations
@@ -73,7 +76,7 @@ from ..core.extras import require
 from ..core.problem import Evaluable, Evaluation
 from .cluster_options import check_cluster_options
 from .evaluator import BatchEvaluator, Job
-from .isolation import RunOutcome, isolation_mode, run_isolated_or_here, run_view
+from .isolation import PackedProblem, RunOutcome, isolation_mode, run_isolated_or_here
 from .local_executors import workers_ignore_sigint, workers_of_runs
 from .resources import check_workers
 
@@ -95,7 +98,7 @@ CLUSTERS = ("local", *JOBQUEUE_CLUSTERS)
 
 
 def _task(
-    problem: Evaluable,
+    problem: PackedProblem,
     x: dict[str, float],
     workdir: str,
     index: int,
@@ -230,7 +233,10 @@ class DaskExecutor:
 
     def _problem_on_cluster(self, problem: Evaluable) -> Any:
         if self._scattered is None or self._scattered[0] is not problem:
-            data = self.client.scatter(run_view(problem), broadcast=True, hash=False)
+            # as bytes: a worker may rebuild its copy between tasks, and the bytes (with
+            # their digest) stay the problem's identity there (PackedProblem)
+            packed = PackedProblem.pack(problem)
+            data = self.client.scatter(packed, broadcast=True, hash=False)
             self._scattered = (problem, data)
         return self._scattered[1]
 

@@ -36,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import hashlib
+import logging
 import os
 import pickle
 import signal
@@ -57,6 +58,7 @@ from .isolation_wire import recv, send
 
 __all__ = [
     "IsolatedRunner",
+    "PackedProblem",
     "isolation_mode",
     "RunOutcome",
     "evaluate_here",
@@ -64,6 +66,8 @@ __all__ = [
     "run_view",
     "worker_label",
 ]
+
+logger = logging.getLogger(__name__)
 
 _KILL_WAIT = 10.0  # s to wait for the helper to confirm a killed run before replacing it
 
@@ -186,6 +190,41 @@ def run_view(problem: Evaluable) -> Evaluable:
     return view
 
 
+@dataclass(frozen=True)
+class PackedProblem:
+    """A problem as its workers receive it: :func:`run_view` pickled once, by the caller, and
+    the SHA-256 digest of those bytes, which is the problem's identity on the workers.
+
+    A Dask worker may hand a task a rebuilt copy of the scattered problem, and a rebuilt copy
+    need not pickle to the same bytes as the first (its sets and caches rebuilt in another
+    order): the runner then took it for another problem and reloaded its helper, and the next
+    run started cold -- one run from rest among warm ones (a 2-worker batch of 3-D runs,
+    benchmarks/bench_dask_3d.py).  Bytes travel unchanged, so a worker compares digests, never
+    objects or its own pickles.
+    """
+
+    blob: bytes
+    digest: bytes
+
+    @classmethod
+    def pack(cls, problem: Evaluable) -> PackedProblem:
+        blob = pickle.dumps(run_view(problem), protocol=pickle.HIGHEST_PROTOCOL)
+        return cls(blob, hashlib.sha256(blob).digest())
+
+    def unpack(self) -> Evaluable:
+        """The problem, loaded once per process and digest: the runs of a worker that are
+        not isolated share one model (its warm starts), whichever copy of the bytes came."""
+        cached = _UNPACKED.get(self.digest)
+        if cached is None:
+            _UNPACKED.clear()  # one problem at a time: a study's next one replaces it
+            cached = _UNPACKED[self.digest] = pickle.loads(self.blob)
+        return cached
+
+
+#: the problem :meth:`PackedProblem.unpack` loaded in this process, by digest
+_UNPACKED: dict[bytes, Evaluable] = {}
+
+
 # -- the caller's side ---------------------------------------------------------------------------
 class IsolatedRunner:
     """Runs evaluations one at a time, each in a forked child of a helper process, and kills
@@ -200,7 +239,7 @@ class IsolatedRunner:
         self._proc: subprocess.Popen[bytes] | None = None
         self._jobs: int | None = None
         self._answers: int | None = None
-        self._problem: Evaluable | None = None
+        self._problem: Evaluable | PackedProblem | None = None
         self._digest: bytes | None = None  # of the problem the helper holds
 
     @property
@@ -226,20 +265,21 @@ class IsolatedRunner:
         self._problem, self._digest = None, None
         send(job_w, ("init", list(sys.path)))
 
-    def _load(self, problem: Evaluable) -> str | None:
+    def _load(self, problem: Evaluable | PackedProblem) -> str | None:
         """Start the helper if none runs and give it ``problem`` unless it has it; returns the
         helper's message if it cannot load the problem (e.g. cannot import the model)."""
         if self._proc is not None and self._problem is problem:
             return None
-        blob = pickle.dumps(run_view(problem), protocol=pickle.HIGHEST_PROTOCOL)
-        digest = hashlib.sha256(blob).digest()
+        packed = problem if isinstance(problem, PackedProblem) else PackedProblem.pack(problem)
+        blob, digest = packed.blob, packed.digest
         if self._proc is not None and digest == self._digest:
-            # the same problem in another object (a Dask worker may rebuild its copy of the
-            # scattered problem between tasks): the helper keeps its model, with the warm
-            # states and the run process's factorisation.  Reloading it there made a cold run
-            # of 17-25 s among warm ones of 1-5 s (3-D dome, benchmarks/bench_dask_3d.py).
+            # the same problem in another object: the helper keeps its model, with the warm
+            # states and the run process's factorisation (a reload there made a cold run of
+            # 17-25 s among warm ones of 1-5 s: 3-D dome, benchmarks/bench_dask_3d.py)
             self._problem = problem
             return None
+        if self._proc is not None:
+            logger.info("the isolated runs' helper loads another problem: its warm states go")
         for _attempt in (1, 2):  # a helper that died between runs is replaced once
             if self._proc is None:
                 self._start()
@@ -262,7 +302,7 @@ class IsolatedRunner:
 
     def run(
         self,
-        problem: Evaluable,
+        problem: Evaluable | PackedProblem,
         x: dict[str, float],
         workdir: str,
         index: int,
@@ -281,7 +321,7 @@ class IsolatedRunner:
 
     def _run(
         self,
-        problem: Evaluable,
+        problem: Evaluable | PackedProblem,
         x: dict[str, float],
         workdir: str,
         index: int,
@@ -407,7 +447,7 @@ def thread_runner() -> IsolatedRunner:
 
 
 def run_isolated_or_here(
-    problem: Evaluable,
+    problem: Evaluable | PackedProblem,
     x: dict[str, float],
     workdir: str,
     index: int,
@@ -417,4 +457,6 @@ def run_isolated_or_here(
     """What a worker does with one run: in a child of its thread's helper, or in itself."""
     if isolate:
         return thread_runner().run(problem, x, workdir, index, timeout)
+    if isinstance(problem, PackedProblem):
+        problem = problem.unpack()
     return evaluate_here(problem, x, workdir, index)

@@ -93,3 +93,50 @@ def test_an_equal_problem_in_another_object_keeps_the_helpers_warm_model(tmp_pat
     assert same.diagnostics["warm_start"] is True and helper_same == helper
     assert same.diagnostics["newton_iterations"] < first.diagnostics["newton_iterations"]
     assert other.diagnostics["warm_start"] is False
+
+
+def test_a_packed_problem_is_known_by_its_bytes_on_the_worker(tmp_path, monkeypatch):
+    """Dask scatters the problem as a :class:`PackedProblem` (the bytes the study pickled and
+    their digest).  A worker's rebuilt copy is then the same problem without pickling it again
+    there (a rebuilt copy need not pickle to the same bytes: that reloaded the helper and made
+    a cold run among warm ones), isolated or not: runs in the worker itself share one model."""
+    import pickle
+
+    from fbia.execution import isolation
+    from fbia.execution.isolation import PackedProblem, run_isolated_or_here
+
+    truth = fbia.forward_model("ale_fsi", **COARSE)
+    obs = fbia.synthetic_observations(
+        truth, {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0
+    )
+    problem = fbia.InverseProblem(
+        model=fbia.forward_model("ale_fsi", **COARSE),
+        measure=fbia.measure("cpp"),
+        observations=obs,
+        parameters=[fbia.Parameter("E", bounds=(100, 800))],
+        fixed={"nu": 0.3},
+        noise_std=0.001,
+    )
+    scattered = pickle.dumps(PackedProblem.pack(problem))
+
+    def refuse(cls: object, problem: object) -> None:
+        raise AssertionError("a worker pickled the problem again")
+
+    monkeypatch.setattr(PackedProblem, "pack", classmethod(refuse))
+    for isolate in (True, False):
+        records = [
+            run_isolated_or_here(
+                pickle.loads(scattered),  # each task another copy of the same bytes
+                {"E": 350.0 + k},
+                str(tmp_path / f"{isolate}{k}"),
+                k,
+                None,
+                isolate,
+            ).record
+            for k in range(2)
+        ]
+        assert all(r.ok for r in records), [r.message for r in records]
+        assert records[0].diagnostics["warm_start"] is False
+        assert records[1].diagnostics["warm_start"] is True
+    isolation.thread_runner().stop()
+    assert problem.model.warm_state() == []  # the study's own model never ran
