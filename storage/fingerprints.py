@@ -30,9 +30,11 @@ from __future__ import annotations
 import ast
 import hashlib
 import importlib.metadata
+import io
 import json
 import os
 import sys
+import tokenize
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -48,10 +50,14 @@ from ..core.problem import InverseProblem, jsonable
 from ..core.protocols import ForwardModelBase, MeasureBase
 
 __all__ = [
+    "CODE_PREFIX",
     "canonical",
     "class_code_digest",
     "code_digest",
     "code_digest_as_stored",
+    "code_digest_like",
+    "code_text",
+    "digest_kind",
     "as_keyed_now",
     "comparison_key",
     "comparison_part",
@@ -243,28 +249,31 @@ def as_keyed_now(
 
 # -- the model plugin's source -------------------------------------------------------------------
 def code_digest(obj: Any) -> dict[str, Any]:
-    """The source of plugin ``obj``'s code: the class, the SHA-256 of each file of it (by its
-    path relative to the plugin's folder: ``model.py``, ``../fem/newton.py``) and one SHA-256
-    over them.  The files are the class's module and the modules of the plugin's own code it
-    imports, transitively (:func:`_own_files`): editing a module of the plugin's package that
-    the model does not import (an iterator, the registration in its ``__init__.py``) keeps
-    the digest.  Code the plugin imports from elsewhere (fbia.core, numpy, NGSolve) is not
-    included: their versions are in the run's provenance.  A plugin that declares a
-    ``numerics_version`` also gets its package's version and that declaration: a new release
-    of the package that declares the same numerics keeps the stores (an edit without a new
-    version does not)."""
+    """The source of plugin ``obj``'s code: the class, the SHA-256 of each file's code (by its
+    path relative to the plugin's folder: ``model.py``, ``../fem/newton.py``; the code without
+    comments and docstrings, :func:`code_text`, so that documenting a model keeps its stores
+    and its rows of the reproductions page) and one SHA-256 over them.  The files are the
+    class's module and the modules of the plugin's own code it imports, transitively
+    (:func:`_own_files`): editing a module of the plugin's package that the model does not
+    import (an iterator, the registration in its ``__init__.py``) keeps the digest.  Code the
+    plugin imports from elsewhere (fbia.core, numpy, NGSolve) is not included: their versions
+    are in the run's provenance.  A plugin that declares a ``numerics_version`` also gets its
+    package's version and that declaration: a new release of the package that declares the
+    same numerics keeps the stores (an edit without a new version does not)."""
     return class_code_digest(type(obj))
 
 
-def class_code_digest(cls: type) -> dict[str, Any]:
+def class_code_digest(cls: type, kind: str = "code") -> dict[str, Any]:
     """:func:`code_digest` of an instance of ``cls`` (the digest depends on the class only):
-    what ``paper.json`` records and the reproductions page checks against the code now."""
+    what ``paper.json`` records and the reproductions page checks against the code now.
+    ``kind = "bytes"``: of the files' bytes, as fbia recorded it before documentation left the
+    digest (:func:`code_digest_like`)."""
     name = f"{cls.__module__}.{cls.__qualname__}"
     source = getattr(sys.modules.get(cls.__module__), "__file__", None)
     if source is None:
         return {"class": name, "files": {}, "sha256": ""}
     root, paths = _own_files(cls.__module__, Path(source).resolve())
-    files = {Path(os.path.relpath(p, root)).as_posix(): _file_sha(p) for p in paths}
+    files = {Path(os.path.relpath(p, root)).as_posix(): _file_sha(p, kind) for p in paths}
     files = dict(sorted(files.items()))
     return {"class": name, "files": files, "sha256": _sha(canonical(files)), **_numerics(cls)}
 
@@ -272,10 +281,32 @@ def class_code_digest(cls: type) -> dict[str, Any]:
 def code_digest_as_stored(
     stored: Mapping[str, Any], obj: Any, code: dict[str, Any]
 ) -> dict[str, Any]:
-    """``code`` (``obj``'s :func:`code_digest`), or when ``stored`` is a digest of fbia before
-    per-file digests (its ``files`` a folder name), ``obj``'s digest of that kind: so a
-    store of a plugin whose folder is unchanged keeps its runs after the upgrade."""
-    return _folder_digest(obj) if isinstance(stored.get("files"), str) else code
+    """``code`` (``obj``'s :func:`code_digest`), or when ``stored`` is a digest of an earlier
+    kind (:func:`digest_kind`), ``obj``'s digest of that kind: so a store of a plugin whose
+    files are unchanged keeps its runs after the upgrade (and records the new kind)."""
+    kind = digest_kind(stored)
+    return code if kind == "code" else code_digest_like(stored, type(obj))
+
+
+def digest_kind(stored: Mapping[str, Any]) -> str:
+    """How a recorded code digest was made: ``"folder"`` (fbia before per-file digests: one
+    SHA-256 of the plugin's folder, ``files`` its name), ``"bytes"`` (per file, of its bytes:
+    fbia before documentation left the digest) or ``"code"`` (per file, of its code alone,
+    :data:`CODE_PREFIX` before each)."""
+    files = stored.get("files")
+    if isinstance(files, str):
+        return "folder"
+    values = files.values() if isinstance(files, Mapping) else []
+    return "code" if all(str(v).startswith(CODE_PREFIX) for v in values) else "bytes"
+
+
+def code_digest_like(stored: Mapping[str, Any], cls: type) -> dict[str, Any]:
+    """The digest of ``cls``'s code now, of the kind ``stored`` was made (:func:`digest_kind`):
+    a record of an earlier fbia is compared with the same files read its way."""
+    kind = digest_kind(stored)
+    if kind == "folder":
+        return _folder_digest(cls)
+    return class_code_digest(cls, kind)
 
 
 def _declared_numerics(cls: type) -> str | None:
@@ -292,8 +323,63 @@ def _numerics(cls: type) -> dict[str, str]:
     return {"version": _package_version(cls), "numerics": str(declared)}
 
 
-def _file_sha(path: Path) -> str:
-    return _bytes_digest(path) or "(unreadable)"
+#: The prefix of a file's digest of its code alone (:func:`code_text`); a recorded digest
+#: without it is of the file's bytes (:func:`digest_kind`).
+CODE_PREFIX = "code:"
+
+
+def _file_sha(path: Path, kind: str = "code") -> str:
+    if kind == "bytes":
+        return _bytes_digest(path) or "(unreadable)"
+    try:
+        source = path.read_bytes()
+    except OSError:
+        return f"{CODE_PREFIX}(unreadable)"
+    text = code_text(source) if path.suffix == ".py" else None
+    return CODE_PREFIX + hashlib.sha256(source if text is None else text).hexdigest()
+
+
+def code_text(source: bytes) -> bytes | None:
+    """A Python module's code without its documentation: the source with every comment and
+    every docstring (of the module, its classes and functions) cut out, trailing blanks and
+    empty lines dropped; None when it does not parse (its bytes are digested then).
+
+    What a run computes does not depend on them, so a documented plugin keeps the runs of
+    its stores and its rows of the reproductions page.  Everything else stays, layout
+    included: a string that is not a docstring (an error message, an option's description) is
+    code, and so is indentation.  Comments come from :mod:`tokenize`, docstrings from
+    :mod:`ast`, both by their positions in the text, which do not change between Python
+    versions as the dump of a syntax tree does."""
+    try:
+        tree = ast.parse(source)
+        tokens = list(tokenize.tokenize(io.BytesIO(source).readline))
+    except (SyntaxError, ValueError, tokenize.TokenError):
+        return None
+    lines = source.decode(tokens[0].string if tokens else "utf-8").splitlines()
+    cuts: list[tuple[int, int, int, int]] = [  # (line, column, end line, end column), 1-based lines
+        (*tok.start, *tok.end) for tok in tokens if tok.type == tokenize.COMMENT
+    ]
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        first = node.body[0] if node.body else None
+        if (
+            isinstance(first, ast.Expr)
+            and isinstance(first.value, ast.Constant)
+            and isinstance(first.value.value, str)
+            and first.end_lineno is not None
+            and first.end_col_offset is not None
+        ):
+            # ast's columns count UTF-8 bytes, tokenize's characters: as characters
+            start = len(lines[first.lineno - 1].encode()[: first.col_offset].decode())
+            last = lines[first.end_lineno - 1].encode()
+            end = len(last[: first.end_col_offset].decode())
+            cuts.append((first.lineno, start, first.end_lineno, end))
+    for line, col, end_line, end_col in sorted(cuts, reverse=True):
+        head, tail = lines[line - 1][:col], lines[end_line - 1][end_col:]
+        lines[line - 1 : end_line] = [head + tail]
+    kept = [line.rstrip() for line in lines if line.strip()]
+    return "\n".join(kept).encode()
 
 
 def _own_files(module: str, path: Path) -> tuple[Path, list[Path]]:
@@ -402,11 +488,12 @@ def _module_file(name: str, folders: Mapping[str, Path]) -> Path | None:
 
 
 def _folder_digest(obj: Any) -> dict[str, Any]:
-    """The code digest of fbia before per-file digests, kept to check the stores it wrote:
+    """The code digest of fbia before per-file digests (of a plugin object or its class),
+    kept to check the stores it wrote:
     the SHA-256 of every ``.py`` file of the folder of the class's module (the module alone
     when it is a top-level module or a module of ``fbia`` or ``fbia.plugins``), and of
     ``plugins/fem/`` for fbia's own models; ``files`` names the folder."""
-    cls = type(obj)
+    cls = obj if isinstance(obj, type) else type(obj)
     module = sys.modules.get(cls.__module__)
     source = getattr(module, "__file__", None)
     name = f"{cls.__module__}.{cls.__qualname__}"
@@ -434,7 +521,7 @@ def _folder_digest(obj: Any) -> dict[str, Any]:
             h.update(b"(unreadable)")
         h.update(b"\0")
     shown = str(root) if len(files) > 1 else str(path)
-    return {"class": name, "files": shown, "sha256": h.hexdigest(), **_numerics(type(obj))}
+    return {"class": name, "files": shown, "sha256": h.hexdigest(), **_numerics(cls)}
 
 
 # -- fingerprints --------------------------------------------------------------------------------

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import logging
 import math
 import os
 import re
@@ -46,7 +47,7 @@ from typing import Any
 
 from ..core.errors import ConfigError
 from ..core.problem import Result
-from ..storage.fingerprints import class_code_digest, code_digest
+from ..storage.fingerprints import class_code_digest, code_digest, code_digest_like, digest_kind
 from .paper import DRAWS_RULE, KINDS, Comparison, compare, verdict
 from .provenance import source_commit
 from .study import Study
@@ -66,6 +67,8 @@ __all__ = [
 ]
 
 RECORD_NAME = "paper.json"
+
+logger = logging.getLogger(__name__)
 #: the section of an example's README that the summary page copies (fresh-run wall times)
 TIMES_HEADING = "Measured times"
 
@@ -209,7 +212,7 @@ def code_changes(code: dict[str, Any]) -> list[str]:
         module, _, qualname = name.rpartition(".")
         try:
             cls = getattr(importlib.import_module(module), qualname)
-            now = class_code_digest(cls)
+            now = code_digest_like(digest, cls)  # a record of an earlier fbia: its kind
         except (ImportError, AttributeError, ValueError):
             changed.append(f"{role} ({name} is gone)")
             continue
@@ -219,6 +222,27 @@ def code_changes(code: dict[str, Any]) -> list[str]:
         files = sorted(f for f in set(old) | set(new) if old.get(f) != new.get(f))
         changed.append(f"{role} ({', '.join(files) or 'its version'})")
     return changed
+
+
+def code_in_current_form(path: Path, code: dict[str, Any]) -> dict[str, Any]:
+    """``code`` (a record's digests, by role, of code that has not changed since:
+    :func:`code_changes` is empty) in this fbia's form, written back to the record ``path``
+    where it was of an earlier kind (the files' bytes, :func:`~fbia.storage.fingerprints.
+    digest_kind`): the same files, digested without their documentation, so that documenting
+    the code later keeps the row "unchanged", as a store records the new form when it is
+    bound."""
+    old = {role: d for role, d in code.items() if digest_kind(d) != "code"}
+    if not old:
+        return code
+    current = dict(code)
+    for role, digest in old.items():
+        module, _, qualname = str(digest.get("class", "")).rpartition(".")
+        current[role] = class_code_digest(getattr(importlib.import_module(module), qualname))
+    data = json.loads(path.read_text(encoding="utf-8"))
+    data["code"] = current
+    path.write_text(json.dumps(data, indent=1), encoding="utf-8")
+    logger.info("%s: code digests recorded without documentation (the files are unchanged)", path)
+    return current
 
 
 def paper_title(study: Study, record: PaperRecord) -> str:
@@ -370,6 +394,9 @@ def write_summary(target: str | Path, folders: Sequence[str | Path]) -> tuple[Pa
     ]
     root = target.parent.resolve()
     changes = {id(rec): code_changes(rec.code) for _, rec in records}
+    for path, rec in records:
+        if not changes[id(rec)]:
+            code_in_current_form(path, rec.code)
     for _, rec in records:
         good, judged = verdict(rec.rows)
         agree = "stale" if rec.stale else f"{good} / {judged}"

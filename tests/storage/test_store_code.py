@@ -149,7 +149,7 @@ def test_the_code_digest_covers_what_the_model_imports_and_only_it(plugin):
     assert {"model.py", "solver.py", "forms.py", "../fem/flow_cell.py", "../fem/newton.py"} <= files
     # not the registration nor the benchmark geometries, which the model does not import
     assert not files & {"__init__.py", "turek_hron.py", "schaefer_turek_3d.py"}
-    assert all(len(sha) == 64 for sha in digest["files"].values())
+    assert all(sha.startswith("code:") and len(sha) == 5 + 64 for sha in digest["files"].values())
     assert len(digest["sha256"]) == 64
     analytic = code_digest(fbia.forward_model("analytic_mound_2d"))["files"]
     assert set(analytic) == {"mound_2d.py", "_mechanics.py"}  # not mound_3d.py
@@ -364,10 +364,10 @@ def test_editing_a_module_the_model_does_not_import_keeps_its_runs(tmp_path, pac
     }
     assert _evaluate(path, _problem(package(unrelated))) == ({0, 1, 2}, 3)
     # a module the model imports changes: refused, naming that file
-    helper = {"helper.py": "SCALE = 1.0  # the same value\n"}
+    helper = {"helper.py": "SCALE = 1.0 * 1.0\n"}
     with pytest.raises(fbia.ConfigError, match=r"its source changed since: helper\.py\)"):
         _evaluate(path, _problem(package(helper)))
-    lazy = {"lazy.py": PACKAGE["lazy.py"] + "# edited\n"}
+    lazy = {"lazy.py": PACKAGE["lazy.py"] + "EDITED = True\n"}
     with pytest.raises(fbia.ConfigError, match=r"its source changed since: lazy\.py\)"):
         _evaluate(path, _problem(package(lazy)))
     # the model imports one more module, then no longer: added and removed files named
@@ -406,3 +406,63 @@ def test_a_store_with_a_folder_digest_keeps_its_runs_while_the_folder_is_unchang
     assert _evaluate(path, _problem(edited), reuse_changed_code=True) == ({0, 1, 2}, 3)
     assert _stored_code(path) == code_digest(edited())
     assert _evaluate(path, _problem(edited)) == ({0, 1, 2}, 3)
+
+
+def test_documenting_the_model_keeps_its_runs_and_a_store_of_byte_digests_is_upgraded(
+    tmp_path, package
+):
+    """The digest is of each file's code without its comments and docstrings
+    (:func:`~fbia.storage.fingerprints.code_text`): documenting a model keeps its stores; a
+    string that is not a docstring, or the layout of the code, is code.  A store that recorded
+    the files' bytes (fbia before) keeps its runs while the bytes are unchanged and records
+    the new form, after which documenting keeps them too."""
+    from fbia.storage import fingerprints
+
+    path = tmp_path / "s.sqlite"
+    assert _evaluate(path, _problem(package())) == (set(), 3)
+    documented = {
+        "helper.py": '"""The scale."""\n\nSCALE = 1.0  # of the inputs\n\n# the end\n',
+        "lazy.py": 'def shift(parameters):\n    """Shift them."""\n    return dict(parameters)\n',
+    }
+    assert _evaluate(path, _problem(package(documented))) == ({0, 1, 2}, 3)
+    for code in ('SCALE = 1.0\nNOTE = "a string"\n', "if True:\n    SCALE = 1.0\n"):
+        with pytest.raises(fbia.ConfigError, match=r"its source changed since: helper\.py\)"):
+            _evaluate(path, _problem(package({"helper.py": code})))
+    # a store of the bytes' digests, as fbia before wrote it
+    bytes_digest = fingerprints.class_code_digest(package(), kind="bytes")
+    assert fingerprints.digest_kind(bytes_digest) == "bytes"
+    _store_code(path, bytes_digest)
+    assert _evaluate(path, _problem(package())) == ({0, 1, 2}, 3)
+    assert _stored_code(path) == code_digest(package()())  # rewritten in the new form
+    assert _evaluate(path, _problem(package(documented))) == ({0, 1, 2}, 3)
+    _store_code(path, bytes_digest)  # the same bytes' digest, the files since documented
+    with pytest.raises(fbia.ConfigError, match=r"since: helper\.py, lazy\.py\)"):
+        _evaluate(path, _problem(package(documented)))
+
+
+def test_code_text_drops_comments_and_docstrings_only():
+    from fbia.storage.fingerprints import code_text
+
+    source = (
+        '"""Module doc."""\n'
+        "import os  # a comment\n\n"
+        "class A:\n"
+        '    """Class doc\n    over lines: # not a comment."""\n\n'
+        '    x = "not a doc"  # trailing\n'
+        "    def f(self):  # c\n"
+        '        """f doc, é"""\n'
+        '        return "# not a comment, é"\n'
+        'def g(): """one line"""; return 1\n'
+    )
+    assert (
+        code_text(source.encode())
+        == (
+            "import os\n"
+            "class A:\n"
+            '    x = "not a doc"\n'
+            "    def f(self):\n"
+            '        return "# not a comment, é"\n'
+            "def g(): ; return 1"
+        ).encode()
+    )
+    assert code_text(b"def broken(:\n") is None  # does not parse: its bytes are digested

@@ -483,15 +483,29 @@ def test_the_summary_marks_a_row_whose_code_changed_since_it_was_made(tmp_path, 
         "unchanged |" in page and "the code of its model, measure and iterator is unchanged" in page
     )
     data = json.loads(path.read_text())
+    recorded = json.loads(json.dumps(data["code"]))
     files = data["code"]["model"]["files"]
     first = sorted(files)[0]
-    files[first] = "0" * 64
+    files[first] = "code:" + "0" * 64
     data["code"]["model"]["sha256"] = "0" * 64
     path.write_text(json.dumps(data))
     assert main(["reproductions", "docs/summary.md", "."]) == 0
     page = (tmp_path / "docs" / "summary.md").read_text()
     assert "**changed since: model** |" in page
     assert f"**The code has changed since**: model ({first})" in page
+    # a record of an earlier fbia, of the files' bytes: unchanged while they are, and
+    # recorded in the current form (without documentation) by the page
+    from fbia.storage.fingerprints import code_digest_like
+
+    data["code"] = {
+        role: code_digest_like({"files": {"x": "0" * 64}}, _class_of(d))
+        for role, d in recorded.items()
+    }
+    path.write_text(json.dumps(data))
+    assert main(["reproductions", "docs/summary.md", "."]) == 0
+    page = (tmp_path / "docs" / "summary.md").read_text()
+    assert "the code of its model, measure and iterator is unchanged" in page
+    assert json.loads(path.read_text())["code"] == recorded
     del data["code"]
     path.write_text(json.dumps(data))
     assert main(["reproductions", "docs/summary.md", "."]) == 0
@@ -663,3 +677,10 @@ def test_the_summary_counts_each_published_number_once(tmp_path):
     assert "| [many](#many) | Paper A, Table 2 | 1 / 2 |" in text
     assert "In all: 0 of 2 judged published numbers agree (0 %). Each published number is " in text
     assert "counted once (4 judgements over the studies)" in text
+
+
+def _class_of(digest: dict) -> type:
+    import importlib
+
+    module, _, name = digest["class"].rpartition(".")
+    return getattr(importlib.import_module(module), name)
