@@ -7,9 +7,13 @@ computed from the same J, without new runs.  μ is chosen by a trust region on �
 short enough, which makes the last iterations converge fast even when J is badly
 conditioned.  D is the largest Jacobian column norms seen so far, so parameters of very
 different magnitude (E ~ 400 Pa, ν ~ 0.3, growth factors 1e4 and 1e-2) are treated alike.
-A step that leaves the bounds is projected onto them or shortened to them (whichever the
-linear model prefers), and a parameter stays at its bound while the gradient pushes it
-outward.  A failed forward run is a declined step (the trust region shrinks); a failed
+A step that would cross a bound from farther than a tenth of the range goes halfway to it
+(:func:`~fbia.iterators.lm.trust_region.step_back`: a bound is where forward models often have
+no solution); a step that leaves the bounds from nearer is projected onto them or shortened to
+them (whichever the linear model prefers), and a parameter stays at its bound while the
+gradient pushes it outward.  After a declined step the trust region shrinks below that step's
+length (MINPACK shrinks from ten times it, so that a declined Gauss-Newton step is asked for
+again, unchanged).  A failed forward run is a declined step (the trust region shrinks); a failed
 perturbed run is repeated on the other side of x, and a parameter whose column still fails
 is held fixed for one step.  Relative criteria on the reduction of ‖r‖ (ftol), on the
 step (xtol) and on the angle between r and the columns of J (gtol) complement eq. 29.
@@ -290,7 +294,7 @@ class RobustChain(LMChain):
                 ratio = actual / pred if pred > 0.0 else 0.0
                 if self.iterations == first_iteration and plen > 0.0:
                     radius = min(radius, plen)
-                # trust-region update of MINPACK's lmdif
+                # trust-region update of MINPACK's lmdif (but for the shrink, below)
                 if ratio <= 0.25:
                     shrink = 0.5 if actual >= 0.0 else 0.5 * dirder / (dirder + 0.5 * actual)
                     if rt is None:

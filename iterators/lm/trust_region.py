@@ -114,7 +114,9 @@ def step_back(x: FloatArray, p: FloatArray, lower: FloatArray, upper: FloatArray
     """The step ``p`` from ``x`` shortened, along its direction, to :data:`STEP_BACK` of the
     way to the first bound it would cross from farther than :data:`NEAR_BOUND` of that
     parameter's range; ``p`` itself (the same object) when it crosses no such bound.  A step
-    that stays inside the box, or crosses only near bounds, is left to :func:`within_bounds`."""
+    that stays inside the box, or crosses only near bounds, is left to :func:`within_bounds`.
+    A parameter with an infinite bound has an infinite range: no bound of it is ever "far"
+    (its steps are projected or shortened as before the step-back)."""
     xt = x + p
     width = upper - lower
     with np.errstate(invalid="ignore"):  # inf - inf of an unbounded parameter: not far
