@@ -238,9 +238,13 @@ def code_in_current_form(path: Path, code: dict[str, Any]) -> dict[str, Any]:
     for role, digest in old.items():
         module, _, qualname = str(digest.get("class", "")).rpartition(".")
         current[role] = class_code_digest(getattr(importlib.import_module(module), qualname))
-    data = json.loads(path.read_text(encoding="utf-8"))
-    data["code"] = current
-    path.write_text(json.dumps(data, indent=1), encoding="utf-8")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        data["code"] = current
+        path.write_text(json.dumps(data, indent=1), encoding="utf-8")
+    except OSError as exc:  # a record that cannot be written keeps the old form, and its row
+        logger.warning("%s: its code digests stay in the old form (%s)", path, exc)
+        return code
     logger.info("%s: code digests recorded without documentation (the files are unchanged)", path)
     return current
 
