@@ -160,9 +160,10 @@ tangent solves (exact solves, and the next run's chord): 8.40 / 9.62 s against 8
 (2) the refinement's tolerance: 1e-4 on the correction gave medians 9.66 against 11.83 s over
 six pairs, but a stop on the estimated error (correction x q / (1 - q) <= 1e-6, q the last
 contraction; the tangent tests pass) against the 1e-7 of now, six more pairs, 10.21 against
-9.73 s with 31 % fewer sweeps (4176 against 6084): a sweep costs ~1.4 ms, so the first pairs'
-gap was this VM's drift, not the sweeps.  What is left is the Jacobian assembly of each
-tangent (a third of a run) against scipy's runs of chord steps.
+9.73 s with 31 % fewer sweeps (4176 against 6084): a sweep costs ~1.4 ms (~0.45 s per
+benchmark saved at most), and the 1e-7 runs of the second six pairs took 9.0-10.3 s, so the
+first pairs' gap was most likely this VM's drift, not the sweeps.  What is left is the
+Jacobian assembly of each tangent (a third of a run) against scipy's runs of chord steps.
 """
 
 from __future__ import annotations
