@@ -196,11 +196,11 @@ class PackedProblem:
     the SHA-256 digest of those bytes, which is the problem's identity on the workers.
 
     A Dask worker may hand a task a rebuilt copy of the scattered problem, and a rebuilt copy
-    need not pickle to the same bytes as the first (its sets and caches rebuilt in another
-    order): the runner then took it for another problem and reloaded its helper, and the next
-    run started cold -- one run from rest among warm ones (a 2-worker batch of 3-D runs,
-    benchmarks/bench_dask_3d.py).  Bytes travel unchanged, so a worker compares digests, never
-    objects or its own pickles.
+    need not pickle to the same bytes as the first (a debug loop caught one; why it differed
+    was not found): the runner then took it for another problem and reloaded its helper, and
+    the next run started cold -- one run from rest among warm ones (a 2-worker batch of 3-D
+    runs, benchmarks/bench_dask_3d.py).  Bytes travel unchanged, so a worker compares digests,
+    never objects or its own pickles.
     """
 
     blob: bytes

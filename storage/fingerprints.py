@@ -341,44 +341,68 @@ def _file_sha(path: Path, kind: str = "code") -> str:
 
 def code_text(source: bytes) -> bytes | None:
     """A Python module's code without its documentation: the source with every comment and
-    every docstring (of the module, its classes and functions) cut out, trailing blanks and
-    empty lines dropped; None when it does not parse (its bytes are digested then).
+    every docstring (of the module, its classes and functions) cut out, and the lines that
+    leaves blank, or were blank, dropped (trailing blanks too), but inside a string that is
+    not a docstring, whose text is kept as it stands; None when it does not parse (its bytes
+    are digested then).
 
     What a run computes does not depend on them, so a documented plugin keeps the runs of
     its stores and its rows of the reproductions page.  Everything else stays, layout
     included: a string that is not a docstring (an error message, an option's description) is
-    code, and so is indentation.  Comments come from :mod:`tokenize`, docstrings from
-    :mod:`ast`, both by their positions in the text, which do not change between Python
+    code, and so is indentation.  Comments come from :mod:`tokenize`, docstrings and strings
+    from :mod:`ast`, all by their positions in the text, which do not change between Python
     versions as the dump of a syntax tree does."""
     try:
         tree = ast.parse(source)
         tokens = list(tokenize.tokenize(io.BytesIO(source).readline))
     except (SyntaxError, ValueError, tokenize.TokenError):
         return None
-    lines = source.decode(tokens[0].string if tokens else "utf-8").splitlines()
-    cuts: list[tuple[int, int, int, int]] = [  # (line, column, end line, end column), 1-based lines
-        (*tok.start, *tok.end) for tok in tokens if tok.type == tokenize.COMMENT
-    ]
+    text = source.decode(tokens[0].string if tokens else "utf-8")
+    # the line breaks Python counts (not str.splitlines's form feeds and the like)
+    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+    def column(line: int, offset: int) -> int:  # ast counts UTF-8 bytes, tokenize characters
+        return len(lines[line - 1].encode()[:offset].decode())
+
+    cuts = [(*tok.start, *tok.end) for tok in tokens if tok.type == tokenize.COMMENT]
+    docstrings = set()
     for node in ast.walk(tree):
-        if not isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
-            continue
-        first = node.body[0] if node.body else None
-        if (
-            isinstance(first, ast.Expr)
-            and isinstance(first.value, ast.Constant)
-            and isinstance(first.value.value, str)
-            and first.end_lineno is not None
-            and first.end_col_offset is not None
-        ):
-            # ast's columns count UTF-8 bytes, tokenize's characters: as characters
-            start = len(lines[first.lineno - 1].encode()[: first.col_offset].decode())
-            last = lines[first.end_lineno - 1].encode()
-            end = len(last[: first.end_col_offset].decode())
-            cuts.append((first.lineno, start, first.end_lineno, end))
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            first = node.body[0] if node.body else None
+            if (
+                isinstance(first, ast.Expr)
+                and isinstance(first.value, ast.Constant)
+                and isinstance(first.value.value, str)
+                and first.end_lineno is not None
+                and first.end_col_offset is not None
+            ):
+                docstrings.add(id(first.value))
+                cuts.append(
+                    (
+                        first.lineno,
+                        column(first.lineno, first.col_offset),
+                        first.end_lineno,
+                        column(first.end_lineno, first.end_col_offset),
+                    )
+                )
+    kept_as_is: set[int] = set()  # lines of a string that spans lines (not a docstring)
+    for node in ast.walk(tree):
+        last = getattr(node, "end_lineno", None)
+        if isinstance(node, ast.Constant | ast.JoinedStr) and id(node) not in docstrings:
+            if last is not None and last > node.lineno:
+                kept_as_is.update(range(node.lineno, last + 1))
     for line, col, end_line, end_col in sorted(cuts, reverse=True):
-        head, tail = lines[line - 1][:col], lines[end_line - 1][end_col:]
-        lines[line - 1 : end_line] = [head + tail]
-    kept = [line.rstrip() for line in lines if line.strip()]
+        if line == end_line:
+            lines[line - 1] = lines[line - 1][:col] + lines[line - 1][end_col:]
+        else:  # blanked, the line count kept
+            lines[line - 1] = lines[line - 1][:col]
+            lines[line : end_line - 1] = [""] * (end_line - 1 - line)
+            lines[end_line - 1] = lines[end_line - 1][end_col:]
+    kept = [
+        line if number in kept_as_is else line.rstrip()
+        for number, line in enumerate(lines, start=1)
+        if number in kept_as_is or line.strip()
+    ]
     return "\n".join(kept).encode()
 
 

@@ -466,3 +466,11 @@ def test_code_text_drops_comments_and_docstrings_only():
         ).encode()
     )
     assert code_text(b"def broken(:\n") is None  # does not parse: its bytes are digested
+    # a string that spans lines is code, blank lines and trailing blanks included
+    template = 'T = """a  \n\nb"""  # c\n'
+    assert code_text(template.encode()) == b'T = """a  \n\nb"""  '
+    assert code_text(template.replace("\n\n", "\n").encode()) != code_text(template.encode())
+    # a comment or docstring added, removed or rewrapped leaves the text as it was
+    plain = b"def f(x):\n    return x\n"
+    documented = b'def f(x):\n    """Long\n    docs."""\n    # why\n\n    return x  # x\n'
+    assert code_text(plain) == code_text(documented) == b"def f(x):\n    return x"
