@@ -18,12 +18,16 @@ The iteration (what ``ale_fsi`` needs, stiff coupled systems solved to a toleran
   chord steps (:meth:`ChordRule.costly_jacobian`) chord steps go on while the updates halve,
   and a warm start's first update is taken up to 0.3 on trust: the second update measures its
   contraction, and if it is larger than the first the first is undone before the fresh
-  Jacobian.  Measured on ``ale_fsi``'s 3-D dome (order 3, 2 threads), a fresh Jacobian costs
-  1.7 + 5.7 s (assembly, factorisation), a chord step ~0.1 s; with the default rule its LM
-  with forward differences assembled a Jacobian in nearly every run (158 s; 75 s with the
-  costly-Jacobian rule, ``benchmarks/bench_lm_tangents.py``).  On its 2-D flow cell (23 + 9
-  ms against ~3 ms) that rule gained nothing, nor where a chord step is itself an iterative
-  solve (``ale_fsi``'s ``block_gmres``: slower).  The converged state meets the tolerance either
+  Jacobian.  Measured on ``ale_fsi``'s 3-D dome (order 3, 2 threads) when the rule was made
+  (2026-11-28), a fresh Jacobian cost 1.7 + 5.7 s (assembly, factorisation), a chord step
+  ~0.1 s, and with the default rule its LM with forward differences assembled a Jacobian in
+  nearly every run (158 s; 75 s with the costly-Jacobian rule,
+  ``benchmarks/bench_lm_tangents.py``); since Pardiso factorises on the solver's threads with
+  nested dissection and only a layer of the mesh moves, about 1-2 s of assembly and 0.75 s of
+  refactorisation against 0.1-0.15 s a chord step (``benchmarks/bench_ale_fsi_3d.py``): still
+  ten to twenty chord steps.  On its 2-D flow cell (23 + 9 ms against ~3 ms) that rule gained
+  nothing, nor where a chord step is itself an iterative solve (``ale_fsi``'s
+  ``block_gmres``: slower).  The converged state meets the tolerance either
   way (a chord-converged one does not overshoot it as a quadratic Newton step does);
 * an update that leads to an inadmissible state (an inverted element, a porosity outside
   (0, 1)) is halved, up to ``max_halvings`` times (default 5);
