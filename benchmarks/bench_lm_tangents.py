@@ -112,6 +112,8 @@ Measured idle 2026-12-01 (session i), ``--dome`` twice: tangents 6 runs 30.5 / 2
 tangents 11.6 / 11.5 s), forward 34 runs 31.9 / 30.9 s, the same optima (20 s not met).  With
 the tangent refinement tolerance at 1e-4 instead of 1e-7 (monkeypatched between them): 30.1 s
 (tangents 10.6 s), the same optimum: the second saved in the tangents is inside the scatter.
+Again idle on 2026-12-01 (session j, no model code changed since): tangents 6 runs 30.8 s (the
+tangents 12.0 s), forward 34 runs 33.2 s, the same optima: 20 s not met.
 """
 
 from __future__ import annotations
