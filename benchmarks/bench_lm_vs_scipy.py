@@ -151,12 +151,13 @@ change of the model's code marks every ale_fsi row of the reproductions page as 
 
 Measured idle 2026-12-01 (session j): the whole benchmark once, fbia 100 runs 10.95 s, scipy
 296 runs 8.73 s, **1.25x (not met)**.  Where a run with its tangents goes (red and cyan,
-instrumented): the Jacobian at the converged state 26-31 ms, the two refined solves 6-7 ms
-each (9-21 sweeps for both), dR/dmu and dR/dlambda 0.4 ms each (the three solid-residual
+instrumented): the Jacobian at the converged state 24-31 ms, the two refined solves 6-7 ms
+each (4-21 sweeps for both), dR/dmu and dR/dlambda 0.4 ms each (the three solid-residual
 evaluations are not worth cutting); the runs near the optimum take 2-4 Newton iterations
-without a Jacobian and their tangents half their time.  Tried, fbia alone on the eleven starts
-in interleaved pairs, not kept: (1) factorising the Jacobian at the converged state before the
-tangent solves (exact solves, and the next run's chord): 8.40 / 9.62 s against 8.65 / 8.95 s;
+without a Jacobian and their tangents half to two thirds of their time.  Tried, fbia alone
+on the eleven starts in interleaved pairs, not kept: (1) factorising the Jacobian at the
+converged state before the tangent solves (exact solves, and the next run's chord): 8.40 /
+9.62 s against 8.65 / 8.95 s;
 (2) the refinement's tolerance: 1e-4 on the correction gave medians 9.66 against 11.83 s over
 six pairs, but a stop on the estimated error (correction x q / (1 - q) <= 1e-6, q the last
 contraction; the tangent tests pass) against the 1e-7 of now, six more pairs, 10.21 against

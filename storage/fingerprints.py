@@ -28,6 +28,7 @@ the same keys as the live problem it was made from (the store's migration relies
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 import importlib.metadata
 import io
@@ -284,8 +285,7 @@ def code_digest_as_stored(
     """``code`` (``obj``'s :func:`code_digest`), or when ``stored`` is a digest of an earlier
     kind (:func:`digest_kind`), ``obj``'s digest of that kind: so a store of a plugin whose
     files are unchanged keeps its runs after the upgrade (and records the new kind)."""
-    kind = digest_kind(stored)
-    return code if kind == "code" else code_digest_like(stored, type(obj))
+    return code if digest_kind(stored) == "code" else code_digest_like(stored, type(obj))
 
 
 def digest_kind(stored: Mapping[str, Any]) -> str:
@@ -335,8 +335,19 @@ def _file_sha(path: Path, kind: str = "code") -> str:
         source = path.read_bytes()
     except OSError:
         return f"{CODE_PREFIX}(unreadable)"
-    text = code_text(source) if path.suffix == ".py" else None
-    return CODE_PREFIX + hashlib.sha256(source if text is None else text).hexdigest()
+    return CODE_PREFIX + (_code_sha(source) if path.suffix == ".py" else _sha_bytes(source))
+
+
+def _sha_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+@functools.lru_cache(maxsize=512)
+def _code_sha(source: bytes) -> str:
+    """SHA-256 of :func:`code_text` of a module's bytes (of the bytes if it does not parse),
+    once per content in a process: the page checks 28 records against the same files."""
+    text = code_text(source)
+    return _sha_bytes(source if text is None else text)
 
 
 def code_text(source: bytes) -> bytes | None:
@@ -366,8 +377,13 @@ def code_text(source: bytes) -> bytes | None:
 
     cuts = [(*tok.start, *tok.end) for tok in tokens if tok.type == tokenize.COMMENT]
     docstrings = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+    kept_as_is: set[int] = set()  # lines of a string that spans lines (not a docstring)
+    for node in ast.walk(tree):  # breadth first: a docstring's owner before the docstring
+        last = getattr(node, "end_lineno", None)
+        if isinstance(node, ast.Constant | ast.JoinedStr) and id(node) not in docstrings:
+            if last is not None and last > node.lineno:
+                kept_as_is.update(range(node.lineno, last + 1))
+        elif isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
             first = node.body[0] if node.body else None
             if (
                 isinstance(first, ast.Expr)
@@ -385,12 +401,6 @@ def code_text(source: bytes) -> bytes | None:
                         column(first.end_lineno, first.end_col_offset),
                     )
                 )
-    kept_as_is: set[int] = set()  # lines of a string that spans lines (not a docstring)
-    for node in ast.walk(tree):
-        last = getattr(node, "end_lineno", None)
-        if isinstance(node, ast.Constant | ast.JoinedStr) and id(node) not in docstrings:
-            if last is not None and last > node.lineno:
-                kept_as_is.update(range(node.lineno, last + 1))
     for line, col, end_line, end_col in sorted(cuts, reverse=True):
         if line == end_line:
             lines[line - 1] = lines[line - 1][:col] + lines[line - 1][end_col:]

@@ -209,10 +209,8 @@ def code_changes(code: dict[str, Any]) -> list[str]:
     changed = []
     for role, digest in sorted(code.items()):
         name = str(digest.get("class", ""))
-        module, _, qualname = name.rpartition(".")
         try:
-            cls = getattr(importlib.import_module(module), qualname)
-            now = code_digest_like(digest, cls)  # a record of an earlier fbia: its kind
+            now = code_digest_like(digest, _recorded_class(digest))  # of the record's kind
         except (ImportError, AttributeError, ValueError):
             changed.append(f"{role} ({name} is gone)")
             continue
@@ -222,6 +220,13 @@ def code_changes(code: dict[str, Any]) -> list[str]:
         files = sorted(f for f in set(old) | set(new) if old.get(f) != new.get(f))
         changed.append(f"{role} ({', '.join(files) or 'its version'})")
     return changed
+
+
+def _recorded_class(digest: dict[str, Any]) -> type:
+    """The class a recorded code digest names (ImportError, AttributeError or ValueError when
+    it is gone)."""
+    module, _, qualname = str(digest.get("class", "")).rpartition(".")
+    return getattr(importlib.import_module(module), qualname)
 
 
 def code_in_current_form(path: Path, code: dict[str, Any]) -> dict[str, Any]:
@@ -236,8 +241,7 @@ def code_in_current_form(path: Path, code: dict[str, Any]) -> dict[str, Any]:
         return code
     current = dict(code)
     for role, digest in old.items():
-        module, _, qualname = str(digest.get("class", "")).rpartition(".")
-        current[role] = class_code_digest(getattr(importlib.import_module(module), qualname))
+        current[role] = class_code_digest(_recorded_class(digest))
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         data["code"] = current

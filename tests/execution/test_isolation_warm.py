@@ -15,21 +15,26 @@ pytest.importorskip("ngsolve")
 COARSE = {"mesh_size": 0.2, "interface_mesh_size": 0.06}
 
 
-def test_isolated_runs_are_meshed_once_and_warm_start_even_after_a_time_out(tmp_path):
+def _problem(parameters: list[str], noise: float = 0.001) -> fbia.InverseProblem:
+    """A coarse ale_fsi problem against a noise-free observation at E = 400 Pa, nu = 0.3,
+    its model a fresh one (``nu`` fixed at 0.3 unless it is a parameter)."""
     truth = fbia.forward_model("ale_fsi", **COARSE)
     obs = fbia.synthetic_observations(
         truth, {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0
     )
-    problem = fbia.InverseProblem(
+    bounds = {"E": (100, 800), "nu": (-0.5, 0.45)}
+    return fbia.InverseProblem(
         model=fbia.forward_model("ale_fsi", **COARSE),
         measure=fbia.measure("cpp"),
         observations=obs,
-        parameters=[
-            fbia.Parameter("E", bounds=(100, 800)),
-            fbia.Parameter("nu", bounds=(-0.5, 0.45)),
-        ],
-        noise_std=0.001,
+        parameters=[fbia.Parameter(n, bounds=bounds[n]) for n in parameters],
+        fixed={} if "nu" in parameters else {"nu": 0.3},
+        noise_std=noise,
     )
+
+
+def test_isolated_runs_are_meshed_once_and_warm_start_even_after_a_time_out(tmp_path):
+    problem = _problem(["E", "nu"])
     with IsolatedRunner() as runner:
 
         def run(k: int, E: float, timeout: float | None = None) -> fbia.Evaluation:
@@ -53,7 +58,7 @@ def test_isolated_runs_are_meshed_once_and_warm_start_even_after_a_time_out(tmp_
     assert problem.model.warm_state() == []
 
 
-def test_an_equal_problem_in_another_object_keeps_the_helpers_warm_model(tmp_path):
+def test_an_equal_problem_in_another_object_keeps_the_helpers_warm_model(tmp_path, caplog):
     """A Dask worker may rebuild its copy of the scattered problem between tasks: the runner
     sees another object of the same problem.  The helper keeps its model (warm states, the run
     process and its factorisation) instead of loading the problem afresh, which made a cold
@@ -62,24 +67,10 @@ def test_an_equal_problem_in_another_object_keeps_the_helpers_warm_model(tmp_pat
 
     from fbia.execution.isolation import run_view
 
-    truth = fbia.forward_model("ale_fsi", **COARSE)
-    obs = fbia.synthetic_observations(
-        truth, {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0
-    )
-
-    def make(noise: float) -> fbia.InverseProblem:
-        return fbia.InverseProblem(
-            model=fbia.forward_model("ale_fsi", **COARSE),
-            measure=fbia.measure("cpp"),
-            observations=obs,
-            parameters=[fbia.Parameter("E", bounds=(100, 800))],
-            fixed={"nu": 0.3},
-            noise_std=noise,
-        )
-
     # a Dask worker's copies of the scattered problem: each one rebuilt from the same bytes
-    scattered = pickle.dumps(run_view(make(0.001)))
-    with IsolatedRunner() as runner:
+    scattered = pickle.dumps(run_view(_problem(["E"])))
+    reloaded = "helper loads another problem"
+    with IsolatedRunner() as runner, caplog.at_level("INFO", logger="fbia.execution.isolation"):
 
         def run(p: object, k: int) -> tuple[fbia.Evaluation, int | None]:
             out = runner.run(p, {"E": 350.0 + k}, str(tmp_path / f"{k}"), k)
@@ -87,7 +78,9 @@ def test_an_equal_problem_in_another_object_keeps_the_helpers_warm_model(tmp_pat
 
         first, helper = run(pickle.loads(scattered), 0)
         same, helper_same = run(pickle.loads(scattered), 1)  # equal, another object
-        other, _ = run(run_view(make(0.002)), 2)  # another problem: loaded afresh, cold
+        assert reloaded not in caplog.text
+        other, _ = run(run_view(_problem(["E"], noise=0.002)), 2)  # another: loaded afresh, cold
+        assert reloaded in caplog.text
     assert first.ok and same.ok and other.ok
     assert first.diagnostics["warm_start"] is False
     assert same.diagnostics["warm_start"] is True and helper_same == helper
@@ -105,18 +98,7 @@ def test_a_packed_problem_is_known_by_its_bytes_on_the_worker(tmp_path, monkeypa
     from fbia.execution import isolation
     from fbia.execution.isolation import PackedProblem, run_isolated_or_here
 
-    truth = fbia.forward_model("ale_fsi", **COARSE)
-    obs = fbia.synthetic_observations(
-        truth, {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], noise_std=0.0, seed=0
-    )
-    problem = fbia.InverseProblem(
-        model=fbia.forward_model("ale_fsi", **COARSE),
-        measure=fbia.measure("cpp"),
-        observations=obs,
-        parameters=[fbia.Parameter("E", bounds=(100, 800))],
-        fixed={"nu": 0.3},
-        noise_std=0.001,
-    )
+    problem = _problem(["E"])
     scattered = pickle.dumps(PackedProblem.pack(problem))
 
     def refuse(cls: object, problem: object) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -464,7 +465,9 @@ def test_run_writes_report_and_the_summary_collects_it(tmp_path, monkeypatch, ca
     )
 
 
-def test_the_summary_marks_a_row_whose_code_changed_since_it_was_made(tmp_path, monkeypatch):
+def test_the_summary_marks_a_row_whose_code_changed_since_it_was_made(
+    tmp_path, monkeypatch, caplog
+):
     """Issue 46 item 1: paper.json records the commit and the code of the study's model,
     measure and iterator; the page says per study whether that code is what runs now, and
     marks a row made by other code (here: the recorded digest of one of the model's files
@@ -502,10 +505,33 @@ def test_the_summary_marks_a_row_whose_code_changed_since_it_was_made(tmp_path, 
         for role, d in recorded.items()
     }
     path.write_text(json.dumps(data))
-    assert main(["reproductions", "docs/summary.md", "."]) == 0
+    # a record that cannot be written keeps its old form, with a warning; its row is unchanged
+    real_write = Path.write_text
+
+    def refuse(self: Path, *args: object, **kwargs: object) -> int:
+        if self.name == "paper.json":
+            raise PermissionError("read-only")
+        return real_write(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    with monkeypatch.context() as m:
+        m.setattr(Path, "write_text", refuse)
+        caplog.clear()
+        assert main(["reproductions", "docs/summary.md", "."]) == 0
+    assert "its code digests stay in the old form (read-only)" in caplog.text
+    page = (tmp_path / "docs" / "summary.md").read_text()
+    assert "the code of its model, measure and iterator is unchanged" in page
+    assert json.loads(path.read_text())["code"] == data["code"]
+    caplog.clear()
+    with caplog.at_level("INFO", logger="fbia.studies.paper_report"):
+        assert main(["reproductions", "docs/summary.md", "."]) == 0
+    assert "recorded without documentation" in caplog.text and "old form" not in caplog.text
     page = (tmp_path / "docs" / "summary.md").read_text()
     assert "the code of its model, measure and iterator is unchanged" in page
     assert json.loads(path.read_text())["code"] == recorded
+    caplog.clear()  # in the current form: nothing to write, nothing said
+    with caplog.at_level("INFO", logger="fbia.studies.paper_report"):
+        assert main(["reproductions", "docs/summary.md", "."]) == 0
+    assert "code digests" not in caplog.text
     del data["code"]
     path.write_text(json.dumps(data))
     assert main(["reproductions", "docs/summary.md", "."]) == 0
