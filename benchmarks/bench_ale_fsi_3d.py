@@ -3,6 +3,7 @@
     python benchmarks/bench_ale_fsi_3d.py            # the table, the reference run included
     python benchmarks/bench_ale_fsi_3d.py --quick    # without the two finest runs
     python benchmarks/bench_ale_fsi_3d.py --target   # the recommended settings only
+    python benchmarks/bench_ale_fsi_3d.py --target --repeat 5   # the target's median of 5
     python benchmarks/bench_ale_fsi_3d.py --solvers  # direct against block-preconditioned GMRes
 
 One quasi-static run of ``geometry = "dome_3d"`` (E = 400 Pa, nu = 0.3, 100 mm^3/s, from rest)
@@ -123,6 +124,39 @@ Jacobians, 0.87 % / 0.42 % from the references (10 s not met).  One run of the r
 settings by itself: 10.8 s wall, of which 1.0 s set-up, 4.4 s assembly (3 Jacobians of about
 1.1 s and 11 residuals), 5.1 s in the direct solver (3 factorisations and the
 back-substitutions).
+
+Measured idle 2026-12-01 (session k, a fresh VM), ``--target --repeat 5`` twice: the
+recommended settings 9.4 / 10.3 / 10.7 / 10.2 / 9.9 s (median 10.2 s) and 9.9 / 10.9 / 9.6 /
+9.2 / 11.1 s (median 9.9 s), 1125 MB, always 10 Newton iterations and 3 Jacobians and the
+same displacement: the 10 s lies inside this VM's scatter, so the target is not claimed.
+Where the direct solver's time goes (Pardiso's own statistics, ``msglevel = 1``): the first
+call 2.36-2.42 s, of which matching and scaling 0.53-0.56 s, the nested-dissection ordering
+0.25-0.29 s, the symbolic factorisation 0.07 s and the numerical one 1.30-1.32 s (23.1 GFlop,
+17.8 GFlop/s on 2 threads; 26.7 M nonzeros in L + U for the 4.08 M of the Jacobian's 32 297
+free rows); a refactorisation 0.83 s; a back-substitution 0.02 s.  Tried that day, none kept:
+
+* Pardiso options, single runs in turn: two-level factorisation ``iparm[23] = 10`` 9.55 /
+  9.70 s against 9.40 / 9.69 s; parallel METIS ``iparm[1] = 3`` 10.29 s; a single-precision
+  factorisation (``iparm[27] = 1``, refined by Newton's own sweeps) had not finished its first
+  factorisation after 10 minutes.
+* The Newton path from rest (scaled updates): the Jacobian at rest gives the Stokes step
+  (1.6e4: the displacement from zero), whose chord update is 5.1 (velocity); the second
+  Jacobian's step 1.15, its chord update 0.53 (pressure-led, over the 0.1 a chord may take);
+  the third Jacobian's step 0.60, then chord steps converge (0.031, 0.0043, ... 4.1e-6).
+  Starting from the inflow profile in the whole fluid (an Oseen first step): the second
+  Jacobian's step 0.68, then chord steps contract 0.12-0.38 down to 8.6e-5, where velocity,
+  displacement and pressure all stall together (0.52, 0.77) and a third Jacobian follows:
+  3 Jacobians either way (10.44 s).  Anderson acceleration (depth 5) of the chord steps after
+  the second Jacobian: contractions 0.12-0.43, then 0.82, again a third Jacobian.  A looser
+  tolerance would save it only in the second path (1e-4: 2 Jacobians), at the cost of forward
+  differences in a calibration (step 1e-3 relative), which the 1e-6 was set for.
+* The Jacobian as a bilinear form of the symbolic linearisation (``CoefficientFunction.Diff``
+  of the integrand with respect to the state's components) instead of NGSolve's
+  ``AssembleLinearization``: the same matrix to 1e-18, but 7x slower to assemble (a P3/P1/P2
+  ALE Navier-Stokes integrand on a box, 26 k unknowns: 4.2 s against 0.6 s).
+* The straight dome (``curved = false``) costs the same time in a pair taken in turn (11.7
+  against 11.0 s; an earlier pair 8.4-8.6 against 10.6 s was the VM's drift) and is 2.4 %
+  off the reference.
 """
 
 from __future__ import annotations
@@ -131,6 +165,7 @@ import argparse
 import json
 import os
 import resource
+import statistics
 import subprocess
 import sys
 import time
@@ -255,10 +290,13 @@ def run(
     return r
 
 
-def convergence_table(quick: bool, target: bool = False) -> None:
+def convergence_table(quick: bool, target: bool = False, repeat: int = 1) -> None:
     """The table of :data:`TABLE` and the target check of :data:`RECOMMENDED`; ``target``:
     only the recommended settings with and without the motion layer, against the stored
-    references."""
+    references.  ``repeat``: the recommended settings run that many times (each in a fresh
+    process, in turn with nothing else), the target judged on the median wall time and the
+    largest memory, every run's wall time printed: this VM's speed drifts by 10-30 % within
+    minutes, and a single run lands on either side of 10 s."""
     rows = [c for c in TABLE if not (quick and c in QUICK_SKIP)]
     if target:
         rows, quick = [WHOLE_FLUID, LAYER_ONLY, RECOMMENDED], True
@@ -275,6 +313,9 @@ def convergence_table(quick: bool, target: bool = False) -> None:
         # references) at the model's default (1e-10)
         tol = RECOMMENDED_3D["newton_tol"] if case == RECOMMENDED else None
         results[case] = run(*case, newton_tol=tol)
+    repeats = [results[RECOMMENDED]]
+    for _ in range(repeat - 1):
+        repeats.append(run(*RECOMMENDED, newton_tol=RECOMMENDED_3D["newton_tol"]))
     reference = REFERENCE if quick else results[FINEST]["max_displacement"]
     for case in rows:
         r = results[case]
@@ -315,11 +356,24 @@ def convergence_table(quick: bool, target: bool = False) -> None:
             f"{r['wall']:.1f} / {w['wall']:.1f} s = {r['wall'] / w['wall']:.2f}, memory "
             f"{r['memory_mb']:.0f} / {w['memory_mb']:.0f} MB, max |d| {change:+.3f} %"
         )
-    ok_wall, ok_mem = r["wall"] <= TARGET_WALL_S, r["memory_mb"] <= TARGET_MEMORY_MB
-    print(f"target: wall {r['wall']:.1f} s <= {TARGET_WALL_S:.0f} s: {'yes' if ok_wall else 'NO'}")
+    walls = [x["wall"] for x in repeats]
+    wall, memory = float(statistics.median(walls)), max(x["memory_mb"] for x in repeats)
+    if len(repeats) > 1:
+        print(
+            f"the recommended settings {len(repeats)} times: wall "
+            f"{' / '.join(f'{w:.1f}' for w in walls)} s, median {wall:.1f} s; max |d| "
+            f"{min(x['max_displacement'] for x in repeats):.9f}-"
+            f"{max(x['max_displacement'] for x in repeats):.9f} mm; Newton iterations "
+            f"{sorted({int(x['newton']) for x in repeats})}, Jacobians "
+            f"{sorted({int(x['jacobians']) for x in repeats})}"
+        )
+    ok_wall, ok_mem = wall <= TARGET_WALL_S, memory <= TARGET_MEMORY_MB
+    which = "" if len(repeats) == 1 else f" (median of {len(repeats)})"
     print(
-        f"target: memory {r['memory_mb']:.0f} MB <= {TARGET_MEMORY_MB:.0f} MB: "
-        f"{'yes' if ok_mem else 'NO'}"
+        f"target: wall {wall:.1f} s{which} <= {TARGET_WALL_S:.0f} s: {'yes' if ok_wall else 'NO'}"
+    )
+    print(
+        f"target: memory {memory:.0f} MB <= {TARGET_MEMORY_MB:.0f} MB: {'yes' if ok_mem else 'NO'}"
     )
     print(
         f"target: error {100 * err:.2f} % <= 1 % of both references: "
@@ -354,6 +408,9 @@ def main() -> None:
     parser.add_argument(
         "--target", action="store_true", help="only the recommended settings (and without layer)"
     )
+    parser.add_argument(
+        "--repeat", type=int, default=1, help="runs of the recommended settings (the median)"
+    )
     parser.add_argument("--solvers", action="store_true", help="direct against block GMRes")
     parser.add_argument("--sizes", type=float, nargs="+", default=[0.15, 0.1])
     args = parser.parse_args()
@@ -361,7 +418,7 @@ def main() -> None:
     if args.solvers:
         solver_table(args.sizes)
     else:
-        convergence_table(args.quick, args.target)
+        convergence_table(args.quick, args.target, max(1, args.repeat))
     print(f"benchmark wall time {time.perf_counter() - t:.0f} s")
 
 
