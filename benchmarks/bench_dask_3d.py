@@ -223,6 +223,17 @@ since): medians **1.37x** (1.42, 1.37, 1.11; the machine check did 1.71x that ho
 Newton iterations against the serial batch's 49; the 2-worker batches took 4.5-5.8 s, the
 serial ones 6.4-8.0 s for the same 49 iterations (0.131-0.164 s each, side by side
 0.146-0.154 s): the ratio moves with this VM's speed during the serial batch.
+
+Measured 2026-12-01 (session k, a fresh VM; one ``--repeat 3 --two-only`` while nothing else
+ran but a short test for part of the first repeat), after a 3-D solve from rest starts from
+the inflow profile and the chord steps of the costly-Jacobian rule go on at contractions up to
+0.8 near the tolerance (bench_ale_fsi_3d.py): median **1.61x** (1.60, 1.79, 1.61); the serial
+batches 7.3-8.1 s, the 2-worker ones 4.5-4.7 s, no Jacobian in any.  The runs now take 54
+Newton iterations serially and 63 on 2 workers (49 and 57 before): the warm-up run of each
+process ends on chord steps with its second Jacobian's factorisation (taken 0.68 from its
+solution in Newton's scaled norm) instead of a third one at its solution, and the warm runs
+chord with it.  At the target, by less than this VM's scatter (earlier medians 1.37x-1.54x):
+not claimed.
 """
 
 from __future__ import annotations

@@ -114,6 +114,11 @@ the tangent refinement tolerance at 1e-4 instead of 1e-7 (monkeypatched between 
 (tangents 10.6 s), the same optimum: the second saved in the tangents is inside the scatter.
 Again idle on 2026-12-01 (session j, no model code changed since): tangents 6 runs 30.8 s (the
 tangents 12.0 s), forward 34 runs 33.2 s, the same optima: 20 s not met.
+On 2026-12-01 (session k, a fresh VM, idle), after a 3-D solve from rest starts from the inflow
+profile and the costly-Jacobian rule takes slower chord steps near the tolerance (the cold run
+2 Jacobians instead of 3, ``bench_ale_fsi_3d.py``): tangents 6 runs 30.8 s (the tangents
+11.1 s), forward 34 runs 29.0 s, the same optima as before (E -0.000238 and -0.00211 Pa from
+the truth): the tangent calibration no faster, 20 s not met.
 """
 
 from __future__ import annotations

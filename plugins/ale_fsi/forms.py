@@ -433,6 +433,23 @@ class AleFsiProblem:
         self.velocity.vec.FV().NumPy()[dofs] = tmp.vec.FV().NumPy()[dofs]
         self.inflow_rate.Set(rate)
 
+    def fill_with_inflow(self) -> None:
+        """Set the fluid's free velocity unknowns to the inflow profile at the current rate,
+        carried unchanged along the flow (the profile depends on the cross-section's
+        coordinates only: Poiseuille flow in a straight duct); the solid's velocity, the walls'
+        (where the profile vanishes) and every other unknown are left as they are.  A start
+        for Newton's method from rest
+        (:meth:`fbia.plugins.ale_fsi.solver.AleFsiSolver.newton`)."""
+        ngs = self.ngs
+        V = self.fes.components[0]
+        tmp = ngs.GridFunction(V)
+        tmp.Set(
+            self.inflow.profile(float(self.inflow_rate.Get())), definedon=self.mesh.Materials(FLUID)
+        )
+        r = self.fes.Range(0)
+        free = self._free_np[r.start : r.stop]
+        self.gfu.vec.FV().NumPy()[r.start : r.stop][free] = tmp.vec.FV().NumPy()[free]
+
     # -- checks ------------------------------------------------------------------------------
     def min_det_f(self) -> tuple[float, float]:
         """Smallest det F of the ALE map (fluid) and of the solid deformation.

@@ -24,9 +24,9 @@ VTU output (tetrahedra) work in 3-D as in 2-D; ``"colony_3d"`` takes a user's co
 
 Recommended 3-D settings (``dome_3d``; :data:`~fbia.plugins.ale_fsi.options.RECOMMENDED_3D`,
 ``benchmarks/bench_ale_fsi_3d.py`` prints the table): ``order = 3, interface_mesh_size = 0.15,
-mesh_size = 0.2, curved = True, threads = 2, mesh_motion_layer = 0.15, mesh_motion_order = 1``
--- 32 k unknowns, 1.3 GB, 13-16 s wall on two free cores (2026-11-30; the same runs
-without ``mesh_motion_order`` 16-19.5 s); the largest displacement within 1 % of both
+mesh_size = 0.2, curved = True, threads = 2, mesh_motion_layer = 0.15, mesh_motion_order = 1,
+newton_tol = 1e-6`` -- 32 k unknowns, 1.1 GB, 9.3-10.1 s wall from rest on two free cores
+(2026-12-01, median 9.8 s of five; 2 Jacobians); the largest displacement within 1 % of both
 references: -0.87 % from the finest run (order 3, duct 0.15 mm, 84 k unknowns) and -0.42 %
 from the limit of orders 2, 3, 4 on the 0.15/0.3 mm mesh (Aitken), which differ by 0.45 %
 themselves.  The motion layer keeps the ALE mesh fixed beyond one interface element of the

@@ -73,6 +73,8 @@ class AleFsiSolver(AleFsiProblem):
             # back-substitution, so it keeps the default rule too (the timings:
             # benchmarks/bench_lm_tangents.py and the CHANGELOG)
             self._newton.chord = ChordRule.costly_jacobian()
+        #: a solve from rest starts from the inflow profile in the whole fluid (:meth:`newton`)
+        self.start_from_inflow = mesh.dim == 3 and blocks is None
         self._continuation = ArclengthContinuation(
             self, self._newton, self.newton, settings.continuation_min_fraction, unit="mm^2/s"
         )
@@ -84,9 +86,22 @@ class AleFsiSolver(AleFsiProblem):
     def newton(self, where: str = "Newton") -> StepReport:
         """Solve the current nonlinear system with :class:`~fbia.plugins.fem.newton.NewtonSolver`
         (consistent Jacobian, chord steps, damping against inverted elements, Pardiso);
-        raises NewtonFailure.  Quasi-static: the solid velocity is zero first."""
+        raises NewtonFailure.  Quasi-static: the solid velocity is zero first.
+
+        Where a fresh Jacobian is costly (:attr:`start_from_inflow`: 3-D, direct solver), a
+        solve from rest (every free unknown zero) starts from the inflow profile carried
+        through the whole fluid
+        (:meth:`~fbia.plugins.ale_fsi.forms.AleFsiProblem.fill_with_inflow`): the first
+        Jacobian then holds the convection of a flow of the right size (an Oseen step)
+        instead of none (a Stokes step).  On the 3-D dome at the recommended settings
+        the Newton updates after the first Jacobian fall from 1.4 (0.68 after the second) to
+        the tolerance 1e-4 with 2 Jacobians, where from rest the second Jacobian's chord update
+        (0.53) calls for a third (CHANGELOG, issue 47).  2-D keeps the start from rest."""
         if not self.transient:
-            self.gfu.vec.FV().NumPy()[self._v_solid] = 0.0  # the solid is at rest
+            x = self.gfu.vec.FV().NumPy()
+            x[self._v_solid] = 0.0  # the solid is at rest
+            if self.start_from_inflow and not x[self.free_mask].any():
+                self.fill_with_inflow()
         return self._newton.solve(where)
 
     @property

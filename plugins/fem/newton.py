@@ -13,22 +13,27 @@ The iteration (what ``ale_fsi`` needs, stiff coupled systems solved to a toleran
 * after every undamped step the factorised Jacobian is tried again (a chord step: one residual
   and one back-substitution); its update is taken if it is below 0.1 and at most a quarter of
   the previous one, else the Jacobian is assembled afresh at the same point.  A solve that
-  starts after a converged one (a warm start) takes the old factorisation's first update if
-  it is below 2.5e-4 (:class:`ChordRule`, the default).  Where a fresh Jacobian costs tens of
+  starts after a converged one (a warm start) takes the old factorisation's first update if it
+  is below 2.5e-4 (:class:`ChordRule`, the default).  Where a fresh Jacobian costs tens of
   chord steps (:meth:`ChordRule.costly_jacobian`) chord steps go on while the updates halve,
   and a warm start's first update is taken up to 0.3 on trust: the second update measures its
   contraction, and if it is larger than the first the first is undone before the fresh
-  Jacobian.  Measured on ``ale_fsi``'s 3-D dome (order 3, 2 threads) when the rule was made
-  (2026-11-28), a fresh Jacobian cost 1.7 + 5.7 s (assembly, factorisation), a chord step
-  ~0.1 s, and with the default rule its LM with forward differences assembled a Jacobian in
-  nearly every run (158 s; 75 s with the costly-Jacobian rule,
-  ``benchmarks/bench_lm_tangents.py``); since Pardiso factorises on the solver's threads with
-  nested dissection and only a layer of the mesh moves, about 1-2 s of assembly and 0.75 s of
-  refactorisation against 0.1-0.15 s a chord step (``benchmarks/bench_ale_fsi_3d.py``): still
-  ten to twenty chord steps.  On its 2-D flow cell (23 + 9 ms against ~3 ms) that rule gained
-  nothing, nor where a chord step is itself an iterative solve (``ale_fsi``'s
-  ``block_gmres``: slower).  The converged state meets the tolerance either
-  way (a chord-converged one does not overshoot it as a quadratic Newton step does);
+  Jacobian; a chord update that contracts more slowly than a half (up to 0.8,
+  :data:`SLOWEST_CHORD`) is still taken when, at its own contraction, it predicts at most eight
+  more chord steps to the tolerance (:data:`COSTLY_STEPS_TO_TOLERANCE`): the 3-D dome's cold
+  run at the recommended settings then ends on chord steps (contraction 0.51 at 8.6e-5, then
+  0.28-0.39 down to 1e-6) instead of a third Jacobian (2026-12-01).  Measured on ``ale_fsi``'s
+  3-D dome (order 3, 2 threads) when the rule was made (2026-11-28), a fresh Jacobian cost 1.7
+  s of assembly and 5.7 s of factorisation, a chord step ~0.1 s, and with the default rule its
+  LM with forward differences assembled a Jacobian in nearly every run (158 s; 75 s with the
+  costly-Jacobian rule, ``benchmarks/bench_lm_tangents.py``); since Pardiso factorises on the
+  solver's threads with nested dissection and only a layer of the mesh moves, about 1-2 s of
+  assembly and 0.75 s of refactorisation against 0.1-0.15 s a chord step
+  (``benchmarks/bench_ale_fsi_3d.py``): still ten to twenty chord steps.  On its 2-D flow cell
+  (23 and 9 ms against ~3 ms) that rule gained nothing, nor where a chord step is itself an
+  iterative solve (``ale_fsi``'s ``block_gmres``: slower).  The converged state meets the
+  tolerance either way (a chord-converged one does not overshoot it as a quadratic Newton step
+  does);
 * an update that leads to an inadmissible state (an inverted element, a porosity outside
   (0, 1)) is halved, up to ``max_halvings`` times (default 5);
 * at most ``max_jacobians`` Jacobians are assembled; updates that diverge (1e3 times the
@@ -44,6 +49,7 @@ Navier-Stokes/Darcy flow and the poroelastic skeleton).
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -73,6 +79,12 @@ CHORD_MAX_UPDATE = 0.1
 #: serial run's assembled a Jacobian (2-3 s) where chord steps (~0.07 s each) converge
 #: (benchmarks/bench_dask_3d.py; CHANGELOG, issue 47).
 COSTLY_WARM_UPDATE = 0.3
+#: Chord steps to the tolerance that :meth:`ChordRule.costly_jacobian` takes at a contraction
+#: slower than a half rather than a fresh Jacobian (which costs ten to twenty of them).
+COSTLY_STEPS_TO_TOLERANCE = 8
+#: The slowest contraction of such a chord step (the converged state's error stays within
+#: 4 times the tolerance: the solve ends on an update below it).
+SLOWEST_CHORD = 0.8
 
 
 @dataclass(frozen=True)
@@ -89,12 +101,21 @@ class ChordRule:
     warm_update: float = 2.5e-4
     #: and undoes it when the next update is larger (the factorisation was too far off)
     undo_worse: bool = False
+    #: a chord update that contracts more slowly than ``contraction`` is still taken while the
+    #: chord steps it predicts to the tolerance, at its own contraction, are at most this many
+    #: (0: never)
+    steps_to_tolerance: int = 0
 
     @classmethod
     def costly_jacobian(cls) -> ChordRule:
         """Chord steps while the updates halve; a warm first update up to
         :data:`COSTLY_WARM_UPDATE`, undone if the next one is larger."""
-        return cls(contraction=0.5, warm_update=COSTLY_WARM_UPDATE, undo_worse=True)
+        return cls(
+            contraction=0.5,
+            warm_update=COSTLY_WARM_UPDATE,
+            undo_worse=True,
+            steps_to_tolerance=COSTLY_STEPS_TO_TOLERANCE,
+        )
 
 
 @dataclass
@@ -247,7 +268,7 @@ class NewtonSolver:
                     self.linear_solve(du, res, where, refine)
                     norm = self.scaled_norm(du)
                     previous = rep.norms[-1] if rep.norms else None
-                    chord = self._chord_taken(norm, previous)
+                    chord = self._chord_taken(norm, previous, tol)
                     rep.solve_time += time.perf_counter() - t0
                     t0 = time.perf_counter()
                     if not chord and before is not None and norm > rep.norms[-1]:
@@ -311,13 +332,18 @@ class NewtonSolver:
             self.chord_ok = rep.converged
         return rep
 
-    def _chord_taken(self, norm: float, previous: float | None) -> bool:
+    def _chord_taken(self, norm: float, previous: float | None, tol: float) -> bool:
         """Whether a chord update is taken (module docstring)."""
         if previous is None:  # a warm start's first update
             return norm <= self.chord.warm_update
         if norm > CHORD_MAX_UPDATE:
             return False
-        return norm <= self.chord.contraction * previous
+        if norm <= self.chord.contraction * previous:
+            return True
+        rate = norm / previous  # slower than the rule's contraction: worth it near the end?
+        if self.chord.steps_to_tolerance <= 0 or rate > SLOWEST_CHORD:
+            return False
+        return norm <= tol or math.log(tol / norm) / math.log(rate) <= self.chord.steps_to_tolerance
 
     @staticmethod
     def _check_progress(norms: list[float], where: str) -> None:

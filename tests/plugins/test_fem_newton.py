@@ -125,6 +125,35 @@ def test_a_costly_jacobians_warm_start_takes_a_first_update_up_to_0_3_on_trust()
         assert np.max(np.abs(system.gfu.vec.FV().NumPy() - solution)) < 1e-9
 
 
+def test_a_costly_jacobians_chord_steps_go_on_at_a_slower_contraction_near_the_tolerance() -> None:
+    """A factorisation of the Jacobian at 0.7 times the solution, the state 1e-5 off it: the
+    chord updates contract by about 0.6 a step.  Under ``ChordRule.costly_jacobian`` they are
+    taken while the steps they predict to the tolerance are few (``steps_to_tolerance``: the
+    3-D dome's cold run ends on chord steps instead of a third Jacobian, issue 47); with that
+    off, the first update slower than a half calls for a Jacobian, as under the default rule.
+    Both end within the tolerance of the solution."""
+    import dataclasses
+
+    for steps, jacobians in ((None, 0), (0, 1)):
+        rule = ChordRule.costly_jacobian()
+        if steps is not None:
+            rule = dataclasses.replace(rule, steps_to_tolerance=steps)
+        system = Cubic()
+        solver = NewtonSolver(system, 1e-5, 12, "umfpack", chord=rule)
+        solver.solve()
+        solution = system.gfu.vec.FV().NumPy().copy()
+        system.gfu.vec.FV().NumPy()[:] = 0.7 * solution
+        system.assemble_jacobian()
+        solver.factorise("test")
+        system.gfu.vec.FV().NumPy()[:] = (1.0 + 1e-5) * solution
+        rep = solver.solve()
+        assert rep.converged and rep.jacobians == jacobians
+        if jacobians == 0:
+            rates = np.array(rep.norms[1:]) / np.array(rep.norms[:-1])
+            assert 0.5 < rates.max() < 0.8  # slower than a half, every one of them taken
+        assert np.max(np.abs(system.gfu.vec.FV().NumPy() - solution)) < 4e-5
+
+
 class Recording(Cubic):
     """Cubic that records the state at each Jacobian assembly."""
 
