@@ -235,7 +235,18 @@ solution in Newton's scaled norm) instead of a third one at its solution, and th
 chord with it.  A second ``--repeat 3`` an hour later, idle: median **1.47x** (1.47, 1.49,
 1.40; serial batches 6.5-8.2 s of the runs' own time, 2-worker 8.9-10.4 s for 63 iterations):
 not met.  Each 2-worker batch still takes 17 % more Newton iterations than the serial one, and
-its iterations cost 0.141-0.166 s against 0.121-0.153 s serially.
+its iterations cost 0.141-0.166 s against 0.121-0.153 s serially.  Tried right after, not kept
+(``workers_of_runs`` monkeypatched in the bench's process, no code changed): the Dask batch in
+contiguous blocks (runs 0-3 on one worker, 4-7 on the other: each worker's warm starts walk
+its half of the E range like the serial chain), median 1.54x (1.41, 1.62, 1.54): 53 Newton
+iterations on 2 workers against the serial 54 (63 with the permutation), the lanes nearly
+balanced (batch 4.0-4.7 s for 7.2-8.9 s of runs), but each iteration 0.137-0.168 s side by
+side against 0.121-0.134 s serially: with the chains as dense as serial and no idle lane, what
+is left is the two processes slowing each other (+13-25 % an iteration here; back-substitution
++15-25 % in the kernel measurement above), which caps 2 workers near 1.6-1.7x on this VM.  A
+Sobol design's contiguous blocks would be balanced too (each half of its points fills the
+box), but an ordered batch's would not, and the permutation's property (no pattern of the batch
+followed) is what the process pool's bits rest on.
 """
 
 from __future__ import annotations
