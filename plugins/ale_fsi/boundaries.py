@@ -86,6 +86,16 @@ class InflowSegment:
         """Mean inflow speed (mm/s) at volume rate ``rate`` (mm^2/s)."""
         return rate / self.width
 
+    def carried(self, rate: float) -> Any:
+        """:meth:`profile` carried along the flow through the cell: the profile where the point
+        lies across the inflow segment's span, zero beside it (where the parabola would turn
+        negative)."""
+        import ngsolve as ngs
+
+        a, w, t = self.start, self.width, self.tangent
+        s = ((ngs.x - a[0]) * t[0] + (ngs.y - a[1]) * t[1]) / w
+        return ngs.IfPos(s, 1.0, 0.0) * ngs.IfPos(1.0 - s, 1.0, 0.0) * self.profile(rate)
+
 
 @dataclass(frozen=True)
 class InflowFace:
@@ -154,6 +164,24 @@ class InflowFace:
         comps: list[Any] = [0.0, 0.0, 0.0]
         comps[self.axis] = self.sign * prof
         return ngs.CoefficientFunction(tuple(comps))
+
+    def carried(self, rate: float) -> Any:
+        """:meth:`profile` carried along the flow through the cell: the profile where the
+        point's cross-section coordinates lie within the inflow face's, zero beside it (in a
+        duct that widens downstream the polynomial would turn negative, or positive again where
+        both factors are), as a start for Newton's method (``AleFsiProblem.fill_with_inflow``).
+        In a straight duct the same as :meth:`profile` (Poiseuille flow)."""
+        import ngsolve as ngs
+
+        inside: Any = 1.0
+        for k in self._profile_axes():
+            c = (ngs.x, ngs.y, ngs.z)[k]
+            inside = (
+                inside
+                * ngs.IfPos(c - float(self.lower[k]), 1.0, 0.0)
+                * ngs.IfPos(float(self.upper[k]) - c, 1.0, 0.0)
+            )
+        return inside * self.profile(rate)
 
     def mean_speed(self, rate: float) -> float:
         """Mean inflow speed (mm/s) at volume rate ``rate``."""

@@ -435,16 +435,17 @@ class AleFsiProblem:
 
     def fill_with_inflow(self) -> None:
         """Set the fluid's free velocity unknowns to the inflow profile at the current rate,
-        carried unchanged along the flow (the profile depends on the cross-section's
-        coordinates only: Poiseuille flow in a straight duct); the solid's velocity, the walls'
-        (where the profile vanishes) and every other unknown are left as they are.  A start
-        for Newton's method from rest
+        carried unchanged along the flow (``inflow.carried``: the profile depends on the
+        cross-section's coordinates only, Poiseuille flow in a straight duct, zero beside the
+        inflow's span); the solid's velocity, the walls' (where the profile vanishes) and every
+        other unknown are left as they are.  A start for Newton's method from rest
         (:meth:`fbia.plugins.ale_fsi.solver.AleFsiSolver.newton`)."""
         ngs = self.ngs
         V = self.fes.components[0]
         tmp = ngs.GridFunction(V)
         tmp.Set(
-            self.inflow.profile(float(self.inflow_rate.Get())), definedon=self.mesh.Materials(FLUID)
+            self.inflow.carried(float(self.inflow_rate.Get())),
+            definedon=self.mesh.Materials(FLUID),
         )
         r = self.fes.Range(0)
         free = self._free_np[r.start : r.stop]

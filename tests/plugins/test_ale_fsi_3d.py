@@ -359,6 +359,28 @@ def test_a_solve_from_rest_starts_from_the_inflow_profile_and_saves_a_jacobian(t
     assert np.abs(d_profile - d_rest).max() < 1e-8 * np.abs(d_rest).max()
 
 
+def test_the_carried_inflow_profile_is_zero_beside_the_inflow_face():
+    """The start from the inflow profile carries it along the flow: the profile across the
+    inflow face's span at any distance downstream, zero beside the span, where the parabola
+    of each cross-section coordinate turns negative (or the product of two positive again)."""
+    import ngsolve as ngs
+    from netgen.occ import Box, OCCGeometry
+
+    from fbia.plugins.ale_fsi.boundaries import InflowFace
+
+    face = InflowFace(
+        axis=0, lower=np.zeros(3), upper=np.array([0.0, 1.0, 1.0]), sign=1.0, depth_axis=-1
+    )
+    mesh = ngs.Mesh(OCCGeometry(Box((0, -1, -1), (2, 2, 2))).GenerateMesh(maxh=0.6))
+    carried, profile = face.carried(10.0), face.profile(10.0)
+    for point in [(0.5, 0.3, 0.6), (1.7, 0.5, 0.5)]:  # across the span, near and far
+        value = carried(mesh(*point))
+        assert value[0] > 0 and value == pytest.approx(profile(mesh(*point)))
+    for point in [(0.5, 1.5, 0.5), (0.5, 1.5, 1.5), (1.5, -0.5, -0.5)]:  # beside it
+        assert profile(mesh(*point))[0] != 0.0
+        assert carried(mesh(*point)) == (0.0, 0.0, 0.0)
+
+
 def test_block_preconditioned_gmres_gives_the_direct_solvers_answer(dome, tmp_path):
     """GMRes to 1e-12 with the block Gauss-Seidel preconditioner: the same Newton iterates as
     with Pardiso (under the same chord rule), so the same state to far below the Newton
