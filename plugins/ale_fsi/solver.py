@@ -93,10 +93,12 @@ class AleFsiSolver(AleFsiProblem):
         through the whole fluid
         (:meth:`~fbia.plugins.ale_fsi.forms.AleFsiProblem.fill_with_inflow`): the first
         Jacobian then holds the convection of a flow of the right size (an Oseen step)
-        instead of none (a Stokes step).  On the 3-D dome at the recommended settings
-        the Newton updates after the first Jacobian fall from 1.4 (0.68 after the second) to
-        the tolerance 1e-4 with 2 Jacobians, where from rest the second Jacobian's chord update
-        (0.53) calls for a third (CHANGELOG, issue 47).  2-D keeps the start from rest."""
+        instead of none (a Stokes step).  On the 3-D dome at the recommended settings the
+        second Jacobian's update is then 0.68 (1.15 from rest) and its chord steps contract to
+        the tolerance (with the costly rule's slower steps near it,
+        :data:`~fbia.plugins.fem.newton.COSTLY_STEPS_TO_TOLERANCE`): 2 Jacobians, where from
+        rest that Jacobian's first chord update (0.53) calls for a third (CHANGELOG, issue
+        47).  2-D keeps the start from rest."""
         if not self.transient:
             x = self.gfu.vec.FV().NumPy()
             x[self._v_solid] = 0.0  # the solid is at rest
