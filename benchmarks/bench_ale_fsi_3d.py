@@ -144,12 +144,13 @@ free rows); a refactorisation 0.83 s; a back-substitution 0.02 s.  Tried that da
   Jacobian's step 1.15, its chord update 0.53 (pressure-led, over the 0.1 a chord may take);
   the third Jacobian's step 0.60, then chord steps converge (0.031, 0.0043, ... 4.1e-6).
   Starting from the inflow profile in the whole fluid (an Oseen first step): the second
-  Jacobian's step 0.68, then chord steps contract 0.12-0.38 down to 8.6e-5, where velocity,
-  displacement and pressure all stall together (0.52, 0.77) and a third Jacobian follows:
-  3 Jacobians either way (10.44 s).  Anderson acceleration (depth 5) of the chord steps after
-  the second Jacobian: contractions 0.12-0.43, then 0.82, again a third Jacobian.  A looser
-  tolerance would save it only in the second path (1e-4: 2 Jacobians), at the cost of forward
-  differences in a calibration (step 1e-3 relative), which the 1e-6 was set for.
+  Jacobian's step 0.68, then chord steps contract 0.12-0.38 down to 8.6e-5, where one step
+  contracts by 0.51 (velocity, displacement and pressure alike), over the costly rule's half,
+  and a third Jacobian follows: 3 Jacobians either way (10.44 s); kept later with slower chord
+  steps allowed near the tolerance (below).  Anderson acceleration (depth 5) of the chord steps
+  after the second Jacobian: contractions 0.12-0.43, then 0.82, again a third Jacobian.  A
+  looser tolerance (1e-4: 2 Jacobians in the second path) was not taken: forward differences
+  in a calibration (step 1e-3 relative) are what the 1e-6 was set for.
 * The Jacobian as a bilinear form of the symbolic linearisation (``CoefficientFunction.Diff``
   of the integrand with respect to the state's components) instead of NGSolve's
   ``AssembleLinearization``: the same matrix to 1e-18, but 7x slower to assemble (a P3/P1/P2
