@@ -118,7 +118,12 @@ On 2026-12-01 (session k, a fresh VM, idle), after a 3-D solve from rest starts 
 profile and the costly-Jacobian rule takes slower chord steps near the tolerance (the cold run
 2 Jacobians instead of 3, ``bench_ale_fsi_3d.py``): tangents 6 runs 30.8 s (the tangents
 11.1 s), forward 34 runs 29.0 s, the same optima as before (E -0.000238 and -0.00211 Pa from
-the truth): the tangent calibration no faster, 20 s not met.
+the truth): the tangent calibration no faster, 20 s not met.  Its runs, once more (28.7 s):
+10.5 s (the cold run, 13 Newton iterations, 2 Jacobians; its tangents 2.3 s with a
+refactorisation, since the run ends on the factorisation of its second Jacobian, 0.68 from the
+solution, not of a third at it), then 5.4, 4.9, 4.2 s (1 Jacobian each, tangents 1.3-2.0 s with
+6-26 refinement sweeps) and 1.9, 1.7 s (no Jacobian, tangents 1.4 s): the LM's long first
+steps cost a Jacobian per run, and every run's tangents a Jacobian assembly (1.0-1.1 s).
 """
 
 from __future__ import annotations
