@@ -86,16 +86,6 @@ class InflowSegment:
         """Mean inflow speed (mm/s) at volume rate ``rate`` (mm^2/s)."""
         return rate / self.width
 
-    def carried(self, rate: float) -> Any:
-        """:meth:`profile` carried along the flow through the cell: the profile where the point
-        lies across the inflow segment's span, zero beside it (where the parabola would turn
-        negative)."""
-        import ngsolve as ngs
-
-        a, w, t = self.start, self.width, self.tangent
-        s = ((ngs.x - a[0]) * t[0] + (ngs.y - a[1]) * t[1]) / w
-        return ngs.IfPos(s, 1.0, 0.0) * ngs.IfPos(1.0 - s, 1.0, 0.0) * self.profile(rate)
-
 
 @dataclass(frozen=True)
 class InflowFace:

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
 from ..fem.flow_cell import FLUID, solid_regions
-from .boundaries import inflow_of, mesh_dirichlet, symmetry_axis
+from .boundaries import InflowFace, inflow_of, mesh_dirichlet, symmetry_axis
 from .checks import StateChecks
 from .materials import lame, stress_pk2
 
@@ -438,8 +438,10 @@ class AleFsiProblem:
         carried unchanged along the flow (``inflow.carried``: the profile depends on the
         cross-section's coordinates only, Poiseuille flow in a straight duct, zero beside the
         inflow's span); the solid's velocity, the walls' (where the profile vanishes) and every
-        other unknown are left as they are.  A start for Newton's method from rest
-        (:meth:`fbia.plugins.ale_fsi.solver.AleFsiSolver.newton`)."""
+        other unknown are left as they are.  A start for Newton's method from rest in a 3-D
+        cell (:meth:`fbia.plugins.ale_fsi.solver.AleFsiSolver.newton`)."""
+        if not isinstance(self.inflow, InflowFace):
+            raise ValueError("fill_with_inflow needs a 3-D cell's inflow face")
         ngs = self.ngs
         V = self.fes.components[0]
         tmp = ngs.GridFunction(V)

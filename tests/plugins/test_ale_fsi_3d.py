@@ -357,6 +357,11 @@ def test_a_solve_from_rest_starts_from_the_inflow_profile_and_saves_a_jacobian(t
     (j_rest, d_rest), (j_profile, d_profile) = runs[False], runs[True]
     assert j_rest == 3 and j_profile == 2
     assert np.abs(d_profile - d_rest).max() < 1e-8 * np.abs(d_rest).max()
+    flat = AleFsiForwardModel(**COARSE_2D)  # 2-D keeps the start from rest
+    flat.prepare()
+    assert not flat.solver.start_from_inflow
+    with pytest.raises(ValueError, match="needs a 3-D cell's inflow face"):
+        flat.solver.fill_with_inflow()
 
 
 def test_the_carried_inflow_profile_is_zero_beside_the_inflow_face():
