@@ -165,6 +165,30 @@ contraction; the tangent tests pass) against the 1e-7 of now, six more pairs, 10
 benchmark saved at most), and the 1e-7 runs of the second six pairs took 9.0-10.3 s, so the
 first pairs' gap was most likely this VM's drift, not the sweeps.  What is left is the
 Jacobian assembly of each tangent (a third of a run) against scipy's runs of chord steps.
+
+Measured idle 2026-12-01 (session l): the default model, fbia 100 runs 9.01 s, scipy 296 runs
+8.37 s, **1.08x (not met)**.  Why the Jacobian costs what it does, on this problem's model (2-D,
+P2/P1, 3 745 free dofs, one thread): the residual 2.2 ms, the Jacobian 24 ms (the fluid's
+terms 22.5 of it), a factorisation 8.8 ms, a back-substitution 0.5 ms.  NGSolve linearises
+an integrand by evaluating it along every trial component (about ten here), hence the 11x.
+Tried and not kept: ``ngsglobals.symbolic_integrator_uses_diff`` (the same matrix, the same
+time), the interpreted integrands without ``Compile()`` (36 ms), the fluid's linearisation
+written out by hand as a bilinear form (the same matrix to 1.4e-14; compiled 30.5 ms, split by
+trial field 21.0 ms against 21.9 ms), refining the tangents from the warm start's tangents
+(1014 -> 929 sweeps over the eleven starts, 4.10 -> 3.94 s of tangents: the refinement's
+contraction, not its start, sets the sweeps).
+
+Machine code for the integrands (``--set model.options.native_code=true``, new: NGSolve's
+``realcompile`` with a cache of the compiled objects, ``fbia.plugins.fem.native``): the
+Jacobian 24 -> 7 ms, the residual 2.2 -> 0.7 ms.  Both methods run on the same model, so both
+gain; four runs of the whole benchmark in turn, idle (default / native / default / native):
+fbia 9.56 / 4.97 / 9.66 / 4.99 s, scipy 8.74 / 4.86 / 9.00 / 4.95 s: **1.09x / 1.02x / 1.07x /
+1.01x**, the same runs and optima.  A 2-D calibration takes about half the time with native
+code, but fbia's ratio to scipy moves only from ~1.08x to ~1.02x: the target is still not met.
+Where fbia's time goes with native code (cProfile of four starts, 40 runs, 2.26 s): Newton
+1.05 s (its Jacobians included), the tangents' refinement sweeps 0.46 s (0.8 ms a Pardiso
+back-substitution through NGSolve's ctypes wrapper), the 69 Jacobian assemblies 0.56 s in all
+(Newton's and the tangents'), the interface curves and the measure's closest points 0.13 s.
 """
 
 from __future__ import annotations
@@ -189,12 +213,18 @@ STUDY = ROOT / "examples/flow_cell/study_fsi.toml"
 FAILED_RESIDUAL = 1.0
 
 
+#: ``--set`` overrides of the study for the calibrated model (both methods), e.g.
+#: ``model.options.native_code=true``
+OVERRIDES: list[str] = []
+
+
 def _fresh_problem() -> Any:
     """The study's problem on a model that has not run.  The study's own model made the
     synthetic observation and holds the state at the truth, a warm start no model calibrated
-    against a scan has: the observation is the study's, the model another instance."""
+    against a scan has: the observation is the study's, the model another instance (with
+    ``--set``'s overrides; the observation stays the study's)."""
     observed = fbia.load_study(STUDY).problem
-    return dataclasses.replace(observed, model=fbia.load_study(STUDY).model)
+    return dataclasses.replace(observed, model=fbia.load_study(STUDY, overrides=OVERRIDES).model)
 
 
 def _start(problem: Any, label: str) -> dict[str, float]:
@@ -269,7 +299,16 @@ def main(argv: list[str] | None = None) -> int:
         help="fbia's LM options instead of its defaults (JSON values), e.g. jacobian=forward "
         "final_jacobian=forward alpha=0 beta=1e-6",
     )
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="overrides of the study for the calibrated model of both methods, as fbia run "
+        "--set takes them, e.g. model.options.native_code=true",
+    )
     args = parser.parse_args(argv)
+    OVERRIDES[:] = args.set
     options = {}
     for item in args.options:
         key, _, value = item.partition("=")
@@ -278,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
         except json.JSONDecodeError:
             options[key] = value
     print(f"fbia's levenberg_marquardt options: {options or 'its defaults'}")
+    print(f"the model: the study's{' with ' + ', '.join(args.set) if args.set else ''}")
     header = (
         f"{'start':7s} {'fbia runs':>9s} {'wall s':>7s} {'(model s)':>9s} {'scipy runs':>10s} "
         f"{'wall s':>7s} {'(model s)':>9s} {'runs x':>7s} {'wall x':>7s}  optima (fbia | scipy), "

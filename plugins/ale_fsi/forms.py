@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from ...core.errors import ForwardModelError
 from ..fem.flow_cell import FLUID, solid_regions
+from ..fem.native import NativeCode, compile_integrand
 from .boundaries import InflowFace, inflow_of, mesh_dirichlet, symmetry_axis
 from .checks import StateChecks
 from .materials import lame, stress_pk2
@@ -82,6 +83,7 @@ class SolverSettings:
     theta: float = 1.0  # one-step-theta
     linear_solver: str = "direct"  # "direct" (Pardiso) | "block_gmres" (fem.krylov)
     threads: int = 1
+    native_code: bool = False  # integrands compiled to machine code (fem.native)
 
 
 class AleFsiProblem:
@@ -219,6 +221,7 @@ class AleFsiProblem:
         rho_f, mu_f, rho_s = s.fluid_density, s.fluid_viscosity, s.solid_density
         v_old, d_old, _ = self.gfu_old.components
         theta = s.theta if transient else 1.0
+        outcomes: list[NativeCode] = []  # of each integrand (fem.native)
 
         def fluid_integrand(disp: Any, disp_old: Any) -> Any:
             """Eq. 2.19 pulled back by the ALE map of ``disp`` (None: the mesh does not move,
@@ -250,7 +253,9 @@ class AleFsiProblem:
                 fluid += rho_f * J * ngs.InnerProduct((v - v_old) / self.dt, phi)
                 if theta < 1.0:
                     fluid += (1.0 - theta) * fluid_terms(v_old, disp_old)
-            return fluid.Compile()
+            compiled, outcome = compile_integrand(fluid, s.native_code)
+            outcomes.append(outcome)
+            return compiled
 
         self._fluid_form = ngs.BilinearForm(self.fes, symmetric=False)
         form = ngs.BilinearForm(self.fes, symmetric=False)
@@ -291,11 +296,14 @@ class AleFsiProblem:
                 # elements exactly), so that both modes solve the same discrete problem.
                 solid = solid_terms(d, psi)
                 bonus = 2
-            compiled = solid.Compile()
+            compiled, outcome = compile_integrand(solid, s.native_code)
+            outcomes.append(outcome)
             form += compiled * ngs.dx(region, bonus_intorder=bonus)
             self._solid_form += compiled * ngs.dx(region, bonus_intorder=bonus)
         self.form = form
         self.transient = transient
+        #: how the integrands were compiled (``native_code``; fem.native)
+        self.native = NativeCode.of_all(outcomes)
         self._on_new_forms()
         self._positions: dict[str, Any] | None = None  # CSR positions, after the 1st assembly
         self._set_free_dofs(transient)

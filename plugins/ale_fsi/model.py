@@ -257,6 +257,7 @@ class AleFsiForwardModel(ForwardModelBase):
         pairs: list[tuple[Coordinate, Interface]] = list(zip(coordinates, curves, strict=True))
         diag.update(
             linear_solver=solver.linear_solver,
+            native_code=solver.native.describe(),
             ndof=solver.ndof,
             elements=int(solver.mesh.ne),
             setup_time=t_setup - t_start,

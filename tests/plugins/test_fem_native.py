@@ -1,0 +1,162 @@
+"""Integrands compiled to machine code (fbia.plugins.fem.native) and the cache of their
+objects (fbia.plugins.fem.native_cache): the same discrete problem as the interpreted code,
+one compilation per integrand across processes, and the interpreted code with a reason where
+there is no compiler or a compilation fails."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ngsolve")
+
+from fbia.plugins.ale_fsi import AleFsiForwardModel  # noqa: E402
+from fbia.plugins.fem import native, native_cache  # noqa: E402
+
+COARSE = {"mesh_size": 0.2, "interface_mesh_size": 0.06, "warm_start": False}
+
+CODE = b"""#include<coefficient.hpp>
+extern "C" void * compiled_code_pointer%d;
+extern "C" void * compiled_code_pointer%d;
+void CompiledEvaluate() { use(compiled_code_pointer%d, compiled_code_pointer%d); }
+"""
+
+
+def test_normalise_renumbers_the_pointers_from_zero() -> None:
+    a = native_cache.normalise(CODE % (88, 89, 88, 89))
+    assert a == native_cache.normalise(CODE % (0, 1, 0, 1)) == CODE % (0, 1, 0, 1)
+    assert native_cache.normalise(CODE % (7, 9, 7, 9)) == CODE % (0, 2, 0, 2)
+    assert native_cache.normalise(b"int x;") == b"int x;"
+
+
+def _fake_compiler(tmp_path: Path) -> dict[str, object]:
+    """Settings of the cache tool with a stand-in for NGSolve's ngscxx that logs each call and
+    writes the normalised source as its 'object'."""
+    log = tmp_path / "calls.log"
+    script = tmp_path / "ngscxx"
+    script.write_text(
+        f'#!/bin/sh\necho "$@" >> {log}\n'
+        'while [ "$1" != "-o" ]; do src="$1"; shift; done\ncp "$src" "$2"\n'
+    )
+    script.chmod(0o755)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    return {"cache": str(cache), "ngscxx": str(script), "cxx": "c++", "link_args": [], "key": "k"}
+
+
+def test_the_cache_compiles_an_integrand_once_whatever_its_pointer_numbers(
+    tmp_path: Path,
+) -> None:
+    settings = _fake_compiler(tmp_path)
+    objects = []
+    for k, first in enumerate([0, 28, 5]):  # three processes, three counters
+        work = tmp_path / f"p{k}"
+        work.mkdir()
+        (work / "code_0.cpp").write_bytes(CODE % (first, first + 1, first, first + 1))
+        args = ["-c", str(work / "code_0.cpp"), "-o", str(work / "code_0.o")]
+        assert native_cache.compile_object(settings, args) == 0
+        objects.append((work / "code_0.o").read_bytes())
+        # the source the compiler saw (or would have seen) is renumbered in place
+        assert (work / "code_0.cpp").read_bytes() == CODE % (0, 1, 0, 1)
+    assert len((tmp_path / "calls.log").read_text().splitlines()) == 1
+    assert objects[0] == objects[1] == objects[2]
+    assert len(list(Path(str(settings["cache"])).glob("*.o"))) == 1
+    # another integrand is another object
+    work = tmp_path / "other"
+    work.mkdir()
+    (work / "code_0.cpp").write_bytes(CODE.replace(b"use", b"other") % (3, 4, 3, 4))
+    native_cache.compile_object(
+        settings, ["-c", str(work / "code_0.cpp"), "-o", str(work / "code_0.o")]
+    )
+    assert len((tmp_path / "calls.log").read_text().splitlines()) == 2
+
+
+def test_the_cache_tool_reads_its_settings_file(tmp_path: Path) -> None:
+    settings = _fake_compiler(tmp_path)
+    path = tmp_path / "settings.json"
+    path.write_text(json.dumps(settings))
+    (tmp_path / "code_0.cpp").write_bytes(CODE % (4, 5, 4, 5))
+    out = tmp_path / "code_0.o"
+    args = [str(path), "ngscxx", "-c", str(tmp_path / "code_0.cpp"), "-o", str(out)]
+    assert native_cache.main(args) == 0
+    assert out.read_bytes() == CODE % (0, 1, 0, 1)
+
+
+def test_without_a_compiler_the_model_runs_interpreted_and_says_why(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setattr(native, "toolchain", lambda: "no C++ compiler (c++) on PATH")
+    sol = AleFsiForwardModel(**COARSE, native_code=True).solve(
+        {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path
+    )
+    assert sol.diagnostics["native_code"] == "interpreted: no C++ compiler (c++) on PATH"
+
+
+def test_a_failed_compilation_falls_back_once_for_the_process(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    import ngsolve
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool in ("ngscxx", "ngsld"):
+        (bin_dir / tool).write_text("#!/bin/sh\nexit 1\n")
+        (bin_dir / tool).chmod(0o755)
+    chain = native.Toolchain(bin_dir, Path(sys.executable).parent)
+    monkeypatch.setattr(native, "toolchain", lambda: chain)
+    monkeypatch.setattr(native, "_FAILED", {})
+    x = ngsolve.Parameter(2.0)
+    compiled, outcome = native.compile_integrand(x * x + 1.0, native=True)
+    assert outcome.requested and not outcome.used
+    assert outcome.describe().startswith("interpreted: the compilation failed")
+    assert native._FAILED[bin_dir] == outcome.reason
+    # the interpreted code gives the value
+    mesh = ngsolve.Mesh(__import__("netgen.geom2d").geom2d.unit_square.GenerateMesh(maxh=0.5))
+    assert compiled(mesh(0.5, 0.5)) == pytest.approx(5.0)
+    _, again = native.compile_integrand(x + 1.0, native=True)
+    assert again == outcome
+    assert native.compile_integrand(x, native=False)[1].describe() == "off"
+
+
+def test_cache_root_follows_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("FBIA_CACHE_DIR", "/some/where")
+    assert native.cache_root() == Path("/some/where")
+    monkeypatch.delenv("FBIA_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", "/xdg")
+    assert native.cache_root() == Path("/xdg/fbia")
+
+
+@pytest.mark.skipif(isinstance(native.toolchain(), str), reason="no C++ compiler for NGSolve")
+def test_machine_code_solves_the_same_discrete_problem(tmp_path: Path) -> None:
+    """The coarse 2-D cell at 100 mm^2/s: the same Newton path, the same state to round-off,
+    and the Jacobian at it to 1e-10 of its largest entry."""
+    states, jacobians, diagnostics = [], [], []
+    for flag in (False, True):
+        model = AleFsiForwardModel(**COARSE, native_code=flag)
+        sol = model.solve({"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path)
+        solver = model.solver
+        states.append(np.array(solver.vector.FV().NumPy()))
+        solver.assemble_jacobian()
+        jacobians.append(solver.matrix.AsVector().FV().NumPy().copy())
+        diagnostics.append(sol.diagnostics)
+    assert [d["native_code"] for d in diagnostics] == ["off", "compiled"]
+    assert diagnostics[0]["newton_iterations"] == diagnostics[1]["newton_iterations"]
+    scale = np.abs(states[0]).max()
+    assert np.abs(states[1] - states[0]).max() <= 1e-10 * scale
+    assert np.abs(jacobians[1] - jacobians[0]).max() <= 1e-10 * np.abs(jacobians[0]).max()
+
+
+def test_the_compiler_is_the_one_ngscxx_calls(tmp_path: Path) -> None:
+    toolset = tmp_path / "g++"
+    toolset.write_text("")
+    script = (
+        "if [ -f /no/such/toolset/g++ ]\n"
+        "  then NGSCXX=/no/such/toolset/g++\n  else NGSCXX=c++\nfi\n"
+        "if [ -f /usr/bin/ccache ]\n"
+    )
+    assert native._compiler_of(script) == __import__("shutil").which("c++")
+    assert native._compiler_of(script.replace("/no/such/toolset/g++", str(toolset))) == str(toolset)
