@@ -192,7 +192,7 @@ class AleFsiOptions(PluginOptions):
         False,
         description="compile the weak forms' integrands to machine code (NGSolve's "
         "realcompile; needs a C++ compiler, else the interpreted code and a note in the "
-        "run's diagnostics): the 2-D cell's runs about 1.75x faster, little gain in 3-D at "
+        "run's diagnostics): the 2-D cell's runs about 1.8x faster, little gain in 3-D at "
         "order 3; the first use of a setting compiles for 4-6 s per integrand, later "
         "processes take it from the cache in $FBIA_CACHE_DIR or ~/.cache/fbia "
         "(fbia.plugins.fem.native) [-]",

@@ -3,11 +3,12 @@
 NGSolve evaluates a symbolic integrand by walking its expression tree at every quadrature
 point; ``Compile()`` flattens the tree, ``Compile(realcompile=True)`` writes it as C++ and
 compiles it.  On the 2-D flow cell (``ale_fsi``, P2/P1, 3 745 free dofs) that makes the
-Jacobian's assembly 4x and the residual's 3x faster (24 -> 7 ms, 2.2 -> 0.7 ms), and a 2-D
-calibration about 1.75x faster (``benchmarks/bench_lm_vs_scipy.py --model-options
-native_code=true``); the 3-D dome at order 3 gains little (its assembly is bound by the element
-matrices, not the integrand).  The same discrete problem: the Jacobian agrees with the
-interpreted one to round-off (7e-13 of its largest entry).
+Jacobian's assembly 4x and the residual's 3x faster (24 -> 7 ms, 2.2 -> 0.7 ms), a 2-D
+calibration about 1.9x faster (``benchmarks/bench_lm_vs_scipy.py --set
+model.options.native_code=true``) and a batch of design runs 1.8x; the 3-D dome at order 3
+gains little (its assembly is bound by the element matrices, not the integrand).  The same
+discrete problem: the Jacobian agrees with the interpreted one to round-off (7e-13 of its
+largest entry).
 
 The price is the compiler: 4-6 s per integrand the first time (2-D), 4 s in 3-D, and a C++
 compiler on the machine (NGSolve's pip wheels ship the ``ngscxx`` script that calls it, not
@@ -33,6 +34,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -179,6 +181,10 @@ def _write(path: Path, text: str) -> None:
 #: compilations that failed in this process, by toolchain: later integrands skip the compiler
 _FAILED: dict[Path, str] = {}
 
+#: one compilation at a time in a process: ``PATH`` is the process's, and a Dask worker may run
+#: tasks (and build models) in several threads
+_COMPILING = threading.Lock()
+
 
 def compile_integrand(cf: Any, native: bool) -> tuple[Any, NativeCode]:
     """``cf.Compile()``, or with ``native`` ``cf.Compile(realcompile=True, wait=True)``
@@ -193,7 +199,7 @@ def compile_integrand(cf: Any, native: bool) -> tuple[Any, NativeCode]:
     if chain.bin in _FAILED:
         return cf.Compile(), NativeCode(True, False, _FAILED[chain.bin])
     try:
-        with chain.on_path():
+        with _COMPILING, chain.on_path():
             compiled = cf.Compile(realcompile=True, wait=True)
     except Exception as exc:  # NGSolve reports a failed compiler call as a plain NgException
         reason = f"the compilation failed: {str(exc).splitlines()[0] if str(exc) else exc!r}"
