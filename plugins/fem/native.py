@@ -35,6 +35,7 @@ import shutil
 import subprocess
 import sys
 import threading
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -195,14 +196,25 @@ def compile_integrand(cf: Any, native: bool) -> tuple[Any, NativeCode]:
         return cf.Compile(), NativeCode()
     chain = toolchain()
     if isinstance(chain, str):
-        return cf.Compile(), NativeCode(True, False, chain)
+        return _interpreted(cf, chain)
     if chain.bin in _FAILED:
-        return cf.Compile(), NativeCode(True, False, _FAILED[chain.bin])
+        return _interpreted(cf, _FAILED[chain.bin])
     try:
         with _COMPILING, chain.on_path():
             compiled = cf.Compile(realcompile=True, wait=True)
     except Exception as exc:  # NGSolve reports a failed compiler call as a plain NgException
         reason = f"the compilation failed: {str(exc).splitlines()[0] if str(exc) else exc!r}"
         _FAILED[chain.bin] = reason
-        return cf.Compile(), NativeCode(True, False, reason)
+        return _interpreted(cf, reason)
     return compiled, NativeCode(True, True)
+
+
+def _interpreted(cf: Any, reason: str) -> tuple[Any, NativeCode]:
+    """``Compile()`` where machine code was asked for, with a warning (once per reason, by
+    Python's default filter) and the reason in the outcome."""
+    warnings.warn(
+        f"native_code: {reason}; the integrands run interpreted (the same problem, slower)",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    return cf.Compile(), NativeCode(True, False, reason)

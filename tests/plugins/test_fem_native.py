@@ -90,9 +90,10 @@ def test_without_a_compiler_the_model_runs_interpreted_and_says_why(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     monkeypatch.setattr(native, "toolchain", lambda: "no C++ compiler (c++) on PATH")
-    sol = AleFsiForwardModel(**COARSE, native_code=True).solve(
-        {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path
-    )
+    with pytest.warns(RuntimeWarning, match="no C.. compiler .* run interpreted"):
+        sol = AleFsiForwardModel(**COARSE, native_code=True).solve(
+            {"E": 400.0, "nu": 0.3}, [{"inflow_rate": 100.0}], tmp_path
+        )
     assert sol.diagnostics["native_code"] == "interpreted: no C++ compiler (c++) on PATH"
 
 
@@ -110,14 +111,16 @@ def test_a_failed_compilation_falls_back_once_for_the_process(
     monkeypatch.setattr(native, "toolchain", lambda: chain)
     monkeypatch.setattr(native, "_FAILED", {})
     x = ngsolve.Parameter(2.0)
-    compiled, outcome = native.compile_integrand(x * x + 1.0, native=True)
+    with pytest.warns(RuntimeWarning, match="the compilation failed"):
+        compiled, outcome = native.compile_integrand(x * x + 1.0, native=True)
     assert outcome.requested and not outcome.used
     assert outcome.describe().startswith("interpreted: the compilation failed")
     assert native._FAILED[bin_dir] == outcome.reason
     # the interpreted code gives the value
     mesh = ngsolve.Mesh(__import__("netgen.geom2d").geom2d.unit_square.GenerateMesh(maxh=0.5))
     assert compiled(mesh(0.5, 0.5)) == pytest.approx(5.0)
-    _, again = native.compile_integrand(x + 1.0, native=True)
+    with pytest.warns(RuntimeWarning):
+        _, again = native.compile_integrand(x + 1.0, native=True)
     assert again == outcome
     assert native.compile_integrand(x, native=False)[1].describe() == "off"
 
