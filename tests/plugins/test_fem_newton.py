@@ -214,7 +214,7 @@ def test_direct_solver_threads_give_pardiso_ngsolves_thread_count() -> None:
 def test_the_fill_reducing_ordering_gives_the_same_solution(ordering: str | None) -> None:
     """Pardiso with nested dissection (``ordering = "metis"``, the 3-D choice of ale_fsi) or
     NGSolve's minimum degree: the same Newton solution to the tolerance, and the ordering
-    reaches Pardiso (its iparm[1]: 2 METIS, 0 minimum degree)."""
+    reaches Pardiso (its iparm[1]: 2 METIS, 0 minimum degree), without its matrix checker."""
     from fbia.plugins.fem.newton import sparse_direct_solver
 
     direct = sparse_direct_solver()
@@ -223,6 +223,8 @@ def test_the_fill_reducing_ordering_gives_the_same_solution(ordering: str | None
     rep = newton.solve()
     if direct == "pardiso":  # NGSolve's wrapper keeps Pardiso's iparm array as _params
         assert newton.inverse._params[1] == (2 if ordering == "metis" else 0)
+        # no matrix check at every call (PARDISO_MATRIX_CHECK), no iterative refinement
+        assert newton.inverse._params[26] == 0 and newton.inverse._params[7] == 0
     anchor = Cubic()
     NewtonSolver(anchor, 1e-10, 12, "umfpack").solve()
     assert rep.converged
