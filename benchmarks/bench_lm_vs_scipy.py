@@ -189,6 +189,17 @@ Where fbia's time goes with native code (cProfile of four starts, 40 runs, 2.26 
 1.05 s (its Jacobians included), the tangents' refinement sweeps 0.46 s (0.8 ms a Pardiso
 back-substitution through NGSolve's ctypes wrapper), the 69 Jacobian assemblies 0.56 s in all
 (Newton's and the tangents'), the interface curves and the measure's closest points 0.13 s.
+
+Pardiso without its matrix checker (``iparm[26] = 0``, ``fbia.plugins.fem.newton
+.PARDISO_MATRIX_CHECK``: NGSolve's wrapper checks the CSR arrays at every call, every
+back-substitution too; 0.52 -> 0.40 ms here, the same bits), then five runs each way in turn,
+idle (2026-12-01, session l): with machine code fbia 4.63 / 4.50 / 4.79 / 4.49 / 4.87 s against
+scipy 4.71 / 4.72 / 4.78 / 4.60 / 5.00 s, **0.98x / 0.95x / 1.00x / 0.98x / 0.97x**; with the
+interpreted code (the default) 8.93 / 8.30 / 8.53 / 8.81 / 8.19 s against 8.51 / 8.18 / 8.17 /
+8.23 / 7.70 s, **1.05x / 1.01x / 1.04x / 1.07x / 1.06x**; the same runs and optima throughout.
+So fbia is no slower than scipy with machine code (median 0.98x, by less than this VM's
+scatter), and 5 % slower with the default, interpreted code: the issue's target is not claimed
+for the default.
 """
 
 from __future__ import annotations
