@@ -247,6 +247,15 @@ is left is the two processes slowing each other (+13-25 % an iteration here; bac
 Sobol design's contiguous blocks would be balanced too (each half of its points fills the
 box), but an ordered batch's would not, and the permutation's property (no pattern of the batch
 followed) is what the process pool's bits rest on.
+
+Measured 2026-12-01 (session l, idle, Pardiso's matrix checker off since the same day:
+back-substitutions 15-25 % faster), ``--recommended --repeat 3 --two-only``: median
+**1.43x** (1.45, 1.43, 1.38; not met): serial batches 5.8-6.0 s (54 Newton iterations,
+0.107-0.111 s each), 2-worker batches 4.1-4.3 s (63 iterations, 0.120 s each, the runs' own
+time 7.5-7.6 s).  The serial batch gained more than the 2-worker one (6.5-8.2 s last session);
+the gap is the same two causes as above, 17 % more Newton iterations on the workers' thinner
+chains and each iteration dearer side by side (the machine check did 1.93x with two processes
+that hour).
 """
 
 from __future__ import annotations
