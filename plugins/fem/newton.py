@@ -87,9 +87,9 @@ COSTLY_STEPS_TO_TOLERANCE = 8
 SLOWEST_CHORD = 0.8
 
 #: MKL Pardiso's matrix checker, ``iparm[26]`` (0-based) as NGSolve's ``MKLPardiso`` takes it
-#: from the inverse's flags: 1 checks the CSR arrays at every call, on each back-substitution
-#: too (0.52 against 0.40 ms on the 2-D cell, 21-24 against 17-19 ms on the 3-D dome); fbia
-#: turns it off.  Measured 2026-12-01; the same interface and tangent bits either way.
+#: from the inverse's flags: 1 (NGSolve's setting) checks the CSR arrays at every call, each
+#: back-substitution too; fbia turns it off (NGSolve's matrices are well formed; the figures
+#: are in the CHANGELOG, issue 47).  It changes no result.
 PARDISO_MATRIX_CHECK = "iparm26"
 
 
@@ -381,10 +381,7 @@ class NewtonSolver:
                 flags: dict[str, Any] = {}
                 if self.linear_solver == "pardiso":
                     flags["refinement"] = 0
-                    # no check of the CSR arrays at every call (NGSolve's wrapper turns it on;
-                    # NGSolve's matrices are well formed): back-substitutions 15-25 % faster,
-                    # the same bits (PARDISO_MATRIX_CHECK)
-                    flags[PARDISO_MATRIX_CHECK] = 0
+                    flags[PARDISO_MATRIX_CHECK] = 0  # no check of the arrays at every call
                     if self.ordering is not None:
                         flags["ordering"] = self.ordering
                 with direct_solver_threads(self.threads):
