@@ -2,19 +2,18 @@
 
 NGSolve evaluates a symbolic integrand by walking its expression tree at every quadrature
 point; ``Compile()`` flattens the tree, ``Compile(realcompile=True)`` writes it as C++ and
-compiles it.  On the 2-D flow cell (``ale_fsi``, P2/P1, 3 745 free dofs) that makes the
-Jacobian's assembly 4x and the residual's 3x faster (24 -> 7 ms, 2.2 -> 0.7 ms), a 2-D
-calibration about 1.9x faster (``benchmarks/bench_lm_vs_scipy.py --set
-model.options.native_code=true``) and a batch of design runs 1.8x; the 3-D dome at order 3
-gains little (its assembly is bound by the element matrices, not the integrand).  The same
-discrete problem: the Jacobian agrees with the interpreted one to round-off (7e-13 of its
-largest entry).
+compiles it.  On the 2-D flow cell (``ale_fsi``, P2/P1) the Jacobian then assembles several
+times faster and a calibration runs about twice as fast; the 3-D dome at order 3 gains less
+(its assembly is bound by the element matrices, not the integrand).  The discrete problem is
+the same: the Jacobian agrees with the interpreted one to round-off.  Figures:
+``benchmarks/bench_lm_vs_scipy.py --set model.options.native_code=true`` and the CHANGELOG
+(issue 47).
 
-The price is the compiler: 4-6 s per integrand the first time (2-D), 4 s in 3-D, and a C++
-compiler on the machine (NGSolve's pip wheels ship the ``ngscxx`` script that calls it, not
-the compiler).  :mod:`.native_cache` keeps the compiled objects in
-``$FBIA_CACHE_DIR/native`` (default ``$XDG_CACHE_HOME/fbia`` or ``~/.cache/fbia``), so every
-later process takes an integrand it has seen from there in 0.1-0.2 s.
+The price is the compiler: seconds per integrand the first time, and a C++ compiler on the
+machine (NGSolve's pip wheels ship the ``ngscxx`` script that calls it, not the compiler).
+:mod:`.native_cache` keeps the compiled objects in ``$FBIA_CACHE_DIR/native`` (default
+``$XDG_CACHE_HOME/fbia`` or ``~/.cache/fbia``), so every later process takes an integrand it
+has seen from there in a fraction of a second.
 
 :func:`compile_integrand` is what a model calls; it falls back to ``Compile()`` (and says
 why in its :class:`NativeCode`) where there is no compiler or a compilation fails, so a study

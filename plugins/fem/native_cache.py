@@ -18,7 +18,6 @@ import: it starts in milliseconds), which does what NGSolve's scripts do, with a
   compiler, and the library linked directly with NGSolve's link arguments (``ngsld`` does the
   same after a Python start that imports NGSolve, half a second a call).
 
-A first compilation of a 2-D ``ale_fsi`` integrand takes 4-6 s; from the cache 0.1-0.2 s.
 """
 
 from __future__ import annotations
