@@ -8,8 +8,9 @@ import: it starts in milliseconds), which does what NGSolve's scripts do, with a
 
 * The source names the objects it reads (proxies, grid functions, parameters) by a counter
   over every compilation of the process, ``compiled_code_pointer88`` ...; one file holds the
-  code, another (no ``#include``) the pointers' addresses.  Both are renumbered from 0
-  (:func:`normalise`), so the same integrand compiles to the same code in any process.
+  code (declaring every pointer), another (no ``#include``) the pointers' addresses.  Both are
+  renumbered from their smallest declared number (:func:`normalise`), so the same integrand
+  compiles to the same code in any process.
 * The code file's object is looked up by the SHA-256 of that code, the compiler's flags
   and the ``key`` (NGSolve's version, the compiler, the real ``ngscxx`` script); a miss calls
   the real ``ngscxx`` and stores its object (written to a temporary name and renamed, so
@@ -35,13 +36,22 @@ from typing import Any
 #: the names by which NGSolve's generated code reaches its objects
 POINTER = re.compile(rb"compiled_code_pointer(\d+)")
 
+#: their declarations (``extern "C" void * ...;`` in the code file) and definitions (``void *
+#: ... = <address>;`` in the pointer file): the same list of names in both files
+DECLARED = re.compile(rb"void \* compiled_code_pointer(\d+)")
+
 
 def normalise(source: bytes) -> bytes:
-    """``source`` with the pointer names renumbered from 0 (their smallest number subtracted)."""
-    numbers = [int(n) for n in POINTER.findall(source)]
-    if not numbers:
+    """``source`` with the pointer names renumbered from 0: the smallest *declared* number is
+    subtracted, so that the code file (which declares every pointer of the compilation) and the
+    pointer file (which defines every one) are shifted alike even where the code uses only some
+    of them.  A source that uses a pointer it does not declare is returned as it is (then no
+    object is shared, but none is bound to the wrong pointer)."""
+    declared = {int(n) for n in DECLARED.findall(source)}
+    used = {int(n) for n in POINTER.findall(source)}
+    if not used or not used <= declared:
         return source
-    base = min(numbers)
+    base = min(declared)
     return POINTER.sub(lambda m: b"compiled_code_pointer%d" % (int(m.group(1)) - base), source)
 
 
