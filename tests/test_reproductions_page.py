@@ -71,3 +71,28 @@ def test_a_quick_study_run_today_gives_the_pages_row(study: str, tmp_path: Path)
         f"{study}: the page says (agree, status) = {page_rows()[study]}, a run today "
         f"gives {now}: regenerate docs/reproductions.md (make reproduce) or say why it moved"
     )
+
+
+def test_the_pages_studies_keep_the_interpreted_integrands_their_rows_were_made_with() -> None:
+    """Compiled integrands (``native_code``, the default of ``ale_fsi`` and ``growth`` since
+    2026-12-01) solve the same problem but move a result's bits, so every study with a
+    ``[paper]`` table whose model has the option says ``native_code = false``: the code its row
+    on the page was made with.  When the page is made afresh with compiled code, drop the
+    setting and this test."""
+    from fbia.core.registry import default_registry
+    from fbia.studies.study_sources import read_sources
+
+    registry = default_registry()
+    checked = []
+    for path in sorted((ROOT / "examples").rglob("*.toml")):
+        if path.name == "pyproject.toml" or "output" in path.parts:
+            continue
+        raw = read_sources(path).raw
+        if "paper" not in raw or raw.get("study", {}).get("base_only"):
+            continue
+        model = raw["model"]
+        options_class = registry.get("forward_model", model["name"]).factory.Options
+        if "native_code" in options_class.model_fields:
+            assert model.get("options", {}).get("native_code") is False, path
+            checked.append(path)
+    assert len(checked) >= 25  # Paper A's and B's ale_fsi studies and growth's

@@ -83,7 +83,7 @@ class SolverSettings:
     theta: float = 1.0  # one-step-theta
     linear_solver: str = "direct"  # "direct" (Pardiso) | "block_gmres" (fem.krylov)
     threads: int = 1
-    native_code: bool = False  # integrands compiled to machine code (fem.native)
+    native_code: bool = True  # integrands compiled to machine code (fem.native)
 
 
 class AleFsiProblem:
