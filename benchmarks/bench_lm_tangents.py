@@ -124,6 +124,14 @@ refactorisation, since the run ends on the factorisation of its second Jacobian,
 solution, not of a third at it), then 5.4, 4.9, 4.2 s (1 Jacobian each, tangents 1.3-2.0 s with
 6-26 refinement sweeps) and 1.9, 1.7 s (no Jacobian, tangents 1.4 s): the LM's long first
 steps cost a Jacobian per run, and every run's tangents a Jacobian assembly (1.0-1.1 s).
+With machine code for the integrands the default (2026-12-01, session m, idle): ``--dome``
+tangents 24.2, 22.2 and 20.4 s, the same optima: 20 s not met by any rule that survives this
+VM's scatter.  Its runs: the cold one 8-10 s (13 Newton iterations, 2 Jacobians), then
+4.2 / 3.7 / 3.4 s (1 Jacobian each) and 1.6 / 1.4 s; the tangents 7-8 s in all (14-26
+refinement sweeps a run).  Pardiso without weighted matching (its first factorisation of the
+dome's Jacobian 1.2-1.3 s instead of 2.7-3.6 s) gave 20.3 and 21.0 s against 22.2 and 20.4 s
+with it, and the recommended settings with quadratic mesh motion then stall in continuation
+(``bench_lm_vs_scipy.py``'s docstring): not kept.
 """
 
 from __future__ import annotations

@@ -200,6 +200,26 @@ interpreted code (the default) 8.93 / 8.30 / 8.53 / 8.81 / 8.19 s against 8.51 /
 So fbia is no slower than scipy with machine code (median 0.98x, by less than this VM's
 scatter), and 5 % slower with the default, interpreted code: the issue's target is not claimed
 for the default.
+
+Machine code the default (2026-12-01, session m; ``--set model.options.native_code=false``
+gives the interpreted code): three runs in turn, idle, fbia 5.17 / 5.29 / 5.40 s against scipy
+4.90 / 5.24 / 5.04 s, **1.05x / 1.01x / 1.07x (not met)**, the same runs and optima (0.001
+std. errors apart); the interpreted code the same hour 9.98 against 9.41 s (1.06x).  The
+default makes a 2-D calibration about 1.8x faster for its user, not fbia faster than scipy
+(the same model serves both).  Where a native run's time goes (cProfile of four starts, 36
+runs, 1.68 s): Pardiso 0.52 s (705 back-substitutions of ~0.38 ms, 21 factorisations), 57
+Jacobian assemblies 0.37 s, residuals 0.16 s, the mesh-quality check 0.07 s.  A
+back-substitution through NGSolve's ctypes wrapper costs what MKL's does (no overhead to cut).
+Tried and not kept: (1) a warm start's first Jacobian taken from the tangents' Jacobian of the
+state it starts from, moved to the new Lame constants (J(U; new) = J(U; old) + J_s(new) -
+J_s(old), exact to 1e-16): 7 stand-ins in 100 runs, Jacobians 63 -> 56 but Newton iterations
+485 -> 506 and refinement sweeps 1014 -> 1044, no gain; (2) Pardiso without weighted matching
+(``iparm[12] = 0``, re-applied after NGSolve's ``Analyze``): in 2-D no gain to speak of, on
+the 3-D dome a first factorisation in 1.2-1.3 s instead of 2.7-3.6 s, but the dome at order 3
+with quadratic mesh motion (``bench_ale_fsi_3d.py --target``'s row) then stalls in
+continuation at 35 mm^2/s, reproducibly: not robust; (3) 1/E or log E as the parameter for
+scipy (5 starts: 41 Jacobians -> 36 / 40); (4) two right-hand sides in one Pardiso call
+through NGSolve's MultiVector (14.3 ms against 2 x 7.8 ms: it loops).
 """
 
 from __future__ import annotations
@@ -225,7 +245,7 @@ FAILED_RESIDUAL = 1.0
 
 
 #: ``--set`` overrides of the study for the calibrated model (both methods), e.g.
-#: ``model.options.native_code=true``
+#: ``model.options.native_code=false`` (the interpreted integrands)
 OVERRIDES: list[str] = []
 
 
@@ -316,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
         default=[],
         metavar="SECTION.KEY=VALUE",
         help="overrides of the study for the calibrated model of both methods, as fbia run "
-        "--set takes them, e.g. model.options.native_code=true",
+        "--set takes them, e.g. model.options.native_code=false",
     )
     args = parser.parse_args(argv)
     OVERRIDES[:] = args.set
