@@ -162,7 +162,8 @@ def toolchain() -> Toolchain | str:
             ),
         )
         for tool in ("ngscxx", "ngsld"):
-            command = [sys.executable, "-I", str(CACHE_TOOL), str(settings), tool]
+            # -I -S: no site-packages (the tool needs the standard library alone; 15-20 ms a call)
+            command = [sys.executable, "-I", "-S", str(CACHE_TOOL), str(settings), tool]
             wrapper = bin_dir / tool
             _write(wrapper, f'#!/bin/sh\nexec {shlex.join(command)} "$@"\n')
             wrapper.chmod(0o755)

@@ -15,9 +15,18 @@ import: it starts in milliseconds), which does what NGSolve's scripts do, with a
   and the ``key`` (NGSolve's version, the compiler, the real ``ngscxx`` script); a miss calls
   the real ``ngscxx`` and stores its object (written to a temporary name and renamed, so
   concurrent processes never see half a file).
-* The pointer file (addresses differ in every process) is compiled directly by the C++
-  compiler, and the library linked directly with NGSolve's link arguments (``ngsld`` does the
-  same after a Python start that imports NGSolve, half a second a call).
+* The pointer file (addresses differ in every process) is not compiled: ``ngscxx`` leaves its
+  source as the "object" (:data:`POINTER_FILE` first), and ``ngsld`` links the library once
+  per content with placeholder addresses (:data:`PLACEHOLDER`: not a canonical address on
+  x86-64 or aarch64), keeps it by the SHA-256 of the objects, the placeholder source and the
+  link arguments, and writes a copy with each placeholder's 8 bytes replaced by the real
+  address (:func:`patched`).  NGSolve defines every pointer as a literal address
+  (``reinterpret_cast<void *>(0x...)``), which the compiler puts in ``.data`` as it stands, no
+  relocation; the copy is used only where every placeholder occurs exactly once in the
+  library, else the pointer file is compiled and the library linked as NGSolve would
+  (``ngsld`` itself starts a Python that imports NGSolve, half a second a call).  A model's
+  integrand from the cache then costs three short Python starts and a file copy instead of a
+  compilation and a link (``bench`` figures: the CHANGELOG).
 
 """
 
@@ -28,8 +37,10 @@ import json
 import os
 import re
 import shutil
+import struct
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +50,21 @@ POINTER = re.compile(rb"compiled_code_pointer(\d+)")
 #: their declarations (``extern "C" void * ...;`` in the code file) and definitions (``void *
 #: ... = <address>;`` in the pointer file): the same list of names in both files
 DECLARED = re.compile(rb"void \* compiled_code_pointer(\d+)")
+
+#: a pointer's definition in the pointer file, its address a literal
+DEFINITION = re.compile(
+    rb"(void \* compiled_code_pointer\d+ = reinterpret_cast<void \*>\()0x([0-9a-fA-F]+)(\))"
+)
+
+#: the first line of a pointer file's stand-in object (its source, linked by ``ngsld``)
+POINTER_FILE = b"// fbia native_cache: pointer file, linked with placeholder addresses\n"
+
+#: the placeholder address of pointer k is PLACEHOLDER + k: above the 48 (57) bits of a
+#: canonical user-space address on x86-64 and aarch64, so never a real pointer
+PLACEHOLDER = 0xF1BA_0000_0000_0000
+
+#: placeholders are patched as 8 little-endian bytes
+PATCHABLE = sys.byteorder == "little" and struct.calcsize("P") == 8
 
 
 def normalise(source: bytes) -> bytes:
@@ -77,6 +103,9 @@ def compile_object(settings: dict[str, Any], args: list[str]) -> int:
     source = normalise(source_path.read_bytes())
     source_path.write_bytes(source)
     if b"#include" not in source:  # the pointers' addresses: new in every process
+        if PATCHABLE and len(DEFINITION.findall(source)) == len(DECLARED.findall(source)) > 0:
+            out.write_bytes(POINTER_FILE + source)  # linked by ngsld (link_library)
+            return 0
         return subprocess.call([settings["cxx"], "-fPIC", *args])
     cached = Path(settings["cache"]) / f"{cache_key(settings['key'], args, source)}.o"
     if cached.is_file():
@@ -91,8 +120,102 @@ def compile_object(settings: dict[str, Any], args: list[str]) -> int:
 
 
 def link_library(settings: dict[str, Any], args: list[str]) -> int:
-    """``ngsld args``: the objects to NGSolve's library, with NGSolve's link arguments."""
+    """``ngsld args``: the objects to NGSolve's library, with NGSolve's link arguments.  With
+    pointer files among them (:func:`compile_object`), the library is the cached one of the
+    same content with placeholder addresses, patched; where it cannot be, the pointer files
+    are compiled and the library linked directly."""
+    out = Path(args[args.index("-o") + 1])
+    pointer_files = [
+        i for i, a in enumerate(args) if a.endswith(".o") and _is_pointer_file(Path(a))
+    ]
+    if not pointer_files:
+        return _link(settings, args)
+    sources = {i: Path(args[i]).read_bytes()[len(POINTER_FILE) :] for i in pointer_files}
+    addresses: list[int] = []
+    placeholders: dict[int, bytes] = {}
+    for i, source in sources.items():
+
+        def placeholder(m: re.Match[bytes]) -> bytes:
+            addresses.append(int(m.group(2), 16))
+            return m.group(1) + b"0x%x" % (PLACEHOLDER + len(addresses) - 1) + m.group(3)
+
+        placeholders[i] = DEFINITION.sub(placeholder, source)
+    h = hashlib.sha256(settings["key"].encode())
+    h.update("\0".join(settings["link_args"]).encode())
+    output = args.index("-o")
+    for i, a in enumerate(args):
+        if i in (output, output + 1):  # the library's name: another temporary one each time
+            continue
+        if i in placeholders:
+            h.update(b"\0pointers\0" + placeholders[i])
+        elif a.endswith(".o"):
+            h.update(b"\0object\0" + Path(a).read_bytes())
+        else:
+            h.update(b"\0" + a.encode())
+    cached = Path(settings["cache"]) / f"{h.hexdigest()}.so"
+    if not cached.is_file():
+        _link_with_placeholders(settings, args, placeholders, len(addresses), cached)
+    library = patched(cached.read_bytes(), addresses) if cached.is_file() else None
+    if library is None:  # compiled and linked as NGSolve would
+        with tempfile.TemporaryDirectory(dir=out.parent) as work:
+            for i, source in sources.items():
+                cpp = Path(work) / f"pointers_{i}.cpp"
+                cpp.write_bytes(source)
+                code = subprocess.call([settings["cxx"], "-fPIC", "-c", str(cpp), "-o", args[i]])
+                if code:
+                    return code
+        return _link(settings, args)
+    out.write_bytes(library)
+    return 0
+
+
+def _is_pointer_file(path: Path) -> bool:
+    with path.open("rb") as f:
+        return f.read(len(POINTER_FILE)) == POINTER_FILE
+
+
+def _link(settings: dict[str, Any], args: list[str]) -> int:
     return subprocess.call([settings["cxx"], *settings["link_args"], *args])
+
+
+def _link_with_placeholders(
+    settings: dict[str, Any],
+    args: list[str],
+    placeholders: dict[int, bytes],
+    n: int,
+    cached: Path,
+) -> None:
+    """Link the library with the placeholder addresses into ``cached`` (written under a
+    temporary name and renamed), if each placeholder occurs exactly once in it."""
+    work = Path(tempfile.mkdtemp(dir=cached.parent))
+    try:
+        linked = list(args)
+        for i, source in placeholders.items():
+            (work / f"pointers_{i}.cpp").write_bytes(source)
+            linked[i] = str(work / f"pointers_{i}.o")
+            compiled = [settings["cxx"], "-fPIC", "-c", str(work / f"pointers_{i}.cpp")]
+            if subprocess.call([*compiled, "-o", linked[i]]):
+                return
+        library = work / "library.so"
+        linked[linked.index("-o") + 1] = str(library)
+        if _link(settings, linked) or patched(library.read_bytes(), [0] * n) is None:
+            return
+        os.replace(library, cached)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def patched(library: bytes, addresses: list[int]) -> bytes | None:
+    """``library`` with placeholder k's 8 bytes replaced by ``addresses[k]``; None unless
+    every placeholder occurs exactly once (then the bytes are the literal, nothing else)."""
+    data = bytearray(library)
+    for k, address in enumerate(addresses):
+        mark = struct.pack("<Q", PLACEHOLDER + k)
+        at = data.find(mark)
+        if at < 0 or data.find(mark, at + 1) >= 0:
+            return None
+        data[at : at + 8] = struct.pack("<Q", address)
+    return bytes(data)
 
 
 def main(argv: list[str]) -> int:

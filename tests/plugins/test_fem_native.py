@@ -189,3 +189,109 @@ def test_the_compiler_is_the_one_ngscxx_calls(tmp_path: Path) -> None:
     )
     assert native._compiler_of(script) == __import__("shutil").which("c++")
     assert native._compiler_of(script.replace("/no/such/toolset/g++", str(toolset))) == str(toolset)
+
+
+LINKED_CODE = b"""#include <cstddef>
+extern "C" void * compiled_code_pointer%d;
+extern "C" void * compiled_code_pointer%d;
+extern "C" void * first() { return compiled_code_pointer%d; }
+extern "C" void * second() { return compiled_code_pointer%d; }
+%s
+"""
+POINTERS = b"""extern "C" {
+[[maybe_unused]]  void * compiled_code_pointer%d = reinterpret_cast<void *>(0x%x);
+[[maybe_unused]]  void * compiled_code_pointer%d = reinterpret_cast<void *>(0x%x);
+}
+"""
+
+
+def _real_compiler(tmp_path: Path) -> dict[str, object]:
+    """Settings of the cache tool with the C++ compiler behind both of NGSolve's scripts, and
+    a log of every call of the compiler the tool makes itself."""
+    log = tmp_path / "cxx.log"
+    cxx = tmp_path / "cxx"
+    cxx.write_text(f'#!/bin/sh\necho "$@" >> {log}\nexec c++ "$@"\n')
+    cxx.chmod(0o755)
+    ngscxx = tmp_path / "ngscxx"
+    ngscxx.write_text('#!/bin/sh\nexec c++ -fPIC "$@"\n')
+    ngscxx.chmod(0o755)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    return {
+        "cache": str(cache),
+        "ngscxx": str(ngscxx),
+        "cxx": str(cxx),
+        "link_args": [],
+        "key": "k",
+    }
+
+
+def _build(
+    settings: dict[str, object],
+    work: Path,
+    first: int,
+    addresses: tuple[int, int],
+    extra: bytes = b"",
+) -> tuple[int, int]:
+    """What NGSolve does for one integrand in a process whose pointer counter is at ``first``:
+    the two files compiled, the library linked and loaded; the addresses its code reads."""
+    import ctypes
+
+    work.mkdir()
+    a, b = first, first + 1
+    (work / "code_0.cpp").write_bytes(LINKED_CODE % (a, b, a, b, extra))
+    (work / "code_1.cpp").write_bytes(POINTERS % (a, addresses[0], b, addresses[1]))
+    for k in (0, 1):
+        args = ["-c", str(work / f"code_{k}.cpp"), "-o", str(work / f"code_{k}.o")]
+        assert native_cache.compile_object(settings, args) == 0
+    objects = [str(work / "code_0.o"), str(work / "code_1.o")]
+    library = work / "library.so"
+    assert native_cache.link_library(settings, ["-shared", *objects, "-o", str(library)]) == 0
+    lib = ctypes.CDLL(str(library))
+    lib.first.restype = lib.second.restype = ctypes.c_void_p
+    return lib.first(), lib.second()
+
+
+@pytest.mark.skipif(not native_cache.PATCHABLE, reason="placeholders are patched as 8 LE bytes")
+@pytest.mark.skipif(isinstance(native.toolchain(), str), reason="no C++ compiler for NGSolve")
+def test_the_library_is_linked_once_and_each_process_reads_its_own_addresses(
+    tmp_path: Path,
+) -> None:
+    settings = _real_compiler(tmp_path)
+    processes = [(0, (0x1000, 0x2000)), (28, (0x7F00DEAD0000, 0x1000)), (5, (0x10, 0x10))]
+    for k, (first, addresses) in enumerate(processes):
+        assert _build(settings, tmp_path / f"p{k}", first, addresses) == addresses
+    # one compilation of the placeholder pointers and one link, for the first process only
+    calls = (tmp_path / "cxx.log").read_text().splitlines()
+    assert len(calls) == 2 and "-shared" in calls[1]
+    assert len(list((tmp_path / "cache").glob("*.so"))) == 1
+
+
+@pytest.mark.skipif(not native_cache.PATCHABLE, reason="placeholders are patched as 8 LE bytes")
+@pytest.mark.skipif(isinstance(native.toolchain(), str), reason="no C++ compiler for NGSolve")
+def test_a_library_holding_a_placeholder_elsewhere_is_linked_as_ngsolve_would(
+    tmp_path: Path,
+) -> None:
+    """The code itself holds the first placeholder's bytes: patching could hit them, so no
+    library is cached and each process compiles its pointers and links."""
+    clash = b'extern "C" volatile unsigned long long clash = 0x%xULL;' % native_cache.PLACEHOLDER
+    settings = _real_compiler(tmp_path)
+    for k, addresses in enumerate([(0x1000, 0x2000), (0x3000, 0x4000)]):
+        assert _build(settings, tmp_path / f"p{k}", 3 * k, addresses, clash) == addresses
+    assert not list((tmp_path / "cache").glob("*.so"))
+
+
+def test_patched_replaces_each_placeholder_that_occurs_exactly_once() -> None:
+    mark = [__import__("struct").pack("<Q", native_cache.PLACEHOLDER + k) for k in (0, 1)]
+    library = b"head" + mark[0] + b"mid" + mark[1] + b"tail"
+    got = native_cache.patched(library, [0x1234, 0x5678])
+    assert (
+        got
+        == b"head"
+        + (0x1234).to_bytes(8, "little")
+        + b"mid"
+        + (0x5678).to_bytes(8, "little")
+        + b"tail"
+    )
+    assert native_cache.patched(library + mark[1], [1, 2]) is None  # twice: which one?
+    assert native_cache.patched(b"head" + mark[0], [1, 2]) is None  # missing
