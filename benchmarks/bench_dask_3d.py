@@ -256,6 +256,12 @@ time 7.5-7.6 s).  The serial batch gained more than the 2-worker one (6.5-8.2 s 
 the gap is the same two causes as above, 17 % more Newton iterations on the workers' thinner
 chains and each iteration dearer side by side (the machine check did 1.93x with two processes
 that hour).
+
+Measured 2026-12-01 (session m, idle), machine code for the integrands now the default:
+``--recommended --repeat 3 --two-only`` median **1.42x** (1.42, 1.47, 1.39; not met): serial
+batches 5.9 s (54 Newton iterations, 0.109 s each), 2-worker batches 4.0-4.2 s (63 iterations,
+0.115-0.125 s each, the runs' own time 7.3-7.9 s); the machine check 1.76x.  The same two causes
+as above; 1.6x is 91 % of what this VM gives two processes.
 """
 
 from __future__ import annotations
