@@ -188,6 +188,20 @@ compilation from the cache, one run each).  Machine code is the default since 20
 idle (session m): ``--target --repeat 5`` 10.2 / 9.0 / 9.9 / 9.9 / 11.0 s, median 9.9 s (13 Newton
 iterations, 2 Jacobians each), 1084 MB, 0.87 % / 0.42 % from the references: the target holds by
 the bench's rule, by less than this VM's drift (the median was 7.9 s and 8.9 s in session l).
+
+Measured idle 2026-12-02 (session n, a fresh VM), after the 3-D direct solve factorises
+without Pardiso's weighted matching until a factorisation perturbs a pivot
+(``fbia.plugins.fem.pardiso``; the matched first call spent 0.53-0.56 s in the matching and
+ordered for more fill): ``--target --repeat 5`` twice each way in turn, the code before from a
+worktree: before 8.5 / 8.2 / 8.0 / 8.4 / 8.0 s (median 8.2 s) and 8.2 / 8.0 / 8.0 / 8.4 / 8.1 s
+(8.1 s), after 6.8 / 6.7 / 6.9 / 6.5 / 6.8 s (6.8 s) and 6.9 / 6.1 / 6.9 / 5.6 / 5.7 s (6.1 s),
+13 Newton iterations and 2 Jacobians each, the same largest displacement, 1057-1062 MB (the
+recommended settings perturb no pivot: matching stays off).  The rows with the quadratic
+mesh motion perturb pivots unmatched (247 in the first factorisation when tried without the
+fallback, which then stalled in continuation at 35 mm^2/s) and switch to matching: 10 Newton
+iterations and 3 Jacobians as before.  The first run on a machine compiles the integrands
+(``native_code``): the first ``--target`` on this VM took 22.8 s for the recommended row
+(12.0 s of CPU in the solve), every later one 6-8 s.
 """
 
 from __future__ import annotations
@@ -200,6 +214,7 @@ import statistics
 import subprocess
 import sys
 import time
+from typing import Any
 
 from fbia.plugins.ale_fsi.options import RECOMMENDED_3D
 
@@ -224,10 +239,23 @@ print(json.dumps({
     "assembly": d["assembly_time"], "solve": d["solve_time"],
     "newton": d["newton_iterations"], "jacobians": d["jacobians"],
     "gmres": getattr(inverse, "iterations", []),
+    "matching": getattr(inverse, "matching", None), "perturbed": getattr(inverse, "perturbed", 0),
     "memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     "max_displacement": d["max_displacement"][0],
 }))
 """
+
+
+def _matching(result: dict[str, Any]) -> str:
+    """Pardiso's weighted matching in a run: ``off``, or ``on@N`` when N perturbed pivots
+    turned it on (fbia.plugins.fem.pardiso); ``-`` for NGSolve's Pardiso (always matching)
+    and other solvers."""
+    if result["matching"] is None:
+        return "-"
+    if result["matching"]:
+        return f"on@{result['perturbed']}"
+    return "off"
+
 
 #: largest interface displacement (mm) of the reference run :data:`FINEST` (measured)
 REFERENCE = 0.026478
@@ -336,7 +364,7 @@ def convergence_table(quick: bool, target: bool = False, repeat: int = 1) -> Non
         f"{'p':>2} {'h_if':>5} {'h_duct':>6} {'curved':>6} {'thr':>3} {'layer':>5} {'d_p':>3} "
         f"{'ndof':>7} "
         f"{'max |d| mm':>11} {'err %':>6} {'wall s':>7} {'cpu s':>7} {'proc cpu':>8} {'MB':>6} "
-        f"{'newton':>6} {'jac':>3}"
+        f"{'newton':>6} {'jac':>3} {'matching':>8}"
     )
     results = {}
     for case in reversed(rows):  # the reference first, so that every row has its error
@@ -359,7 +387,8 @@ def convergence_table(quick: bool, target: bool = False, repeat: int = 1) -> Non
             f"{motion_order:3d} "
             f"{r['ndof']:7d} "
             f"{r['max_displacement']:11.7f} {err:+6.2f} {r['wall']:7.1f} {r['cpu']:7.1f} "
-            f"{r['process_cpu']:8.1f} {r['memory_mb']:6.0f} {r['newton']:6d} {r['jacobians']:3d}",
+            f"{r['process_cpu']:8.1f} {r['memory_mb']:6.0f} {r['newton']:6d} {r['jacobians']:3d} "
+            f"{_matching(r):>8}",
             flush=True,
         )
     r = results[RECOMMENDED]

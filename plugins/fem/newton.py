@@ -210,6 +210,10 @@ class NewtonSolver:
     threads
         Threads of the direct solver's factorisations and solves (``ngsolve.SetNumThreads``
         must allow as many); 1 keeps them serial (:func:`direct_solver_threads`).
+    matching
+        Pardiso's weighted matching (NGSolve's setting); False factorises without it until a
+        factorisation perturbs a pivot (:mod:`~fbia.plugins.fem.pardiso`).  Other solvers
+        ignore it.
     """
 
     def __init__(
@@ -225,6 +229,7 @@ class NewtonSolver:
         chord: ChordRule | None = None,
         ordering: str | None = None,
         threads: int = 1,
+        matching: bool = True,
     ) -> None:
         self.system = system
         self.tol = tol
@@ -237,6 +242,7 @@ class NewtonSolver:
         self.blocks = blocks
         self.ordering = ordering
         self.threads = threads
+        self.matching = matching
         #: seconds spent assembling and solving, summed over every solve
         self.timings = {"assembly": 0.0, "solve": 0.0}
         #: the factorised Jacobian (None until the first factorisation)
@@ -379,6 +385,12 @@ class NewtonSolver:
                 )
             elif self.inverse is None:
                 flags: dict[str, Any] = {}
+                inverse = self.linear_solver
+                if inverse == "pardiso" and not self.matching:
+                    from .pardiso import UNMATCHED, unmatched_pardiso
+
+                    if unmatched_pardiso():
+                        inverse = UNMATCHED
                 if self.linear_solver == "pardiso":
                     flags["refinement"] = 0
                     flags[PARDISO_MATRIX_CHECK] = 0  # no check of the arrays at every call
@@ -386,7 +398,7 @@ class NewtonSolver:
                         flags["ordering"] = self.ordering
                 with direct_solver_threads(self.threads):
                     self.inverse = self.system.matrix.Inverse(
-                        self.system.free, inverse=self.linear_solver, flags=Flags(flags)
+                        self.system.free, inverse=inverse, flags=Flags(flags)
                     )
             else:
                 with direct_solver_threads(self.threads):
