@@ -15,7 +15,10 @@ dolfin-adjoint's tangent linear model; Nocedal & Wright 2006, sec. 8.2 on the co
 * **dR/dU** is assembled at the converged state.  Newton's last factorisation is of a nearby
   iterate (chord steps follow it), so it serves as the solver of an iterative refinement
   against the exact Jacobian (no new factorisation); only when that does not contract is the
-  Jacobian factorised afresh (``refactorised`` in the report).
+  Jacobian factorised afresh (``refactorised`` in the report).  A solver whose
+  ``tangents_refactorise`` is true (``ale_fsi`` in 3-D with the direct solver, where a
+  refactorisation costs less than the sweeps) factorises it first; one sweep then checks the
+  solve.  Either way the factorisation of the converged state is the next solve's chord.
 * The vertices of the interface are linear in the displacement dofs
   (:class:`~fbia.plugins.ale_fsi.postprocess.AleFsiPostprocess`: the displacement at the
   edge points in 2-D, at the vertices in 3-D), so dv/dp is the same map applied to dU/dp.
@@ -164,11 +167,14 @@ def _solve(
 ) -> NDArray[np.float64]:
     """J^-1 b on the free dofs (zero elsewhere): Newton's factorisation refined against the
     assembled Jacobian; a fresh factorisation (once per state: ``fresh[0]`` says it is
-    done) where that does not contract."""
+    done) first where the solver asks for it, else where the refinement does not contract."""
     newton = solver.newton_solver
     free = solver.free_mask
     rhs = solver.vector.CreateVector()
     rhs.FV().NumPy()[:] = np.where(free, b, 0.0)
+    if solver.tangents_refactorise and not fresh[0]:
+        newton.factorise("tangents")
+        fresh[0] = report.refactorised = True
     x = _refined(solver, newton, rhs, report) if newton.inverse is not None else None
     if x is None and not fresh[0]:
         newton.factorise("tangents")

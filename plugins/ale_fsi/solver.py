@@ -79,6 +79,12 @@ class AleFsiSolver(AleFsiProblem):
             self._newton.chord = ChordRule.costly_jacobian()
         #: a solve from rest starts from the inflow profile in the whole fluid (:meth:`newton`)
         self.start_from_inflow = mesh.dim == 3 and blocks is None
+        #: the tangents factorise the Jacobian at the converged state before they solve,
+        #: instead of refining with Newton's last factorisation: in 3-D with the direct solver
+        #: a refactorisation (~0.4 s on the dome) costs less than the 14-26 refinement sweeps
+        #: (a product with the Jacobian and a back-substitution, ~35 ms each) it saves; in 2-D
+        #: they cost the same (benchmarks/bench_lm_tangents.py, bench_lm_vs_scipy.py)
+        self.tangents_refactorise = mesh.dim == 3 and blocks is None
         self._continuation = ArclengthContinuation(
             self, self._newton, self.newton, settings.continuation_min_fraction, unit="mm^2/s"
         )
