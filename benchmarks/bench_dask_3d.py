@@ -262,6 +262,15 @@ Measured 2026-12-01 (session m, idle), machine code for the integrands now the d
 batches 5.9 s (54 Newton iterations, 0.109 s each), 2-worker batches 4.0-4.2 s (63 iterations,
 0.115-0.125 s each, the runs' own time 7.3-7.9 s); the machine check 1.76x.  The same two causes
 as above; 1.6x is 91 % of what this VM gives two processes.
+
+Measured 2026-12-02 (session n, a fresh VM, idle but for the load of a study that had just
+ended), after the 3-D direct solve dropped Pardiso's weighted matching where no pivot needs
+it: ``--recommended --repeat 3 --two-only`` median **1.51x** (1.51, 1.48, 1.53; not met):
+serial batches 4.9-5.1 s (54 Newton iterations, 0.091-0.094 s each), 2-worker batches 3.2-3.4 s
+(63 iterations, 0.094-0.103 s each, the runs' own time 5.9-6.5 s); the machine check 2.06x.
+Side by side an iteration now costs about what it costs alone; what is left is the workers'
+thinner chains (63 against 54 iterations: 3.0 s of runs per worker against 2.5 s) and about
+0.4 s per batch outside the runs (the batch's wall time less half the runs' own time).
 """
 
 from __future__ import annotations
