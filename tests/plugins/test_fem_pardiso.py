@@ -80,6 +80,35 @@ def test_a_saddle_point_whose_pivots_get_perturbed_turns_matching_on() -> None:
     assert _relative_residual(form.mat, inverse, free) < 1e-9
 
 
+def test_a_refactorisation_that_perturbs_pivots_turns_matching_on() -> None:
+    """A saddle point stabilised by -eps p q factorises unmatched without perturbed pivots;
+    the same pattern with eps = 0, refactorised (``Update``, as Newton does), perturbs some:
+    the solver analyses again with matching and solves accurately."""
+    mesh = _mesh()
+    space = ngs.VectorH1(mesh, order=2, dirichlet=".*") * ngs.H1(mesh, order=1)
+    (u, p), (v, q) = space.TnT()
+    eps = ngs.Parameter(1.0)
+    form = ngs.BilinearForm(space)
+    form += (
+        ngs.InnerProduct(ngs.grad(u), ngs.grad(v))
+        - ngs.div(u) * q
+        - ngs.div(v) * p
+        + 0.3 * u[0] * v[1]
+        - eps * p * q
+    ) * ngs.dx
+    form.Assemble()
+    free = space.FreeDofs()
+    free.Clear(space.ndof - 1)
+    inverse = _inverse(form.mat, free)
+    assert not inverse.matching and inverse._params[13] == 0
+    assert _relative_residual(form.mat, inverse, free) < 1e-12
+    eps.Set(0.0)
+    form.Assemble()
+    inverse.Update()
+    assert inverse.matching and inverse.perturbed > 0 and inverse._params[13] == 0
+    assert _relative_residual(form.mat, inverse, free) < 1e-9
+
+
 def test_newton_without_matching_reaches_the_matched_solution() -> None:
     """NewtonSolver(matching=False) uses the unmatched inverse and converges to the matched
     solver's solution to the tolerance; matching=True keeps NGSolve's Pardiso."""
