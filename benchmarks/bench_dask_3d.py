@@ -271,6 +271,9 @@ serial batches 4.9-5.1 s (54 Newton iterations, 0.091-0.094 s each), 2-worker ba
 Side by side an iteration now costs about what it costs alone; what is left is the workers'
 thinner chains (63 against 54 iterations: 3.0 s of runs per worker against 2.5 s) and about
 0.4 s per batch outside the runs (the batch's wall time less half the runs' own time).
+``--no-isolate`` right after: median 1.48x (1.48, 1.49, 1.47; machine check 2.03x), serial
+4.6-4.7 s, 2-worker 3.1-3.2 s for 5.6-5.7 s of runs (63 iterations against 54): the child
+processes are not the cause; the workers' thinner chains (~0.4 s a worker) are the most of it.
 """
 
 from __future__ import annotations
