@@ -220,6 +220,19 @@ with quadratic mesh motion (``bench_ale_fsi_3d.py --target``'s row) then stalls 
 continuation at 35 mm^2/s, reproducibly: not robust; (3) 1/E or log E as the parameter for
 scipy (5 starts: 41 Jacobians -> 36 / 40); (4) two right-hand sides in one Pardiso call
 through NGSolve's MultiVector (14.3 ms against 2 x 7.8 ms: it loops).
+
+Measured 2026-12-02 (session n, a fresh VM, idle, machine code the default): fbia 4.38 /
+4.31 s against scipy 4.02 / 4.04 s, **1.09x / 1.06x (not met)**, the same 100 against 296
+runs and optima.  Per start (``brown``, one run of each): fbia 9 runs, 59 Newton iterations, 4
+Jacobians, 0.41 s of model time of which the tangents 0.20 s (132 refinement sweeps: a sweep
+is a 0.44 ms back-substitution and a 0.16 ms product with ~0.1 ms around them); scipy 25 runs,
+70 Newton iterations, 5 Jacobians, 0.29 s.  The late runs of fbia's start are close together
+(E within 0.2 Pa) but chord with the factorisation of its fourth run, so each tangent pair
+needs 15-16 sweeps (21-24 ms) for a run of 2-6 Newton iterations.  Factorising the converged
+state's Jacobian before the tangents (what 3-D does since this session) gave 1.11 / 1.06 /
+1.10x: no gain (a 2-D refactorisation costs about what the sweeps cost).  So with the same
+iteration counts a tangent pair costs what scipy's two warm forward-difference runs cost on the
+shared model: parity, not a lead.
 """
 
 from __future__ import annotations
