@@ -230,7 +230,8 @@ is a 0.44 ms back-substitution and a 0.16 ms product with ~0.1 ms around them); 
 (E within 0.2 Pa) but chord with the factorisation of its fourth run, so each tangent pair
 needs 15-16 sweeps (21-24 ms) for a run of 2-6 Newton iterations.  Factorising the converged
 state's Jacobian before the tangents (what 3-D does since this session) gave 1.11 / 1.06 /
-1.10x: no gain (a 2-D refactorisation costs about what the sweeps cost).  So with the same
+1.10x: no gain (a 2-D factorisation was measured at 8.8 ms in stop 68, about what the 15
+sweeps it saves cost).  So with the same
 iteration counts a tangent pair costs what scipy's two warm forward-difference runs cost on the
 shared model: parity, not a lead.
 """
