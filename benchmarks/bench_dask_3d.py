@@ -274,6 +274,11 @@ thinner chains (63 against 54 iterations: 3.0 s of runs per worker against 2.5 s
 ``--no-isolate`` right after: median 1.48x (1.48, 1.49, 1.47; machine check 2.03x), serial
 4.6-4.7 s, 2-worker 3.1-3.2 s for 5.6-5.7 s of runs (63 iterations against 54): the child
 processes are not the cause; the workers' thinner chains (~0.4 s a worker) are the most of it.
+Then a worker's next run was submitted before the client recorded its last one (the record,
+the store and the listeners had kept the worker waiting): twice each way in turn, the code
+before from a worktree, medians 1.48x / 1.40x before, 1.55x / 1.52x after for the dome,
+and 0.90x / 0.92x before, 1.02x / 1.02x after for the 2-D flow
+cell, whose 30 ms runs felt the waiting most.  1.6x is still not met: the thinner chains.
 """
 
 from __future__ import annotations

@@ -39,9 +39,10 @@ run: a ``job_extra_directives`` entry is a flag of the batch system's allow-list
 
 On the local cluster each run of a batch goes to the worker its place in the batch fixes
 (:func:`~fbia.execution.local_executors.workers_of_runs`, as in the process pool; workers in
-the order of their names), each worker getting its next run when its last is done, so in the
-batch's order: a warm-starting model's last digits depend on the runs its process made
-before, so a study gives the same bits on the same number of single-threaded workers.  A run
+the order of their names), each worker getting its next run when its last is done (before
+the client records the last one), so in the batch's order: a warm-starting model's last
+digits depend on the runs its process made before, so a study gives the same bits on the same
+number of single-threaded workers.  A run
 goes to another worker only if its own has left the cluster, and the local cluster runs
 without Dask's work stealing.  On a scheduler at an ``address`` or a batch-system cluster,
 whose workers come and go, every run of a batch is submitted at once for any free worker:
@@ -299,9 +300,11 @@ class DaskExecutor:
                     message = f"{type(exc).__name__}: {exc}"
                     outcome = RunOutcome.unfinished(i, x, str(wd), message, "error")
                 fut.release()
-                done[i] = finish(outcome)
+                # the worker's next run first: recording this one (the store, the listener)
+                # would otherwise keep the worker idle
                 if lanes and queues[w]:
                     running.add(submit(w))
+                done[i] = finish(outcome)
         except BaseException:  # Ctrl-C or a bug: stop the tasks instead of waiting for them
             self.client.cancel(list(futures), force=True)
             raise
