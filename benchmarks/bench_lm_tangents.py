@@ -133,24 +133,24 @@ dome's Jacobian 1.2-1.3 s instead of 2.7-3.6 s) gave 20.3 and 21.0 s against 22.
 with it, and the recommended settings with quadratic mesh motion then stall in continuation
 (``bench_lm_vs_scipy.py``'s docstring): not kept.
 
-Measured idle 2026-12-02 (session n, a fresh VM).  Pardiso without weighted matching in 3-D,
-now with matching switched on where a factorisation perturbs a pivot
+Measured idle 2026-12-02 (session n, a fresh VM). Pardiso without weighted matching in 3-D, now
+with matching switched on where a factorisation perturbs a pivot
 (``fbia.plugins.fem.pardiso``): ``--dome`` tangents in turn with the code before (a worktree)
-22.8 / 22.1 s before, 19.5 / 19.1 s after, the same optimum.  Its runs then (21.7 s in that
-run): 8.2 s cold (13 Newton iterations, 2 Jacobians), 3.8 / 3.3 / 2.9 s (1 Jacobian each),
-1.9 / 1.6 s; the tangents 8.1 s, 0.9-1.7 s a run: the Jacobian's assembly at the converged
-state 0.65 s, then 6-26 refinement sweeps with the run's last factorisation, each a product
-with the Jacobian (23.5 ms on two threads) and a back-substitution (11 ms).  A refactorisation
-without matching costs about 0.4 s, less than those sweeps: the tangents in 3-D now factorise
-the converged state's Jacobian first (``AleFsiSolver.tangents_refactorise``), then one sweep
-per input checks the solve.  Three pairs in turn: before 21.6 / 18.8 / 20.8 s (median 20.8 s),
-after 17.7 / 19.7 / 17.7 s (median 17.7 s), the tangents 6.8-7.2 s instead of 8.1-8.7 s, the
-same 6 runs and 4 iterations, the optimum's error from the truth -0.000235 instead of -0.000238
-Pa in E (the tangents' rounding moves the LM's path within the Newton tolerance).  Issue 47's
-20 s holds by the median of three, by less than this VM's scatter.  In 2-D
-(``bench_lm_vs_scipy.py``, monkeypatched, three runs with it and two without, in turn) the
-same change gave fbia 1.11 / 1.06 / 1.10x scipy's wall time against 1.09 / 1.06x: no gain,
-so 2-D keeps the refinement with Newton's factorisation (and its results).
+22.8 / 22.1 s before, 19.5 / 19.1 s after, the same optimum. Its runs then (21.7 s in that
+run): 8.2 s cold (13 Newton iterations, 2 Jacobians), 3.8 / 3.3 / 2.9 s (1 Jacobian each), 1.9
+/ 1.6 s; the tangents 8.1 s, 0.9-1.7 s a run: the Jacobian's assembly at the converged state
+0.65 s, then 6-26 refinement sweeps with the run's last factorisation, each a product with the
+Jacobian (23.5 ms on two threads) and a back-substitution (11 ms). A refactorisation without
+matching costs 0.37-0.39 s (every factorisation timed), less than those sweeps: the tangents in
+3-D now factorise the converged state's Jacobian first (``AleFsiSolver.tangents_refactorise``),
+then one sweep per input checks the solve. Three pairs in turn: before 21.6 / 18.8 / 20.8 s
+(median 20.8 s), after 17.7 / 19.7 / 17.7 s (median 17.7 s), the tangents 6.8-7.2 s instead of
+8.1-8.7 s, the same 6 runs and 4 iterations, the optimum's error from the truth -0.000235
+instead of -0.000238 Pa in E (the tangents' rounding moves the LM's path within the Newton
+tolerance). Issue 47's 20 s holds by the median of three, by less than this VM's scatter. In
+2-D (``bench_lm_vs_scipy.py``, monkeypatched, three runs with it and two without, in turn) the
+same change gave fbia 1.11 / 1.06 / 1.10x scipy's wall time against 1.09 / 1.06x: no gain, so
+2-D keeps the refinement with Newton's factorisation (and its results).
 """
 
 from __future__ import annotations

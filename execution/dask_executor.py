@@ -42,11 +42,11 @@ On the local cluster each run of a batch goes to the worker its place in the bat
 the order of their names), each worker getting its next run when its last is done (before
 the client records the last one), so in the batch's order: a warm-starting model's last
 digits depend on the runs its process made before, so a study gives the same bits on the same
-number of single-threaded workers.  A run
-goes to another worker only if its own has left the cluster, and the local cluster runs
-without Dask's work stealing.  On a scheduler at an ``address`` or a batch-system cluster,
-whose workers come and go, every run of a batch is submitted at once for any free worker:
-there the numbers agree to the model's tolerance, not bit for bit.
+number of single-threaded workers.  A run goes to another worker only if its own has left the
+cluster, and the local cluster runs without Dask's work stealing.  On a scheduler at an
+``address`` or a batch-system cluster, whose workers come and go, every run of a batch is
+submitted at once for any free worker: there the numbers agree to the model's tolerance, not
+bit for bit.
 
 Every run is a task that evaluates in a child process of the worker
 (:mod:`fbia.execution.isolation`, ``isolate = True`` by default here): a time-out kills that

@@ -172,10 +172,9 @@ def _solve(
     free = solver.free_mask
     rhs = solver.vector.CreateVector()
     rhs.FV().NumPy()[:] = np.where(free, b, 0.0)
-    if solver.tangents_refactorise and not fresh[0]:
-        newton.factorise("tangents")
-        fresh[0] = report.refactorised = True
-    x = _refined(solver, newton, rhs, report) if newton.inverse is not None else None
+    x = None
+    if newton.inverse is not None and (fresh[0] or not solver.tangents_refactorise):
+        x = _refined(solver, newton, rhs, report)
     if x is None and not fresh[0]:
         newton.factorise("tangents")
         # of the converged state now: the best chord for the next solve as well

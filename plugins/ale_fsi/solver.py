@@ -55,6 +55,10 @@ class AleFsiSolver(AleFsiProblem):
             self.linear_solver = f"block_gmres({direct})"
         elif settings.linear_solver != "direct":
             raise ValueError(f"unknown linear solver {settings.linear_solver!r}")
+        # 3-D with the direct solver: a fresh Jacobian costs tens of chord steps, and the
+        # choices below follow from that; 2-D and block_gmres keep NGSolve's and fbia's
+        # defaults and their results bit for bit
+        costly = mesh.dim == 3 and blocks is None
         self._newton = NewtonSolver(
             self,
             settings.newton_tol,
@@ -65,12 +69,12 @@ class AleFsiSolver(AleFsiProblem):
             # minimum degree (benchmarks/bench_ale_fsi_3d.py); 2-D keeps NGSolve's ordering
             ordering="metis" if mesh.dim == 3 else None,
             threads=max(1, int(settings.threads)),
-            # Pardiso's weighted matching off in 3-D unless a factorisation perturbs a pivot
+            # Pardiso's weighted matching off unless a factorisation perturbs a pivot
             # (fbia.plugins.fem.pardiso): the 3-D dome's Jacobian needs none with a linear
-            # mesh motion; 2-D keeps NGSolve's setting and its results bit for bit
-            matching=not (mesh.dim == 3 and blocks is None),
+            # mesh motion
+            matching=not costly,
         )
-        if mesh.dim == 3 and blocks is None:
+        if costly:
             # with the direct solver a fresh Jacobian costs tens of chord steps in 3-D and a
             # few in 2-D, where the rule gained nothing: 2-D keeps the default rule and its
             # results bit for bit; a chord step of block_gmres is a GMRes solve, not a
@@ -78,13 +82,13 @@ class AleFsiSolver(AleFsiProblem):
             # benchmarks/bench_lm_tangents.py and the CHANGELOG)
             self._newton.chord = ChordRule.costly_jacobian()
         #: a solve from rest starts from the inflow profile in the whole fluid (:meth:`newton`)
-        self.start_from_inflow = mesh.dim == 3 and blocks is None
+        self.start_from_inflow = costly
         #: the tangents factorise the Jacobian at the converged state before they solve,
         #: instead of refining with Newton's last factorisation: in 3-D with the direct solver
-        #: a refactorisation (~0.4 s on the dome) costs less than the 14-26 refinement sweeps
-        #: (a product with the Jacobian and a back-substitution, ~35 ms each) it saves; in 2-D
-        #: they cost the same (benchmarks/bench_lm_tangents.py, bench_lm_vs_scipy.py)
-        self.tangents_refactorise = mesh.dim == 3 and blocks is None
+        #: a refactorisation (0.37-0.39 s on the dome) costs less than the 6-26 refinement
+        #: sweeps (a product with the Jacobian and a back-substitution, ~35 ms each) it saves;
+        #: in 2-D they cost the same (benchmarks/bench_lm_tangents.py, bench_lm_vs_scipy.py)
+        self.tangents_refactorise = costly
         self._continuation = ArclengthContinuation(
             self, self._newton, self.newton, settings.continuation_min_fraction, unit="mm^2/s"
         )

@@ -49,8 +49,8 @@ class PardisoUnmatched(mkl_pardiso.MKLPardiso):
         super().__init__(*args, **kwargs)
 
     def _call_pardiso(self, phase: int) -> None:
-        if phase in (11, 12, 13):  # an analysis: matching is decided here
-            self._params[MATCHING] = int(self.matching)
+        if phase in (11, 12, 13) and not self.matching:  # an analysis decides the matching;
+            self._params[MATCHING] = 0  # with it, NGSolve's own setting stands
         super()._call_pardiso(phase)
 
     def Factor(self) -> None:  # noqa: N802 (NGSolve's name)
